@@ -1,0 +1,52 @@
+# cdw-twin: two commands for a fresh Debian machine with python3.
+#   make demo   set up (venv, pinned packages, message build, FMU build) and run the main job
+#   make test   same set-up, then ruff, mypy and the whole test suite
+# Every set-up step is stamped, so a second call skips what is done.
+
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+PIP    := $(PY) -m pip
+CLI    := $(VENV)/bin/cdw-twin
+STAMPS := $(VENV)/.stamps
+
+FMU_SOURCES := $(wildcard fmus/framework/* fmus/belt_drive/* fmus/build.py)
+MSG_SOURCES := $(wildcard interfaces/cdw_interfaces/msg/*.msg interfaces/cdw_interfaces/CMakeLists.txt interfaces/cdw_interfaces/package.xml interfaces/build_interfaces.py)
+
+.PHONY: setup demo test lint typecheck pytest clean
+
+setup: $(STAMPS)/deps $(STAMPS)/fmus $(STAMPS)/msgs
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+
+$(STAMPS)/deps: pyproject.toml constraints.txt | $(PY)
+	$(PIP) install --quiet --upgrade pip
+	$(PIP) install --quiet -c constraints.txt -e '.[dev]'
+	@mkdir -p $(STAMPS) && touch $@
+
+$(STAMPS)/fmus: $(STAMPS)/deps $(FMU_SOURCES)
+	$(CLI) fmu build
+	@touch $@
+
+$(STAMPS)/msgs: $(STAMPS)/deps $(MSG_SOURCES)
+	$(PY) interfaces/build_interfaces.py
+	@touch $@
+
+demo: setup
+	$(CLI) demo
+
+lint: $(STAMPS)/deps
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+typecheck: $(STAMPS)/deps
+	$(VENV)/bin/mypy
+
+pytest: setup
+	$(VENV)/bin/pytest -q
+
+test: setup lint typecheck pytest
+
+clean:
+	rm -rf fmus/build interfaces/build $(STAMPS)

@@ -1,0 +1,1 @@
+"""cdw-twin: the conveyor digital twin (scene, co-simulation, events, ground truth, scores)."""

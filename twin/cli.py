@@ -1,0 +1,92 @@
+"""The ``cdw-twin`` console script: one entry point, one subcommand per job.
+
+Each subcommand lives in its own module exposing ``configure(parser)`` and ``run(args) -> int``;
+those modules import their heavy dependencies (PyBullet, rclpy, fmpy) only inside ``run`` so that
+``cdw-twin --help`` and light jobs start fast.
+
+Examples::
+
+    cdw-twin sample --out data/sample
+    cdw-twin meshgen data/sample --out out/meshes --json
+    cdw-twin bench meshgen --json
+    cdw-twin fmu build
+    cdw-twin bench fmu --json
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import sys
+from collections.abc import Sequence
+from typing import Protocol, cast
+
+from twin.errors import CdwTwinError
+
+
+class _CommandModule(Protocol):
+    def configure(self, parser: argparse.ArgumentParser) -> None: ...
+
+    def run(self, args: argparse.Namespace) -> int: ...
+
+
+# (command words, module, one-line help). Nested words ("bench", "meshgen") form sub-subcommands.
+COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
+    (("sample",), "meshgen.cmd_sample", "write the built-in procedural YOLO-seg sample dataset"),
+    (("meshgen",), "meshgen.cmd_meshgen", "turn annotated polygons into metric 3D proxy meshes"),
+    (("bench", "meshgen"), "meshgen.cmd_bench", "benchmark mesh generation against a baseline"),
+    (("fmu", "build"), "fmus.build", "compile the belt-drive FMUs (FMI 3.0 and 2.0) with gcc"),
+    (("bench", "fmu"), "twin.bench_fmu", "benchmark one FMU co-simulation step"),
+    (("bench", "twin"), "twin.bench_twin", "benchmark the twin's real-time factor"),
+    (("demo",), "twin.cmd_demo", "the main job: sample, mesh, simulate, summarise"),
+)
+
+
+def _available(module: str) -> bool:
+    return importlib.util.find_spec(module) is not None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the argument parser with every subcommand whose module is installed."""
+    parser = argparse.ArgumentParser(
+        prog="cdw-twin",
+        description="Digital twin and benchmark for robotic sorting of CDW on a conveyor.",
+    )
+    top = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    groups: dict[str, argparse._SubParsersAction[argparse.ArgumentParser]] = {}
+    for words, module_name, help_text in COMMANDS:
+        if not _available(module_name):
+            continue
+        action = top
+        for word in words[:-1]:
+            if word not in groups:
+                group_parser = top.add_parser(word, help=f"{word} subcommands")
+                groups[word] = group_parser.add_subparsers(
+                    dest=f"{word}_command", metavar="COMMAND", required=True
+                )
+            action = groups[word]
+        sub = action.add_parser(words[-1], help=help_text, description=help_text)
+        module = cast(_CommandModule, importlib.import_module(module_name))
+        module.configure(sub)
+        sub.set_defaults(_module=module_name)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``cdw-twin`` command line; returns the process exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    module = cast(_CommandModule, importlib.import_module(args._module))
+    try:
+        return module.run(args)
+    except CdwTwinError as exc:
+        print(f"cdw-twin: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("cdw-twin: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,24 @@
+"""Project-wide error base.
+
+Every package of cdw-twin derives its errors from :class:`CdwTwinError`, so a caller can catch
+everything the project raises on purpose with one ``except`` while real bugs still surface.
+Messages always name the file, line, field or value that was wrong.
+"""
+
+from __future__ import annotations
+
+
+class CdwTwinError(Exception):
+    """Base class of every error cdw-twin raises on purpose."""
+
+
+class ConfigError(CdwTwinError):
+    """A configuration value (scenario, robot, CLI option) is missing or out of range."""
+
+
+class SceneError(CdwTwinError):
+    """A scene input (scene CSV, mesh, URDF) is missing or malformed."""
+
+
+class FmuError(CdwTwinError):
+    """An FMU is missing, malformed, or rejected a call."""
