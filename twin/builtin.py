@@ -1,0 +1,42 @@
+"""The built-in dataset: the procedural sample, meshed once and cached.
+
+The demo, the benchmarks and the tests run on data the project makes itself, so they need nothing
+outside the repository. The meshed sample is cached under ``$CDW_TWIN_CACHE`` (default
+``~/.cache/cdw-twin``), keyed by the sample's parameters; a partial cache is never used (the
+meshgen output folder is complete once it exists, it is written atomically).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+SAMPLE_IMAGES = 24
+SAMPLE_SEED = 0
+
+
+def cache_root() -> Path:
+    """Where cached, regenerable data lives."""
+    env = os.environ.get("CDW_TWIN_CACHE")
+    if env:
+        return Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "cdw-twin"
+
+
+def builtin_dataset(root: Path | None = None, *, images: int = SAMPLE_IMAGES,
+                    seed: int = SAMPLE_SEED) -> Path:
+    """Path of the meshed built-in sample, generating and meshing it on first use."""
+    from meshgen.config import MeshgenConfig
+    from meshgen.pipeline import mesh_dataset
+    from meshgen.sample import write_sample
+
+    base = (root or cache_root()) / f"builtin-i{images}-s{seed}"
+    meshes = base / "meshes"
+    if (meshes / "index.csv").is_file():
+        return meshes
+    sample = base / "sample"
+    if not (sample / "data.yaml").is_file():
+        write_sample(sample, images=images, seed=seed)
+    mesh_dataset(sample, meshes, MeshgenConfig(seed=seed))
+    return meshes

@@ -1,0 +1,316 @@
+"""Event detection, the grasp approximation and ground truth, evaluated after every physics step.
+
+Grasp approximation (as the reference defines it): finger contacts come from the contact points
+on each finger link; a small box around the TCP is the overlap volume. A pick succeeds when the
+TCP volume has overlapped the object continuously for the dwell time (0.6 s default) *and* the
+fingers touch it from opposite sides (contact normals pointing against each other). The object is
+then held by a fixed constraint to the TCP link; opening the gripper releases it.
+
+Fates and events:
+
+- ``entered_workspace`` / ``left_workspace``: the object's centre of mass crosses the pick window
+  while on the belt. Leaving it downstream without having been picked also emits ``missed``.
+- ``fell_off``: the object dropped below the belt surface outside any bin (over the belt's end
+  or its side); it is removed from the scene.
+- ``placed_in_bin``: the object came to lie inside a bin (``correct`` when the bin sorts its
+  class); it is removed from the physics (it is sorted) but keeps its ground truth.
+- ``pick_dropped``: a held object was released (or lost) away from every bin.
+- ``unintended_contact``: a robot link touches an object the robot is not picking (neither held,
+  nor overlapping the TCP volume, nor under the open gripper).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import pybullet as pb
+
+from twin.config import CellConfig
+from twin.events import Event, EventType
+from twin.robot import Robot
+from twin.stream import Placement
+from twin.world import SpawnedBody, World
+
+_NEAR_TCP_M = 0.25
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """The true state of one object (world frame, SI units)."""
+
+    id: int
+    source_id: str
+    class_name: str
+    position_m: tuple[float, float, float]
+    orientation_xyzw: tuple[float, float, float, float]
+    linear_velocity_mps: tuple[float, float, float]
+    angular_velocity_radps: tuple[float, float, float]
+    length_m: float
+    width_m: float
+    area_m2: float
+    volume_m3: float
+    height_m: float
+    mass_kg: float
+    on_belt: bool
+    in_workspace: bool
+    held: bool
+    in_bin: bool
+
+
+@dataclass
+class _Record:
+    id: int
+    placement: Placement
+    body: int
+    mass_kg: float
+    height_m: float
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    active: bool = True
+    on_belt: bool = False
+    in_workspace: bool = False
+    held: bool = False
+    picked: bool = False
+    missed: bool = False
+    in_bin: bool = False
+    overlap_since: float | None = None
+    fingers: frozenset[int] = frozenset()
+    arm_links: frozenset[int] = frozenset()
+    constraint: int | None = None
+    extra: dict[str, float] = field(default_factory=dict)
+
+
+class Monitor:
+    """Watches every object of one episode; :meth:`update` returns the step's new events."""
+
+    def __init__(self, client: int, cell: CellConfig, world: World, robot: Robot) -> None:
+        self.client = client
+        self.cell = cell
+        self.world = world
+        self.robot = robot
+        self._records: list[_Record] = []
+        self._by_body: dict[int, _Record] = {}
+        self._tcp_shape = pb.createCollisionShape(
+            pb.GEOM_BOX, halfExtents=list(cell.grasp.tcp_half_extents_m), physicsClientId=client
+        )
+        self._finger_set = {link: i for i, link in enumerate(robot.finger_links)}
+        self.load_mass_kg = 0.0
+        self._held: _Record | None = None
+        self._pending: list[Event] = []
+
+    def add(self, placement: Placement, spawned: SpawnedBody, step: int, time_s: float) -> Event:
+        """Register a freshly spawned object; returns its ``spawned`` event."""
+        record = _Record(id=len(self._records) + 1, placement=placement, body=spawned.body,
+                         mass_kg=spawned.mass_kg, height_m=spawned.height_m,
+                         position=placement.position_m, on_belt=True)
+        self._records.append(record)
+        self._by_body[spawned.body] = record
+        self.load_mass_kg += record.mass_kg
+        event = Event(time_s=time_s, step=step, type=EventType.SPAWNED, object_id=record.id,
+                      class_name=placement.spec.class_name,
+                      data={"source_id": placement.spec.object_id,
+                            "position_m": list(placement.position_m),
+                            "mass_kg": record.mass_kg})
+        self._pending.append(event)
+        return event
+
+    def body_of(self, object_id: int) -> int | None:
+        """PyBullet body of a twin object id, if it is still simulated."""
+        if 1 <= object_id <= len(self._records):
+            record = self._records[object_id - 1]
+            return record.body if record.active else None
+        return None
+
+    # -- per step ---------------------------------------------------------------------------
+    def update(self, step: int, time_s: float) -> list[Event]:
+        """Evaluate contacts, overlaps and fates after a physics step."""
+        events, self._pending = self._pending, []
+        c = self.client
+        belt = self.cell.belt
+        ws = self.cell.workspace
+        fingers: dict[int, dict[int, tuple[float, float, float]]] = {}
+        arm: dict[int, set[int]] = {}
+        for cp in pb.getContactPoints(bodyA=self.robot.body, physicsClientId=c):
+            record = self._by_body.get(cp[2])
+            if record is None:
+                continue
+            finger = self._finger_set.get(cp[3])
+            if finger is not None:
+                fingers.setdefault(record.id, {})[finger] = cp[7]
+            else:
+                arm.setdefault(record.id, set()).add(cp[3])
+        tcp_pos, tcp_orn = self.robot.tcp_pose()
+        gripper_open = self.robot.gripper_width_target_m >= 0.5 * self.robot.config.max_opening_m
+        load = 0.0
+
+        def emit(kind: EventType, record: _Record, **data: object) -> None:
+            events.append(Event(time_s=time_s, step=step, type=kind, object_id=record.id,
+                                class_name=record.placement.spec.class_name, data=dict(data)))
+
+        for record in self._records:
+            if not record.active:
+                continue
+            pos, orn = pb.getBasePositionAndOrientation(record.body, physicsClientId=c)
+            record.position, record.orientation = pos, orn
+            x, y, z = pos
+            # -- release of a held object
+            if record.held and gripper_open:
+                self._release(record)
+                if not any(b.contains_xy(x, y) for b in self.cell.bins):
+                    emit(EventType.PICK_DROPPED, record, position_m=list(pos))
+            # -- fates
+            bin_hit = None
+            for bin_config in self.cell.bins:
+                if bin_config.contains_xy(x, y) and bin_config.floor_z_m - 0.05 < z < \
+                        bin_config.top_z_m:
+                    bin_hit = bin_config
+                    break
+            if bin_hit is not None and not record.held:
+                record.in_bin = True
+                self._deactivate(record)
+                emit(EventType.PLACED_IN_BIN, record, bin=bin_hit.class_name,
+                     correct=bin_hit.class_name == record.placement.spec.class_name)
+                continue
+            if z < belt.surface_z_m - 0.05 and not record.held:
+                where = "belt_end" if x > belt.end_x_m else "side"
+                if record.in_workspace:
+                    record.in_workspace = False
+                    emit(EventType.LEFT_WORKSPACE, record, direction="fell")
+                self._deactivate(record)
+                emit(EventType.FELL_OFF, record, where=where, position_m=list(pos))
+                continue
+            record.on_belt = (not record.held) and belt.on_belt_xy(x, y) and \
+                z > belt.surface_z_m
+            if record.on_belt:
+                load += record.mass_kg
+            in_ws = record.on_belt and ws.min_x_m <= x <= ws.max_x_m
+            if in_ws and not record.in_workspace:
+                emit(EventType.ENTERED_WORKSPACE, record, x_m=x)
+            elif record.in_workspace and not in_ws:
+                direction = ("lifted" if record.held else "downstream" if x > ws.max_x_m
+                             else "upstream" if x < ws.min_x_m else "off_belt")
+                emit(EventType.LEFT_WORKSPACE, record, direction=direction, x_m=x)
+                if direction == "downstream" and not record.picked and not record.missed:
+                    record.missed = True
+                    emit(EventType.MISSED, record)
+            record.in_workspace = in_ws
+            # -- TCP overlap
+            overlap = False
+            dx, dy = x - tcp_pos[0], y - tcp_pos[1]
+            if dx * dx + dy * dy < _NEAR_TCP_M**2 and abs(z - tcp_pos[2]) < _NEAR_TCP_M:
+                overlap = bool(pb.getClosestPoints(
+                    bodyA=-1, bodyB=record.body, distance=0.0, collisionShapeA=self._tcp_shape,
+                    collisionShapePositionA=tcp_pos, collisionShapeOrientationA=tcp_orn,
+                    physicsClientId=c))
+            if overlap and record.overlap_since is None:
+                record.overlap_since = time_s
+                emit(EventType.TCP_OVERLAP_START, record)
+            elif not overlap and record.overlap_since is not None:
+                record.overlap_since = None
+                emit(EventType.TCP_OVERLAP_END, record)
+            # -- finger and arm contacts
+            touching = fingers.get(record.id, {})
+            engaged = record.held or overlap or (
+                dx * dx + dy * dy < self.robot.config.max_opening_m**2)
+            for finger in sorted(set(touching) - record.fingers):
+                emit(EventType.FINGER_CONTACT, record,
+                     finger=self.robot.config.finger_links[finger])
+                if not engaged:
+                    emit(EventType.UNINTENDED_CONTACT, record,
+                         link=self.robot.config.finger_links[finger])
+            record.fingers = frozenset(touching)
+            links = frozenset(arm.get(record.id, set()))
+            if not record.held:
+                for link in sorted(links - record.arm_links):
+                    emit(EventType.UNINTENDED_CONTACT, record, link=self._link_name(link))
+            record.arm_links = links
+            # -- pick success
+            if (self._held is None and record.overlap_since is not None
+                    and time_s - record.overlap_since >= self.cell.grasp.dwell_s - 1e-9
+                    and self._opposite(touching)):
+                self._attach(record, tcp_pos, tcp_orn)
+                emit(EventType.PICK_SUCCESS, record,
+                     dwell_s=time_s - record.overlap_since, position_m=list(pos))
+        self.load_mass_kg = load
+        return events
+
+    def _opposite(self, touching: dict[int, tuple[float, float, float]]) -> bool:
+        if len(self.robot.finger_links) < 2 or len(touching) < len(self.robot.finger_links):
+            return False
+        normals = list(touching.values())
+        dot = sum(a * b for a, b in zip(normals[0], normals[1], strict=True))
+        return dot < 0.0
+
+    def _link_name(self, link: int) -> str:
+        if link < 0:
+            return "base"
+        info = pb.getJointInfo(self.robot.body, link, physicsClientId=self.client)
+        return str(info[12].decode())
+
+    def _attach(self, record: _Record, tcp_pos: tuple[float, float, float],
+                tcp_orn: tuple[float, float, float, float]) -> None:
+        c = self.client
+        inv_pos, inv_orn = pb.invertTransform(tcp_pos, tcp_orn)
+        rel_pos, rel_orn = pb.multiplyTransforms(inv_pos, inv_orn, record.position,
+                                                 record.orientation)
+        record.constraint = pb.createConstraint(
+            self.robot.body, self.robot.tcp_link, record.body, -1, pb.JOINT_FIXED,
+            [0.0, 0.0, 0.0], parentFramePosition=rel_pos, childFramePosition=[0.0, 0.0, 0.0],
+            parentFrameOrientation=rel_orn, physicsClientId=c,
+        )
+        pb.changeConstraint(record.constraint, maxForce=500.0, physicsClientId=c)
+        record.held = True
+        record.picked = True
+        record.on_belt = False
+        self._held = record
+
+    def _release(self, record: _Record) -> None:
+        if record.constraint is not None:
+            pb.removeConstraint(record.constraint, physicsClientId=self.client)
+            record.constraint = None
+        record.held = False
+        if self._held is record:
+            self._held = None
+
+    def _deactivate(self, record: _Record) -> None:
+        if record.held:
+            self._release(record)
+        record.active = False
+        record.on_belt = False
+        record.in_workspace = False
+        record.overlap_since = None
+        self._by_body.pop(record.body, None)
+        self.world.remove(record.body)
+
+    # -- ground truth -----------------------------------------------------------------------
+    def ground_truth(self) -> tuple[GroundTruth, ...]:
+        """Every object that is on the belt, held, or in a bin (not those that fell off)."""
+        out = []
+        for record in self._records:
+            if not record.active and not record.in_bin:
+                continue
+            if record.active:
+                lin, ang = pb.getBaseVelocity(record.body, physicsClientId=self.client)
+            else:
+                lin, ang = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+            spec = record.placement.spec
+            scale = record.height_m / spec.height_m
+            out.append(GroundTruth(
+                id=record.id, source_id=spec.object_id, class_name=spec.class_name,
+                position_m=tuple(record.position),  # type: ignore[arg-type]
+                orientation_xyzw=tuple(record.orientation),  # type: ignore[arg-type]
+                linear_velocity_mps=tuple(lin),  # type: ignore[arg-type]
+                angular_velocity_radps=tuple(ang),  # type: ignore[arg-type]
+                length_m=spec.length_m, width_m=spec.width_m, area_m2=spec.area_m2,
+                volume_m3=spec.volume_m3 * scale, height_m=record.height_m,
+                mass_kg=record.mass_kg, on_belt=record.on_belt,
+                in_workspace=record.in_workspace, held=record.held, in_bin=record.in_bin,
+            ))
+        return tuple(out)
+
+
+def yaw_of(quat_xyzw: tuple[float, float, float, float]) -> float:
+    """Yaw (rotation about z) of an xyzw quaternion."""
+    x, y, z, w = quat_xyzw
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

@@ -1,0 +1,214 @@
+"""Load meshgen output (``index.csv`` and one ``scene.csv`` per image) into object specs.
+
+Everything is checked before a simulation starts: a missing file, a malformed row, a missing mesh
+or an unknown class raises :class:`twin.errors.SceneError` naming the file, line and field.
+Inertia comes from the mesh itself (trimesh mass properties scaled to the recorded mass), expressed
+as principal moments plus the rotation of the principal frame, which is what PyBullet takes.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from twin.errors import SceneError
+
+_FLOAT_FIELDS = (
+    "centroid_x_m", "centroid_y_m", "yaw_rad", "length_m", "width_m", "area_m2", "height_m",
+    "volume_m3", "mass_kg",
+)
+_REQUIRED = ("object_id", "source_image", "class_name", *_FLOAT_FIELDS, "mesh_path", "convex_path")
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """One meshed object as recorded by meshgen (image belt frame, metres, kg)."""
+
+    object_id: str
+    source_image: str
+    class_name: str
+    centroid_x_m: float
+    centroid_y_m: float
+    yaw_rad: float
+    length_m: float
+    width_m: float
+    area_m2: float
+    height_m: float
+    volume_m3: float
+    mass_kg: float
+    mesh_path: Path
+    convex_path: Path | None
+
+    @property
+    def collision_path(self) -> Path:
+        """The file PyBullet builds the collision shape from (convex pieces when concave)."""
+        return self.convex_path if self.convex_path is not None else self.mesh_path
+
+
+@dataclass(frozen=True)
+class ImageLayout:
+    """The objects of one source image in their recorded layout."""
+
+    image: str
+    length_m: float
+    width_m: float
+    objects: tuple[ObjectSpec, ...]
+
+
+@dataclass(frozen=True)
+class Inertia:
+    """Principal moments (kg m^2) and the principal frame's orientation (xyzw quaternion)."""
+
+    principal_kgm2: tuple[float, float, float]
+    frame_quat_xyzw: tuple[float, float, float, float]
+
+
+def _read_csv(path: Path) -> list[tuple[int, dict[str, str]]]:
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            reader = csv.DictReader(handle)
+            rows = [(i + 2, row) for i, row in enumerate(reader)]
+            fields = reader.fieldnames or []
+    except FileNotFoundError:
+        msg = f"{path}: no such file"
+        raise SceneError(msg) from None
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        msg = f"{path}: cannot read: {exc}"
+        raise SceneError(msg) from None
+    if not fields:
+        msg = f"{path}: empty file (no header line)"
+        raise SceneError(msg)
+    return rows
+
+
+def _float(path: Path, line: int, row: dict[str, str], key: str) -> float:
+    raw = row.get(key)
+    try:
+        value = float(raw) if raw is not None else math.nan
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        msg = f"{path}:{line}: field {key!r} = {raw!r} is not a finite number"
+        raise SceneError(msg)
+    return value
+
+
+def _parse_object(path: Path, line: int, row: dict[str, str], classes: Iterable[str]) -> ObjectSpec:
+    for key in _REQUIRED:
+        if key not in row or row[key] is None:
+            msg = f"{path}:{line}: missing field {key!r}"
+            raise SceneError(msg)
+    values = {key: _float(path, line, row, key) for key in _FLOAT_FIELDS}
+    for key in ("length_m", "width_m", "area_m2", "height_m", "volume_m3", "mass_kg"):
+        if values[key] <= 0.0:
+            msg = f"{path}:{line}: field {key!r} = {values[key]!r} must be positive"
+            raise SceneError(msg)
+    class_name = row["class_name"]
+    known = tuple(classes)
+    if class_name not in known:
+        msg = f"{path}:{line}: field 'class_name' = {class_name!r} is not a known class {known}"
+        raise SceneError(msg)
+    mesh_path = (path.parent / row["mesh_path"]).resolve()
+    if not mesh_path.is_file():
+        msg = f"{path}:{line}: field 'mesh_path': mesh {mesh_path} does not exist"
+        raise SceneError(msg)
+    convex_path: Path | None = None
+    if row["convex_path"]:
+        convex_path = (path.parent / row["convex_path"]).resolve()
+        if not convex_path.is_file():
+            msg = f"{path}:{line}: field 'convex_path': mesh {convex_path} does not exist"
+            raise SceneError(msg)
+    return ObjectSpec(
+        object_id=row["object_id"],
+        source_image=row["source_image"],
+        class_name=class_name,
+        mesh_path=mesh_path,
+        convex_path=convex_path,
+        **values,
+    )
+
+
+def load_dataset(out_dir: Path, classes: Iterable[str]) -> tuple[ImageLayout, ...]:
+    """Read a meshgen output folder: every image's layout, in ``index.csv`` order."""
+    known = tuple(classes)
+    index_path = out_dir / "index.csv"
+    layouts = []
+    for line, row in _read_csv(index_path):
+        for key in ("image", "width_px", "height_px", "m_per_px", "scene_csv"):
+            if not row.get(key):
+                msg = f"{index_path}:{line}: missing field {key!r}"
+                raise SceneError(msg)
+        m_per_px = _float(index_path, line, row, "m_per_px")
+        width_px = _float(index_path, line, row, "width_px")
+        height_px = _float(index_path, line, row, "height_px")
+        scene_path = out_dir / row["scene_csv"]
+        objects = tuple(
+            _parse_object(scene_path, obj_line, obj_row, known)
+            for obj_line, obj_row in _read_csv(scene_path)
+        )
+        if objects:
+            layouts.append(ImageLayout(image=row["image"], length_m=height_px * m_per_px,
+                                       width_m=width_px * m_per_px, objects=objects))
+    if not layouts:
+        msg = f"{index_path}: no image with objects to simulate"
+        raise SceneError(msg)
+    return tuple(layouts)
+
+
+@cache
+def _unit_inertia(mesh_path: Path, z_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    mesh = trimesh.load(mesh_path, force="mesh", process=False)
+    if z_scale != 1.0:
+        mesh.apply_scale([1.0, 1.0, z_scale])
+    if mesh.volume <= 0:
+        msg = f"{mesh_path}: mesh has no positive volume"
+        raise SceneError(msg)
+    mesh.density = 1.0 / mesh.volume
+    return (np.asarray(mesh.principal_inertia_components, dtype=float),
+            np.asarray(mesh.principal_inertia_vectors, dtype=float))
+
+
+def inertia_of(spec: ObjectSpec, z_scale: float = 1.0) -> Inertia:
+    """The object's inertia about its centre of mass (the mesh origin) for its recorded mass.
+
+    ``z_scale`` stretches the mesh along z (a re-sampled height); mass scales with it.
+    """
+    components, vectors = _unit_inertia(spec.mesh_path, z_scale)
+    rotation = np.array(vectors, dtype=float).T
+    if np.linalg.det(rotation) < 0:
+        rotation[:, 2] = -rotation[:, 2]
+    mass_kg = spec.mass_kg * z_scale
+    return Inertia(
+        principal_kgm2=(float(components[0]) * mass_kg, float(components[1]) * mass_kg,
+                        float(components[2]) * mass_kg),
+        frame_quat_xyzw=_matrix_to_quat(rotation),
+    )
+
+
+def _matrix_to_quat(m: np.ndarray) -> tuple[float, float, float, float]:
+    trace = float(m[0, 0] + m[1, 1] + m[2, 2])
+    if trace > 0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        w, x = 0.25 * s, (m[2, 1] - m[1, 2]) / s
+        y, z = (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        w, x = (m[2, 1] - m[1, 2]) / s, 0.25 * s
+        y, z = (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        w, x = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s
+        y, z = 0.25 * s, (m[1, 2] + m[2, 1]) / s
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        w, x = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s
+        y, z = (m[1, 2] + m[2, 1]) / s, 0.25 * s
+    return (float(x), float(y), float(z), float(w))

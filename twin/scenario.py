@@ -1,0 +1,215 @@
+"""Scenarios: what one episode contains, as a frozen dataclass that round-trips to YAML.
+
+Three levels, as in the reference: the *object* level (which images and objects, heights
+re-sampled within class ranges, orientation jitter), the *system* level (belt speed, stochastic
+perturbation, order and spacing of the stream) and *physics* (friction and restitution ranges per
+class). All randomness of an episode comes from one ``numpy.random.SeedSequence(seed)``; see
+:func:`seed_tree`.
+
+Example ``experiments/scenarios/default.yaml``::
+
+    name: default
+    dataset: builtin
+    duration_s: 60.0
+    system:
+      belt_speed_mps: 0.4
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal, NamedTuple
+
+import numpy as np
+import yaml
+
+from twin.dataclass_io import from_data, to_data
+from twin.errors import ConfigError
+
+CLASS_NAMES: tuple[str, ...] = ("concrete", "brick", "wood", "rubber")
+
+
+def _check(condition: bool, key: str, value: object, what: str) -> None:
+    if not condition:
+        msg = f"{key} = {value!r}: {what}"
+        raise ConfigError(msg)
+
+
+def _check_range(key: str, lo_hi: tuple[float, float], lo: float, hi: float) -> None:
+    a, b = lo_hi
+    _check(lo <= a <= b <= hi, key, list(lo_hi), f"needs {lo} <= low <= high <= {hi}")
+
+
+@dataclass(frozen=True)
+class ObjectLevel:
+    """Which objects enter the belt and how they vary from their source annotation."""
+
+    images: tuple[str, ...] = ()
+    max_objects: int | None = None
+    resample_heights: bool = False
+    height_ranges_m: dict[str, tuple[float, float]] = field(default_factory=dict)
+    orientation_jitter_rad: float = 0.0
+    classes: tuple[str, ...] = CLASS_NAMES
+
+    def __post_init__(self) -> None:
+        if self.max_objects is not None:
+            _check(self.max_objects >= 1, "objects.max_objects", self.max_objects, "must be >= 1")
+        _check(0.0 <= self.orientation_jitter_rad <= np.pi, "objects.orientation_jitter_rad",
+               self.orientation_jitter_rad, "must be in [0, pi]")
+        for name, rng in self.height_ranges_m.items():
+            _check_range(f"objects.height_ranges_m.{name}", rng, 0.001, 1.0)
+        _check(len(self.classes) > 0, "objects.classes", self.classes, "must not be empty")
+
+
+@dataclass(frozen=True)
+class PerturbationLevel:
+    """The belt drive's stochastic perturbation: an Ornstein-Uhlenbeck force on the belt (FMU)."""
+
+    enabled: bool = False
+    force_std_N: float = 40.0
+    correlation_time_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        _check(self.force_std_N >= 0.0, "system.perturbation.force_std_N", self.force_std_N,
+               "must be >= 0")
+        _check(self.correlation_time_s > 0.0, "system.perturbation.correlation_time_s",
+               self.correlation_time_s, "must be positive")
+
+
+@dataclass(frozen=True)
+class SystemLevel:
+    """Belt speed and the stream of objects.
+
+    ``speed_schedule`` lists ``[time_s, speed_mps]`` setpoint changes. ``prefill_m`` starts the
+    episode with the stream already carried that far: the belt is full from the first step.
+    """
+
+    belt_speed_mps: float = 0.4
+    perturbation: PerturbationLevel = field(default_factory=PerturbationLevel)
+    object_order: Literal["dataset", "shuffled"] = "dataset"
+    image_gap_m: float = 0.25
+    repeat_images: bool = True
+    speed_schedule: tuple[tuple[float, float], ...] = ()
+    prefill_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check(0.0 <= self.prefill_m <= 100.0, "system.prefill_m", self.prefill_m,
+               "must be in [0, 100] m")
+        _check(0.0 <= self.belt_speed_mps <= 2.0, "system.belt_speed_mps", self.belt_speed_mps,
+               "must be in [0, 2] m/s")
+        _check(0.0 <= self.image_gap_m <= 10.0, "system.image_gap_m", self.image_gap_m,
+               "must be in [0, 10] m")
+        for i, (t_s, v) in enumerate(self.speed_schedule):
+            _check(t_s >= 0.0 and 0.0 <= v <= 2.0, f"system.speed_schedule[{i}]", [t_s, v],
+                   "needs time >= 0 and speed in [0, 2] m/s")
+
+
+def _default_friction() -> dict[str, tuple[float, float]]:
+    return {"concrete": (0.6, 0.8), "brick": (0.6, 0.8), "wood": (0.4, 0.6),
+            "rubber": (0.8, 1.0)}
+
+
+def _default_restitution() -> dict[str, tuple[float, float]]:
+    return {"concrete": (0.05, 0.15), "brick": (0.05, 0.15), "wood": (0.1, 0.25),
+            "rubber": (0.3, 0.5)}
+
+
+@dataclass(frozen=True)
+class PhysicsLevel:
+    """Per-class contact properties, each drawn uniformly from its range per object."""
+
+    friction: dict[str, tuple[float, float]] = field(default_factory=_default_friction)
+    restitution: dict[str, tuple[float, float]] = field(default_factory=_default_restitution)
+
+    def __post_init__(self) -> None:
+        for name, rng in self.friction.items():
+            _check_range(f"physics.friction.{name}", rng, 0.0, 2.0)
+        for name, rng in self.restitution.items():
+            _check_range(f"physics.restitution.{name}", rng, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One episode's definition. ``dataset`` is a meshgen output folder or ``builtin``."""
+
+    name: str = "default"
+    dataset: str = "builtin"
+    seed: int = 0
+    duration_s: float = 60.0
+    robot: str = "panda"
+    objects: ObjectLevel = field(default_factory=ObjectLevel)
+    system: SystemLevel = field(default_factory=SystemLevel)
+    physics: PhysicsLevel = field(default_factory=PhysicsLevel)
+
+    def __post_init__(self) -> None:
+        _check(bool(self.name), "name", self.name, "must not be empty")
+        _check(self.seed >= 0, "seed", self.seed, "must be >= 0")
+        _check(0.0 < self.duration_s <= 86400.0, "duration_s", self.duration_s,
+               "must be in (0, 86400] s")
+
+    def to_yaml(self) -> str:
+        """The scenario as YAML text."""
+        return yaml.safe_dump(to_data(self), sort_keys=False)
+
+    @classmethod
+    def from_yaml(cls, text: str, where: str = "scenario") -> Scenario:
+        """Parse YAML text; errors name ``where`` and the key."""
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            msg = f"{where}: not valid YAML: {exc}"
+            raise ConfigError(msg) from None
+        if data is None:
+            data = {}
+        if not isinstance(data, dict):
+            msg = f"{where}: the top level must be a mapping, got {type(data).__name__}"
+            raise ConfigError(msg)
+        try:
+            return from_data(cls, data, "")
+        except ConfigError as exc:
+            msg = f"{where}: {exc}"
+            raise ConfigError(msg) from None
+
+    @classmethod
+    def load(cls, path: Path) -> Scenario:
+        """Read a scenario file."""
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            msg = f"{path}: cannot read scenario: {exc.strerror}"
+            raise ConfigError(msg) from None
+        return cls.from_yaml(text, where=str(path))
+
+    def save(self, path: Path) -> None:
+        """Write the scenario atomically."""
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(self.to_yaml())
+        Path(tmp).replace(path)
+
+
+class SeedTree(NamedTuple):
+    """Independent generators for each random part of an episode, all from one seed."""
+
+    objects: np.random.Generator
+    order: np.random.Generator
+    physics: np.random.Generator
+    perception: np.random.Generator
+    fmu_seed: int
+
+
+def seed_tree(seed: int) -> SeedTree:
+    """Split ``seed`` into the episode's independent streams (Gymnasium-style SeedSequence)."""
+    root = np.random.SeedSequence(seed)
+    objects, order, physics, perception, fmu = root.spawn(5)
+    return SeedTree(
+        objects=np.random.default_rng(objects),
+        order=np.random.default_rng(order),
+        physics=np.random.default_rng(physics),
+        perception=np.random.default_rng(perception),
+        fmu_seed=int(fmu.generate_state(1, dtype=np.uint32)[0]),
+    )

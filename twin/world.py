@@ -1,0 +1,139 @@
+"""The static part of the PyBullet scene: belt, floor, bins; and spawning/removing objects.
+
+The belt is a kinematic body: a fixed-base multibody of mass 0 whose base velocity is the belt
+speed. Bullet's contact solver then sees a surface moving at that speed, so objects are carried
+by friction (with realistic acceleration and slip), never teleported. Each step the belt is put
+back to its nominal pose, so its surface stays where it is while it "moves".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pybullet as pb
+
+from twin.config import BinConfig, CellConfig
+from twin.errors import SceneError
+from twin.objects import ObjectSpec, inertia_of
+
+
+@dataclass(frozen=True)
+class SpawnedBody:
+    """A PyBullet body made from an object spec."""
+
+    body: int
+    mass_kg: float
+    height_m: float
+
+
+class World:
+    """Belt, floor and bins in one PyBullet client; objects are added and removed over time."""
+
+    def __init__(self, client: int, cell: CellConfig) -> None:
+        self.client = client
+        self.cell = cell
+        belt = cell.belt
+        self._belt_pos = (
+            0.5 * (belt.start_x_m + belt.end_x_m),
+            belt.centre_y_m,
+            belt.surface_z_m - 0.5 * belt.thickness_m,
+        )
+        shape = pb.createCollisionShape(
+            pb.GEOM_BOX,
+            halfExtents=[0.5 * belt.length_m, 0.5 * belt.width_m, 0.5 * belt.thickness_m],
+            physicsClientId=client,
+        )
+        self.belt = pb.createMultiBody(0.0, shape, basePosition=self._belt_pos,
+                                       physicsClientId=client)
+        pb.changeDynamics(self.belt, -1, lateralFriction=belt.lateral_friction,
+                          physicsClientId=client)
+        floor = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=client)
+        self.floor = pb.createMultiBody(0.0, floor,
+                                        basePosition=[0.0, 0.0, cell.physics.floor_z_m],
+                                        physicsClientId=client)
+        self.bins = {b.class_name: self._make_bin(b) for b in cell.bins}
+        self._shapes: dict[tuple[str, float], int] = {}
+        self.belt_speed_mps = 0.0
+
+    def _make_bin(self, config: BinConfig) -> int:
+        c = self.client
+        half = 0.5 * config.size_m
+        wall_h = 0.5 * (config.top_z_m - config.floor_z_m)
+        t = 0.5 * config.wall_m
+        boxes = [
+            ([half, half, t], [0.0, 0.0, -wall_h + t]),
+            ([t, half, wall_h], [half - t, 0.0, 0.0]),
+            ([t, half, wall_h], [-half + t, 0.0, 0.0]),
+            ([half, t, wall_h], [0.0, half - t, 0.0]),
+            ([half, t, wall_h], [0.0, -half + t, 0.0]),
+        ]
+        shape = pb.createCollisionShapeArray(
+            shapeTypes=[pb.GEOM_BOX] * len(boxes),
+            halfExtents=[b[0] for b in boxes],
+            collisionFramePositions=[b[1] for b in boxes],
+            physicsClientId=c,
+        )
+        centre = [config.centre_x_m, config.centre_y_m, config.floor_z_m + wall_h]
+        return int(pb.createMultiBody(0.0, shape, basePosition=centre, physicsClientId=c))
+
+    def set_belt_speed(self, speed_mps: float) -> None:
+        """Keep the belt in place and give its surface the velocity ``speed_mps`` along +x."""
+        self.belt_speed_mps = speed_mps
+        pb.resetBasePositionAndOrientation(self.belt, self._belt_pos, (0.0, 0.0, 0.0, 1.0),
+                                           physicsClientId=self.client)
+        pb.resetBaseVelocity(self.belt, (speed_mps, 0.0, 0.0), (0.0, 0.0, 0.0),
+                             physicsClientId=self.client)
+
+    def _collision_shape(self, spec: ObjectSpec, z_scale: float) -> int:
+        key = (str(spec.collision_path), z_scale)
+        shape = self._shapes.get(key)
+        if shape is None:
+            try:
+                shape = pb.createCollisionShape(
+                    pb.GEOM_MESH, fileName=str(spec.collision_path),
+                    meshScale=[1.0, 1.0, z_scale], physicsClientId=self.client,
+                )
+            except pb.error as exc:
+                msg = f"{spec.collision_path}: PyBullet cannot build a collision shape: {exc}"
+                raise SceneError(msg) from None
+            if shape < 0:
+                msg = f"{spec.collision_path}: PyBullet cannot build a collision shape"
+                raise SceneError(msg)
+            self._shapes[key] = shape
+        return shape
+
+    def spawn(
+        self,
+        spec: ObjectSpec,
+        position_m: tuple[float, float, float],
+        quat_xyzw: tuple[float, float, float, float],
+        *,
+        height_m: float,
+        friction: float,
+        restitution: float,
+    ) -> SpawnedBody:
+        """Add one object; ``height_m`` may differ from the spec's (the mesh is scaled in z)."""
+        z_scale = height_m / spec.height_m
+        mass_kg = spec.mass_kg * z_scale
+        shape = self._collision_shape(spec, z_scale)
+        inertia = inertia_of(spec, z_scale)
+        body = pb.createMultiBody(
+            baseMass=mass_kg,
+            baseCollisionShapeIndex=shape,
+            basePosition=position_m,
+            baseOrientation=quat_xyzw,
+            baseInertialFramePosition=[0.0, 0.0, 0.0],
+            baseInertialFrameOrientation=inertia.frame_quat_xyzw,
+            physicsClientId=self.client,
+        )
+        moments = list(inertia.principal_kgm2)
+        pb.changeDynamics(
+            body, -1, lateralFriction=friction, restitution=restitution,
+            spinningFriction=0.001, rollingFriction=0.0, localInertiaDiagonal=moments,
+            physicsClientId=self.client,
+        )
+        return SpawnedBody(body=body, mass_kg=mass_kg, height_m=height_m)
+
+    def remove(self, body: int) -> None:
+        """Take a body out of the simulation."""
+        pb.removeBody(body, physicsClientId=self.client)
