@@ -210,7 +210,7 @@ class Twin:
         if self.step_count % self._fmu_every == 0:
             self._belt_state = self._drive.step(self.dt_s * self._fmu_every, self.setpoint_mps,
                                                 self._monitor.load_mass_kg)
-        self._world.set_belt_speed(self._belt_state.belt_speed_mps)
+        self._world.set_belt_speed(self._belt_state.belt_speed_mps, self.dt_s)
         self._spawn_due()
         pb.stepSimulation(physicsClientId=self.client)
         self.step_count += 1
