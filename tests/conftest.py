@@ -21,21 +21,22 @@ def built_fmus() -> tuple[Path, Path]:
 
 
 @pytest.fixture(scope="session")
-def builtin_meshes(tmp_path_factory: pytest.TempPathFactory, built_fmus: tuple[Path, Path]
-                   ) -> Path:
+def builtin_meshes(tmp_path_factory: pytest.TempPathFactory, built_fmus: tuple[Path, Path]) -> Path:
     """A small meshed built-in sample (8 images), private to this test session."""
     from twin.builtin import builtin_dataset
 
     return builtin_dataset(tmp_path_factory.mktemp("builtin"), images=8, seed=0)
 
 
-def write_yolo(folder: Path, labels: dict[str, Sequence[Polygon]],
-               size_px: tuple[int, int] = (1000, 1000)) -> Path:
+def write_yolo(
+    folder: Path, labels: dict[str, Sequence[Polygon]], size_px: tuple[int, int] = (1000, 1000)
+) -> Path:
     """Write a YOLO-seg dataset of pixel polygons (normalised on writing)."""
     w, h = size_px
     (folder / "labels").mkdir(parents=True, exist_ok=True)
     (folder / "data.yaml").write_text(
-        "names:\n  0: concrete\n  1: brick\n  2: wood\n  3: rubber\n", encoding="utf-8")
+        "names:\n  0: concrete\n  1: brick\n  2: wood\n  3: rubber\n", encoding="utf-8"
+    )
     for stem, polygons in labels.items():
         lines = []
         for class_id, points in polygons:

@@ -37,8 +37,8 @@ class BeltState:
     time_s: float
     belt_speed_mps: float
     belt_position_m: float
-    motor_torque_Nm: float  # noqa: N815 - unit suffix
-    motor_current_A: float  # noqa: N815 - unit suffix
+    motor_torque_Nm: float
+    motor_current_A: float
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -24,12 +24,17 @@ import numpy as np
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the benchmark's options."""
     parser.add_argument("--objects", type=int, default=40, help="objects on the belt (40)")
-    parser.add_argument("--seconds", type=float, default=None,
-                        help="simulated seconds (headless: 4; realtime: 60)")
+    parser.add_argument(
+        "--seconds", type=float, default=None, help="simulated seconds (headless: 4; realtime: 60)"
+    )
     parser.add_argument("--speed", type=float, default=0.2, help="belt speed in m/s (0.2)")
     parser.add_argument("--realtime", action="store_true", help="pace to the wall clock")
-    parser.add_argument("--dataset", type=Path, default=None,
-                        help="meshgen output folder (default: the built-in sample)")
+    parser.add_argument(
+        "--dataset",
+        type=Path,
+        default=None,
+        help="meshgen output folder (default: the built-in sample)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -85,13 +90,15 @@ def run(args: argparse.Namespace) -> int:
         }
         if args.realtime:
             rates = np.diff([0, *second_marks]).astype(float)
-            result.update({
-                "mode": "realtime",
-                "target_rate_hz": 1.0 / twin.dt_s,
-                "step_rate_series_hz": rates.tolist(),
-                "step_rate_p1_hz": float(np.percentile(rates, 1)) if rates.size else 0.0,
-                "step_rate_mean_hz": float(rates.mean()) if rates.size else 0.0,
-            })
+            result.update(
+                {
+                    "mode": "realtime",
+                    "target_rate_hz": 1.0 / twin.dt_s,
+                    "step_rate_series_hz": rates.tolist(),
+                    "step_rate_p1_hz": float(np.percentile(rates, 1)) if rates.size else 0.0,
+                    "step_rate_mean_hz": float(rates.mean()) if rates.size else 0.0,
+                }
+            )
         else:
             result["mode"] = "headless"
     if args.json:
@@ -101,5 +108,3 @@ def run(args: argparse.Namespace) -> int:
             if key != "step_rate_series_hz":
                 print(f"{key:>24}: {value}")
     return 0
-
-

@@ -24,8 +24,9 @@ def cache_root() -> Path:
     return (Path(xdg) if xdg else Path.home() / ".cache") / "cdw-twin"
 
 
-def builtin_dataset(root: Path | None = None, *, images: int = SAMPLE_IMAGES,
-                    seed: int = SAMPLE_SEED) -> Path:
+def builtin_dataset(
+    root: Path | None = None, *, images: int = SAMPLE_IMAGES, seed: int = SAMPLE_SEED
+) -> Path:
     """Path of the meshed built-in sample, generating and meshing it on first use."""
     from meshgen.config import MeshgenConfig
     from meshgen.pipeline import mesh_dataset

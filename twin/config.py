@@ -39,7 +39,9 @@ class BeltConfig:
 
     def __post_init__(self) -> None:
         _require(self.width_m > 0, "belt.width_m", self.width_m, "must be positive")
-        _require(self.end_x_m > self.start_x_m, "belt.end_x_m", self.end_x_m, "must exceed start_x_m")
+        _require(
+            self.end_x_m > self.start_x_m, "belt.end_x_m", self.end_x_m, "must exceed start_x_m"
+        )
         _require(
             self.start_x_m <= self.infeed_x_m < self.end_x_m,
             "belt.infeed_x_m",
@@ -48,7 +50,10 @@ class BeltConfig:
         )
         _require(self.thickness_m > 0, "belt.thickness_m", self.thickness_m, "must be positive")
         _require(
-            self.lateral_friction >= 0, "belt.lateral_friction", self.lateral_friction, "must be >= 0"
+            self.lateral_friction >= 0,
+            "belt.lateral_friction",
+            self.lateral_friction,
+            "must be >= 0",
         )
 
     @property
@@ -75,7 +80,7 @@ class WorkspaceConfig:
 
 @dataclass(frozen=True)
 class BinConfig:
-    """One open-top bin standing on the floor; objects dropped into it are sorted as ``class_name``."""
+    """An open-top bin on the floor; objects dropped into it are sorted as ``class_name``."""
 
     class_name: str
     centre_x_m: float
@@ -86,10 +91,18 @@ class BinConfig:
     wall_m: float = 0.01
 
     def __post_init__(self) -> None:
-        _require(self.size_m > 2 * self.wall_m, f"bins[{self.class_name}].size_m", self.size_m,
-                 "must exceed twice the wall thickness")
-        _require(self.top_z_m > self.floor_z_m, f"bins[{self.class_name}].top_z_m", self.top_z_m,
-                 "must be above floor_z_m")
+        _require(
+            self.size_m > 2 * self.wall_m,
+            f"bins[{self.class_name}].size_m",
+            self.size_m,
+            "must exceed twice the wall thickness",
+        )
+        _require(
+            self.top_z_m > self.floor_z_m,
+            f"bins[{self.class_name}].top_z_m",
+            self.top_z_m,
+            "must be above floor_z_m",
+        )
 
     def contains_xy(self, x_m: float, y_m: float) -> bool:
         """Whether a point lies over the bin's inner area."""
@@ -128,7 +141,7 @@ class RobotConfig:
     finger_closed: tuple[float, ...] = (0.0, 0.0)
     max_opening_m: float = 0.08
     home_joint_positions: tuple[float, ...] = (0.0, -0.35, 0.0, -2.3, 0.0, 1.95, 0.785)
-    position_gain: float = 0.3
+    position_gain: float = 0.1
     velocity_gain: float = 1.0
 
     def __post_init__(self) -> None:
@@ -139,12 +152,21 @@ class RobotConfig:
             self.home_joint_positions,
             f"needs {len(self.arm_joints)} values, one per arm joint",
         )
-        _require(len(self.finger_open) == len(self.finger_joints), "robot.finger_open",
-                 self.finger_open, "needs one value per finger joint")
-        _require(len(self.finger_closed) == len(self.finger_joints), "robot.finger_closed",
-                 self.finger_closed, "needs one value per finger joint")
-        _require(self.max_opening_m > 0, "robot.max_opening_m", self.max_opening_m,
-                 "must be positive")
+        _require(
+            len(self.finger_open) == len(self.finger_joints),
+            "robot.finger_open",
+            self.finger_open,
+            "needs one value per finger joint",
+        )
+        _require(
+            len(self.finger_closed) == len(self.finger_joints),
+            "robot.finger_closed",
+            self.finger_closed,
+            "needs one value per finger joint",
+        )
+        _require(
+            self.max_opening_m > 0, "robot.max_opening_m", self.max_opening_m, "must be positive"
+        )
 
     def resolve_urdf(self) -> Path:
         """The URDF file: as given if it exists, else inside ``pybullet_data``."""
@@ -181,34 +203,64 @@ ROBOTS: dict[str, RobotConfig] = {"panda": RobotConfig(), "xarm6": xarm6_robot()
 
 @dataclass(frozen=True)
 class GraspConfig:
-    """The reference's grasp approximation: finger contacts plus a TCP overlap volume and a dwell."""
+    """The reference grasp approximation: finger contacts, a TCP overlap volume, a dwell."""
 
     dwell_s: float = 0.6
     tcp_half_extents_m: tuple[float, float, float] = (0.01, 0.01, 0.02)
 
     def __post_init__(self) -> None:
         _require(self.dwell_s >= 0, "grasp.dwell_s", self.dwell_s, "must be >= 0")
-        _require(all(v > 0 for v in self.tcp_half_extents_m), "grasp.tcp_half_extents_m",
-                 self.tcp_half_extents_m, "must be positive")
+        _require(
+            all(v > 0 for v in self.tcp_half_extents_m),
+            "grasp.tcp_half_extents_m",
+            self.tcp_half_extents_m,
+            "must be positive",
+        )
 
 
 @dataclass(frozen=True)
 class PhysicsConfig:
-    """Solver settings. The step is fixed; the FMU communication step is a multiple or equal."""
+    """Solver settings. The step is fixed; the FMU communication step is a multiple or equal.
+
+    ``hull_merge_tolerance`` and ``max_convex_pieces`` bound the collision-shape complexity of
+    concave objects (see :mod:`twin.collision`).
+    """
 
     physics_hz: float = 240.0
     fmu_step_s: float | None = None
     solver_iterations: int = 10
+    hull_merge_tolerance: float = 0.1
+    max_convex_pieces: int = 6
     floor_z_m: float = -0.8
     gravity_mps2: float = 9.81
 
     def __post_init__(self) -> None:
-        _require(self.physics_hz > 0 and math.isfinite(self.physics_hz), "physics.physics_hz",
-                 self.physics_hz, "must be positive")
+        _require(
+            self.physics_hz > 0 and math.isfinite(self.physics_hz),
+            "physics.physics_hz",
+            self.physics_hz,
+            "must be positive",
+        )
         if self.fmu_step_s is not None:
             _require(self.fmu_step_s > 0, "physics.fmu_step_s", self.fmu_step_s, "must be positive")
-        _require(self.solver_iterations >= 1, "physics.solver_iterations", self.solver_iterations,
-                 "must be >= 1")
+        _require(
+            self.solver_iterations >= 1,
+            "physics.solver_iterations",
+            self.solver_iterations,
+            "must be >= 1",
+        )
+        _require(
+            self.hull_merge_tolerance >= 0,
+            "physics.hull_merge_tolerance",
+            self.hull_merge_tolerance,
+            "must be >= 0",
+        )
+        _require(
+            self.max_convex_pieces >= 1,
+            "physics.max_convex_pieces",
+            self.max_convex_pieces,
+            "must be >= 1",
+        )
 
     @property
     def dt_s(self) -> float:

@@ -67,8 +67,10 @@ def _convert(tp: Any, value: object, where: str) -> object:
             return tuple(_convert(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
         if len(args) != len(value):
             _fail(where, value, f"expected {len(args)} values")
-        return tuple(_convert(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, value,
-                                                                                     strict=True)))
+        return tuple(
+            _convert(a, v, f"{where}[{i}]")
+            for i, (a, v) in enumerate(zip(args, value, strict=True))
+        )
     if origin is dict:
         key_type, value_type = get_args(tp)
         if not isinstance(value, dict):

@@ -44,8 +44,14 @@ class Event:
     def to_json(self) -> str:
         """One JSON line (the event log format)."""
         return json.dumps(
-            {"time_s": self.time_s, "step": self.step, "type": str(self.type),
-             "object_id": self.object_id, "class_name": self.class_name, "data": self.data},
+            {
+                "time_s": self.time_s,
+                "step": self.step,
+                "type": str(self.type),
+                "object_id": self.object_id,
+                "class_name": self.class_name,
+                "data": self.data,
+            },
             sort_keys=True,
         )
 
@@ -53,6 +59,11 @@ class Event:
     def from_json(cls, line: str) -> Event:
         """Parse one line written by :meth:`to_json`."""
         raw = json.loads(line)
-        return cls(time_s=float(raw["time_s"]), step=int(raw["step"]),
-                   type=EventType(raw["type"]), object_id=int(raw["object_id"]),
-                   class_name=str(raw.get("class_name", "")), data=dict(raw.get("data", {})))
+        return cls(
+            time_s=float(raw["time_s"]),
+            step=int(raw["step"]),
+            type=EventType(raw["type"]),
+            object_id=int(raw["object_id"]),
+            class_name=str(raw.get("class_name", "")),
+            data=dict(raw.get("data", {})),
+        )

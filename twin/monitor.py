@@ -3,7 +3,8 @@
 Grasp approximation (as the reference defines it): finger contacts come from the contact points
 on each finger link; a small box around the TCP is the overlap volume. A pick succeeds when the
 TCP volume has overlapped the object continuously for the dwell time (0.6 s default) *and* the
-fingers touch it from opposite sides (contact normals pointing against each other). The object is
+fingers touch it from opposite sides (contact normals pointing against each other) while the
+gripper is commanded closed (less than half open). The object is
 then held by a fixed constraint to the TCP link; opening the gripper releases it.
 
 Fates and events:
@@ -65,6 +66,7 @@ class _Record:
     body: int
     mass_kg: float
     height_m: float
+    inertial_inv: tuple[float, float, float, float]
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
     active: bool = True
@@ -101,17 +103,32 @@ class Monitor:
 
     def add(self, placement: Placement, spawned: SpawnedBody, step: int, time_s: float) -> Event:
         """Register a freshly spawned object; returns its ``spawned`` event."""
-        record = _Record(id=len(self._records) + 1, placement=placement, body=spawned.body,
-                         mass_kg=spawned.mass_kg, height_m=spawned.height_m,
-                         position=placement.position_m, on_belt=True)
+        qx, qy, qz, qw = spawned.inertial_quat_xyzw
+        record = _Record(
+            id=len(self._records) + 1,
+            placement=placement,
+            body=spawned.body,
+            mass_kg=spawned.mass_kg,
+            height_m=spawned.height_m,
+            inertial_inv=(-qx, -qy, -qz, qw),
+            position=placement.position_m,
+            on_belt=True,
+        )
         self._records.append(record)
         self._by_body[spawned.body] = record
         self.load_mass_kg += record.mass_kg
-        event = Event(time_s=time_s, step=step, type=EventType.SPAWNED, object_id=record.id,
-                      class_name=placement.spec.class_name,
-                      data={"source_id": placement.spec.object_id,
-                            "position_m": list(placement.position_m),
-                            "mass_kg": record.mass_kg})
+        event = Event(
+            time_s=time_s,
+            step=step,
+            type=EventType.SPAWNED,
+            object_id=record.id,
+            class_name=placement.spec.class_name,
+            data={
+                "source_id": placement.spec.object_id,
+                "position_m": list(placement.position_m),
+                "mass_kg": record.mass_kg,
+            },
+        )
         self._pending.append(event)
         return event
 
@@ -145,8 +162,16 @@ class Monitor:
         load = 0.0
 
         def emit(kind: EventType, record: _Record, **data: object) -> None:
-            events.append(Event(time_s=time_s, step=step, type=kind, object_id=record.id,
-                                class_name=record.placement.spec.class_name, data=dict(data)))
+            events.append(
+                Event(
+                    time_s=time_s,
+                    step=step,
+                    type=kind,
+                    object_id=record.id,
+                    class_name=record.placement.spec.class_name,
+                    data=dict(data),
+                )
+            )
 
         for record in self._records:
             if not record.active:
@@ -161,18 +186,25 @@ class Monitor:
                     emit(EventType.PICK_DROPPED, record, position_m=list(pos))
             # -- fates
             bin_hit = None
+            over_bin = False
             for bin_config in self.cell.bins:
-                if bin_config.contains_xy(x, y) and bin_config.floor_z_m - 0.05 < z < \
-                        bin_config.top_z_m:
-                    bin_hit = bin_config
+                if bin_config.contains_xy(x, y):
+                    over_bin = True
+                    if bin_config.floor_z_m - 0.05 < z < bin_config.top_z_m:
+                        bin_hit = bin_config
                     break
             if bin_hit is not None and not record.held:
                 record.in_bin = True
                 self._deactivate(record)
-                emit(EventType.PLACED_IN_BIN, record, bin=bin_hit.class_name,
-                     correct=bin_hit.class_name == record.placement.spec.class_name)
+                emit(
+                    EventType.PLACED_IN_BIN,
+                    record,
+                    bin=bin_hit.class_name,
+                    correct=bin_hit.class_name == record.placement.spec.class_name,
+                )
                 continue
-            if z < belt.surface_z_m - 0.05 and not record.held:
+            falling_into_bin = over_bin and z > self.cell.physics.floor_z_m + 0.05
+            if z < belt.surface_z_m - 0.05 and not record.held and not falling_into_bin:
                 where = "belt_end" if x > belt.end_x_m else "side"
                 if record.in_workspace:
                     record.in_workspace = False
@@ -180,16 +212,22 @@ class Monitor:
                 self._deactivate(record)
                 emit(EventType.FELL_OFF, record, where=where, position_m=list(pos))
                 continue
-            record.on_belt = (not record.held) and belt.on_belt_xy(x, y) and \
-                z > belt.surface_z_m
+            record.on_belt = (not record.held) and belt.on_belt_xy(x, y) and z > belt.surface_z_m
             if record.on_belt:
                 load += record.mass_kg
             in_ws = record.on_belt and ws.min_x_m <= x <= ws.max_x_m
             if in_ws and not record.in_workspace:
                 emit(EventType.ENTERED_WORKSPACE, record, x_m=x)
             elif record.in_workspace and not in_ws:
-                direction = ("lifted" if record.held else "downstream" if x > ws.max_x_m
-                             else "upstream" if x < ws.min_x_m else "off_belt")
+                direction = (
+                    "lifted"
+                    if record.held
+                    else "downstream"
+                    if x > ws.max_x_m
+                    else "upstream"
+                    if x < ws.min_x_m
+                    else "off_belt"
+                )
                 emit(EventType.LEFT_WORKSPACE, record, direction=direction, x_m=x)
                 if direction == "downstream" and not record.picked and not record.missed:
                     record.missed = True
@@ -199,10 +237,17 @@ class Monitor:
             overlap = False
             dx, dy = x - tcp_pos[0], y - tcp_pos[1]
             if dx * dx + dy * dy < _NEAR_TCP_M**2 and abs(z - tcp_pos[2]) < _NEAR_TCP_M:
-                overlap = bool(pb.getClosestPoints(
-                    bodyA=-1, bodyB=record.body, distance=0.0, collisionShapeA=self._tcp_shape,
-                    collisionShapePositionA=tcp_pos, collisionShapeOrientationA=tcp_orn,
-                    physicsClientId=c))
+                overlap = bool(
+                    pb.getClosestPoints(
+                        bodyA=-1,
+                        bodyB=record.body,
+                        distance=0.0,
+                        collisionShapeA=self._tcp_shape,
+                        collisionShapePositionA=tcp_pos,
+                        collisionShapeOrientationA=tcp_orn,
+                        physicsClientId=c,
+                    )
+                )
             if overlap and record.overlap_since is None:
                 record.overlap_since = time_s
                 emit(EventType.TCP_OVERLAP_START, record)
@@ -211,27 +256,40 @@ class Monitor:
                 emit(EventType.TCP_OVERLAP_END, record)
             # -- finger and arm contacts
             touching = fingers.get(record.id, {})
-            engaged = record.held or overlap or (
-                dx * dx + dy * dy < self.robot.config.max_opening_m**2)
+            engaged = (
+                record.held or overlap or (dx * dx + dy * dy < self.robot.config.max_opening_m**2)
+            )
             for finger in sorted(set(touching) - record.fingers):
-                emit(EventType.FINGER_CONTACT, record,
-                     finger=self.robot.config.finger_links[finger])
+                emit(
+                    EventType.FINGER_CONTACT, record, finger=self.robot.config.finger_links[finger]
+                )
                 if not engaged:
-                    emit(EventType.UNINTENDED_CONTACT, record,
-                         link=self.robot.config.finger_links[finger])
+                    emit(
+                        EventType.UNINTENDED_CONTACT,
+                        record,
+                        link=self.robot.config.finger_links[finger],
+                    )
             record.fingers = frozenset(touching)
             links = frozenset(arm.get(record.id, set()))
-            if not record.held:
+            if not engaged:
                 for link in sorted(links - record.arm_links):
                     emit(EventType.UNINTENDED_CONTACT, record, link=self._link_name(link))
             record.arm_links = links
             # -- pick success
-            if (self._held is None and record.overlap_since is not None
-                    and time_s - record.overlap_since >= self.cell.grasp.dwell_s - 1e-9
-                    and self._opposite(touching)):
+            if (
+                self._held is None
+                and not gripper_open
+                and record.overlap_since is not None
+                and time_s - record.overlap_since >= self.cell.grasp.dwell_s - 1e-9
+                and self._opposite(touching)
+            ):
                 self._attach(record, tcp_pos, tcp_orn)
-                emit(EventType.PICK_SUCCESS, record,
-                     dwell_s=time_s - record.overlap_since, position_m=list(pos))
+                emit(
+                    EventType.PICK_SUCCESS,
+                    record,
+                    dwell_s=time_s - record.overlap_since,
+                    position_m=list(pos),
+                )
         self.load_mass_kg = load
         return events
 
@@ -248,16 +306,28 @@ class Monitor:
         info = pb.getJointInfo(self.robot.body, link, physicsClientId=self.client)
         return str(info[12].decode())
 
-    def _attach(self, record: _Record, tcp_pos: tuple[float, float, float],
-                tcp_orn: tuple[float, float, float, float]) -> None:
+    def _attach(
+        self,
+        record: _Record,
+        tcp_pos: tuple[float, float, float],
+        tcp_orn: tuple[float, float, float, float],
+    ) -> None:
         c = self.client
         inv_pos, inv_orn = pb.invertTransform(tcp_pos, tcp_orn)
-        rel_pos, rel_orn = pb.multiplyTransforms(inv_pos, inv_orn, record.position,
-                                                 record.orientation)
+        rel_pos, rel_orn = pb.multiplyTransforms(
+            inv_pos, inv_orn, record.position, record.orientation
+        )
         record.constraint = pb.createConstraint(
-            self.robot.body, self.robot.tcp_link, record.body, -1, pb.JOINT_FIXED,
-            [0.0, 0.0, 0.0], parentFramePosition=rel_pos, childFramePosition=[0.0, 0.0, 0.0],
-            parentFrameOrientation=rel_orn, physicsClientId=c,
+            self.robot.body,
+            self.robot.tcp_link,
+            record.body,
+            -1,
+            pb.JOINT_FIXED,
+            [0.0, 0.0, 0.0],
+            parentFramePosition=rel_pos,
+            childFramePosition=[0.0, 0.0, 0.0],
+            parentFrameOrientation=rel_orn,
+            physicsClientId=c,
         )
         pb.changeConstraint(record.constraint, maxForce=500.0, physicsClientId=c)
         record.held = True
@@ -296,17 +366,30 @@ class Monitor:
                 lin, ang = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
             spec = record.placement.spec
             scale = record.height_m / spec.height_m
-            out.append(GroundTruth(
-                id=record.id, source_id=spec.object_id, class_name=spec.class_name,
-                position_m=tuple(record.position),  # type: ignore[arg-type]
-                orientation_xyzw=tuple(record.orientation),  # type: ignore[arg-type]
-                linear_velocity_mps=tuple(lin),  # type: ignore[arg-type]
-                angular_velocity_radps=tuple(ang),  # type: ignore[arg-type]
-                length_m=spec.length_m, width_m=spec.width_m, area_m2=spec.area_m2,
-                volume_m3=spec.volume_m3 * scale, height_m=record.height_m,
-                mass_kg=record.mass_kg, on_belt=record.on_belt,
-                in_workspace=record.in_workspace, held=record.held, in_bin=record.in_bin,
-            ))
+            _, orientation = pb.multiplyTransforms(
+                (0.0, 0.0, 0.0), record.orientation, (0.0, 0.0, 0.0), record.inertial_inv
+            )
+            out.append(
+                GroundTruth(
+                    id=record.id,
+                    source_id=spec.object_id,
+                    class_name=spec.class_name,
+                    position_m=record.position,
+                    orientation_xyzw=tuple(orientation),
+                    linear_velocity_mps=tuple(lin),
+                    angular_velocity_radps=tuple(ang),
+                    length_m=spec.length_m,
+                    width_m=spec.width_m,
+                    area_m2=spec.area_m2,
+                    volume_m3=spec.volume_m3 * scale,
+                    height_m=record.height_m,
+                    mass_kg=record.mass_kg,
+                    on_belt=record.on_belt,
+                    in_workspace=record.in_workspace,
+                    held=record.held,
+                    in_bin=record.in_bin,
+                )
+            )
         return tuple(out)
 
 

@@ -20,8 +20,15 @@ import numpy as np
 from twin.errors import SceneError
 
 _FLOAT_FIELDS = (
-    "centroid_x_m", "centroid_y_m", "yaw_rad", "length_m", "width_m", "area_m2", "height_m",
-    "volume_m3", "mass_kg",
+    "centroid_x_m",
+    "centroid_y_m",
+    "yaw_rad",
+    "length_m",
+    "width_m",
+    "area_m2",
+    "height_m",
+    "volume_m3",
+    "mass_kg",
 )
 _REQUIRED = ("object_id", "source_image", "class_name", *_FLOAT_FIELDS, "mesh_path", "convex_path")
 
@@ -153,8 +160,14 @@ def load_dataset(out_dir: Path, classes: Iterable[str]) -> tuple[ImageLayout, ..
             for obj_line, obj_row in _read_csv(scene_path)
         )
         if objects:
-            layouts.append(ImageLayout(image=row["image"], length_m=height_px * m_per_px,
-                                       width_m=width_px * m_per_px, objects=objects))
+            layouts.append(
+                ImageLayout(
+                    image=row["image"],
+                    length_m=height_px * m_per_px,
+                    width_m=width_px * m_per_px,
+                    objects=objects,
+                )
+            )
     if not layouts:
         msg = f"{index_path}: no image with objects to simulate"
         raise SceneError(msg)
@@ -166,14 +179,19 @@ def _unit_inertia(mesh_path: Path, z_scale: float) -> tuple[np.ndarray, np.ndarr
     import trimesh
 
     mesh = trimesh.load(mesh_path, force="mesh", process=False)
+    if not isinstance(mesh, trimesh.Trimesh):
+        msg = f"{mesh_path}: not a triangle mesh"
+        raise SceneError(msg)
     if z_scale != 1.0:
-        mesh.apply_scale([1.0, 1.0, z_scale])
+        mesh.apply_transform(np.diag([1.0, 1.0, z_scale, 1.0]))
     if mesh.volume <= 0:
         msg = f"{mesh_path}: mesh has no positive volume"
         raise SceneError(msg)
     mesh.density = 1.0 / mesh.volume
-    return (np.asarray(mesh.principal_inertia_components, dtype=float),
-            np.asarray(mesh.principal_inertia_vectors, dtype=float))
+    return (
+        np.asarray(mesh.principal_inertia_components, dtype=float),
+        np.asarray(mesh.principal_inertia_vectors, dtype=float),
+    )
 
 
 def inertia_of(spec: ObjectSpec, z_scale: float = 1.0) -> Inertia:
@@ -187,8 +205,11 @@ def inertia_of(spec: ObjectSpec, z_scale: float = 1.0) -> Inertia:
         rotation[:, 2] = -rotation[:, 2]
     mass_kg = spec.mass_kg * z_scale
     return Inertia(
-        principal_kgm2=(float(components[0]) * mass_kg, float(components[1]) * mass_kg,
-                        float(components[2]) * mass_kg),
+        principal_kgm2=(
+            float(components[0]) * mass_kg,
+            float(components[1]) * mass_kg,
+            float(components[2]) * mass_kg,
+        ),
         frame_quat_xyzw=_matrix_to_quat(rotation),
     )
 

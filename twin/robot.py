@@ -37,8 +37,11 @@ class Robot:
         quat = pb.getQuaternionFromEuler([0.0, 0.0, config.base_yaw_rad])
         try:
             self.body = pb.loadURDF(
-                str(urdf), basePosition=config.base_position_m, baseOrientation=quat,
-                useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE,
+                str(urdf),
+                basePosition=config.base_position_m,
+                baseOrientation=quat,
+                useFixedBase=True,
+                flags=pb.URDF_USE_INERTIA_FROM_FILE,
                 physicsClientId=client,
             )
         except pb.error as exc:
@@ -47,16 +50,22 @@ class Robot:
         joints: dict[str, int] = {}
         links: dict[str, int] = {}
         lower, upper, velocity, effort = [], [], [], []
-        infos = [pb.getJointInfo(self.body, j, physicsClientId=client)
-                 for j in range(pb.getNumJoints(self.body, physicsClientId=client))]
+        infos = [
+            pb.getJointInfo(self.body, j, physicsClientId=client)
+            for j in range(pb.getNumJoints(self.body, physicsClientId=client))
+        ]
         for info in infos:
             joints[info[1].decode()] = info[0]
             links[info[12].decode()] = info[0]
-        self.arm_joints = [self._lookup(joints, name, "arm joint", urdf) for name in config.arm_joints]
-        self.finger_joints = [self._lookup(joints, name, "finger joint", urdf)
-                              for name in config.finger_joints]
-        self.finger_links = [self._lookup(links, name, "finger link", urdf)
-                             for name in config.finger_links]
+        self.arm_joints = [
+            self._lookup(joints, name, "arm joint", urdf) for name in config.arm_joints
+        ]
+        self.finger_joints = [
+            self._lookup(joints, name, "finger joint", urdf) for name in config.finger_joints
+        ]
+        self.finger_links = [
+            self._lookup(links, name, "finger link", urdf) for name in config.finger_links
+        ]
         self.tcp_link = self._lookup(links, config.tcp_link, "TCP link", urdf)
         for j in self.arm_joints:
             info = infos[j]
@@ -67,8 +76,9 @@ class Robot:
             upper.append(hi)
             velocity.append(float(info[11]) if info[11] > 0 else 2.0)
             effort.append(float(info[10]) if info[10] > 0 else 100.0)
-        self.limits = JointLimits(np.array(lower), np.array(upper), np.array(velocity),
-                                  np.array(effort))
+        self.limits = JointLimits(
+            np.array(lower), np.array(upper), np.array(velocity), np.array(effort)
+        )
         self._finger_effort = [max(float(infos[j][10]), 20.0) for j in self.finger_joints]
         self.robot_links = frozenset(links.values()) | {-1}
         self._q_target = np.array(config.home_joint_positions, dtype=float)
@@ -98,9 +108,11 @@ class Robot:
     def command(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
         """Set arm joint position targets (and feed-forward velocities); clipped to the limits."""
         self._q_target = np.clip(np.asarray(q, dtype=float), self.limits.lower, self.limits.upper)
-        self._qd_target = (np.zeros(len(self.arm_joints)) if qd is None
-                           else np.clip(np.asarray(qd, dtype=float), -self.limits.velocity,
-                                        self.limits.velocity))
+        self._qd_target = (
+            np.zeros(len(self.arm_joints))
+            if qd is None
+            else np.clip(np.asarray(qd, dtype=float), -self.limits.velocity, self.limits.velocity)
+        )
 
     def command_gripper(self, width_m: float) -> None:
         """Set the gripper opening in metres (0 = closed, ``max_opening_m`` = open)."""
@@ -110,8 +122,11 @@ class Robot:
         """Hand the current targets to PyBullet's joint motors."""
         n = len(self.arm_joints)
         pb.setJointMotorControlArray(
-            self.body, self.arm_joints, pb.POSITION_CONTROL,
-            targetPositions=self._q_target.tolist(), targetVelocities=self._qd_target.tolist(),
+            self.body,
+            self.arm_joints,
+            pb.POSITION_CONTROL,
+            targetPositions=self._q_target.tolist(),
+            targetVelocities=self._qd_target.tolist(),
             forces=self.limits.effort.tolist(),
             positionGains=[self.config.position_gain] * n,
             velocityGains=[self.config.velocity_gain] * n,
@@ -119,11 +134,17 @@ class Robot:
         )
         if self.finger_joints:
             frac = self._gripper_width_m / self.config.max_opening_m
-            targets = [c + frac * (o - c) for o, c in zip(self.config.finger_open,
-                                                          self.config.finger_closed, strict=True)]
+            targets = [
+                c + frac * (o - c)
+                for o, c in zip(self.config.finger_open, self.config.finger_closed, strict=True)
+            ]
             pb.setJointMotorControlArray(
-                self.body, self.finger_joints, pb.POSITION_CONTROL, targetPositions=targets,
-                forces=self._finger_effort, physicsClientId=self.client,
+                self.body,
+                self.finger_joints,
+                pb.POSITION_CONTROL,
+                targetPositions=targets,
+                forces=self._finger_effort,
+                physicsClientId=self.client,
             )
 
     @property
@@ -148,19 +169,27 @@ class Robot:
         states = pb.getJointStates(self.body, self.finger_joints, physicsClientId=self.client)
         fracs = [
             (s[0] - c) / (o - c) if o != c else 0.0
-            for s, o, c in zip(states, self.config.finger_open, self.config.finger_closed,
-                               strict=True)
+            for s, o, c in zip(
+                states, self.config.finger_open, self.config.finger_closed, strict=True
+            )
         ]
         return float(np.clip(np.mean(fracs), 0.0, 1.0) * self.config.max_opening_m)
 
     def tcp_pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
         """Position and xyzw orientation of the TCP link in the world frame."""
-        state = pb.getLinkState(self.body, self.tcp_link, computeForwardKinematics=True,
-                                physicsClientId=self.client)
+        state = pb.getLinkState(
+            self.body, self.tcp_link, computeForwardKinematics=True, physicsClientId=self.client
+        )
         return state[4], state[5]
 
     def tcp_velocity(self) -> tuple[float, float, float]:
         """Linear velocity of the TCP link in the world frame."""
-        state = pb.getLinkState(self.body, self.tcp_link, computeLinkVelocity=True,
-                                computeForwardKinematics=True, physicsClientId=self.client)
-        return state[6]
+        state = pb.getLinkState(
+            self.body,
+            self.tcp_link,
+            computeLinkVelocity=True,
+            computeForwardKinematics=True,
+            physicsClientId=self.client,
+        )
+        vx, vy, vz = state[6]
+        return (float(vx), float(vy), float(vz))

@@ -57,8 +57,12 @@ class ObjectLevel:
     def __post_init__(self) -> None:
         if self.max_objects is not None:
             _check(self.max_objects >= 1, "objects.max_objects", self.max_objects, "must be >= 1")
-        _check(0.0 <= self.orientation_jitter_rad <= np.pi, "objects.orientation_jitter_rad",
-               self.orientation_jitter_rad, "must be in [0, pi]")
+        _check(
+            0.0 <= self.orientation_jitter_rad <= np.pi,
+            "objects.orientation_jitter_rad",
+            self.orientation_jitter_rad,
+            "must be in [0, pi]",
+        )
         for name, rng in self.height_ranges_m.items():
             _check_range(f"objects.height_ranges_m.{name}", rng, 0.001, 1.0)
         _check(len(self.classes) > 0, "objects.classes", self.classes, "must not be empty")
@@ -73,10 +77,18 @@ class PerturbationLevel:
     correlation_time_s: float = 0.5
 
     def __post_init__(self) -> None:
-        _check(self.force_std_N >= 0.0, "system.perturbation.force_std_N", self.force_std_N,
-               "must be >= 0")
-        _check(self.correlation_time_s > 0.0, "system.perturbation.correlation_time_s",
-               self.correlation_time_s, "must be positive")
+        _check(
+            self.force_std_N >= 0.0,
+            "system.perturbation.force_std_N",
+            self.force_std_N,
+            "must be >= 0",
+        )
+        _check(
+            self.correlation_time_s > 0.0,
+            "system.perturbation.correlation_time_s",
+            self.correlation_time_s,
+            "must be positive",
+        )
 
 
 @dataclass(frozen=True)
@@ -96,25 +108,44 @@ class SystemLevel:
     prefill_m: float = 0.0
 
     def __post_init__(self) -> None:
-        _check(0.0 <= self.prefill_m <= 100.0, "system.prefill_m", self.prefill_m,
-               "must be in [0, 100] m")
-        _check(0.0 <= self.belt_speed_mps <= 2.0, "system.belt_speed_mps", self.belt_speed_mps,
-               "must be in [0, 2] m/s")
-        _check(0.0 <= self.image_gap_m <= 10.0, "system.image_gap_m", self.image_gap_m,
-               "must be in [0, 10] m")
+        _check(
+            0.0 <= self.prefill_m <= 100.0,
+            "system.prefill_m",
+            self.prefill_m,
+            "must be in [0, 100] m",
+        )
+        _check(
+            0.0 <= self.belt_speed_mps <= 2.0,
+            "system.belt_speed_mps",
+            self.belt_speed_mps,
+            "must be in [0, 2] m/s",
+        )
+        _check(
+            0.0 <= self.image_gap_m <= 10.0,
+            "system.image_gap_m",
+            self.image_gap_m,
+            "must be in [0, 10] m",
+        )
         for i, (t_s, v) in enumerate(self.speed_schedule):
-            _check(t_s >= 0.0 and 0.0 <= v <= 2.0, f"system.speed_schedule[{i}]", [t_s, v],
-                   "needs time >= 0 and speed in [0, 2] m/s")
+            _check(
+                t_s >= 0.0 and 0.0 <= v <= 2.0,
+                f"system.speed_schedule[{i}]",
+                [t_s, v],
+                "needs time >= 0 and speed in [0, 2] m/s",
+            )
 
 
 def _default_friction() -> dict[str, tuple[float, float]]:
-    return {"concrete": (0.6, 0.8), "brick": (0.6, 0.8), "wood": (0.4, 0.6),
-            "rubber": (0.8, 1.0)}
+    return {"concrete": (0.6, 0.8), "brick": (0.6, 0.8), "wood": (0.4, 0.6), "rubber": (0.8, 1.0)}
 
 
 def _default_restitution() -> dict[str, tuple[float, float]]:
-    return {"concrete": (0.05, 0.15), "brick": (0.05, 0.15), "wood": (0.1, 0.25),
-            "rubber": (0.3, 0.5)}
+    return {
+        "concrete": (0.05, 0.15),
+        "brick": (0.05, 0.15),
+        "wood": (0.1, 0.25),
+        "rubber": (0.3, 0.5),
+    }
 
 
 @dataclass(frozen=True)
@@ -147,8 +178,12 @@ class Scenario:
     def __post_init__(self) -> None:
         _check(bool(self.name), "name", self.name, "must not be empty")
         _check(self.seed >= 0, "seed", self.seed, "must be >= 0")
-        _check(0.0 < self.duration_s <= 86400.0, "duration_s", self.duration_s,
-               "must be in (0, 86400] s")
+        _check(
+            0.0 < self.duration_s <= 86400.0,
+            "duration_s",
+            self.duration_s,
+            "must be in (0, 86400] s",
+        )
 
     def to_yaml(self) -> str:
         """The scenario as YAML text."""

@@ -19,6 +19,7 @@ drives the kinematic belt. Time is ``step * dt``, never accumulated.
 from __future__ import annotations
 
 import math
+import tempfile
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
@@ -41,8 +42,11 @@ from twin.stream import ImageBatch, Stream
 from twin.world import World
 
 # Names of the belt-drive FMU's perturbation parameters (see fmus/belt_drive/readme.md).
-PERTURBATION_PARAMETERS = ("perturbation_std_N", "perturbation_correlation_time_s",
-                           "perturbation_seed")
+PERTURBATION_PARAMETERS = (
+    "perturbation_std_N",
+    "perturbation_correlation_time_s",
+    "perturbation_seed",
+)
 
 
 @dataclass(frozen=True)
@@ -99,6 +103,7 @@ class Twin:
         self._fmu_parameters = dict(fmu_parameters or {})
         self.realtime = realtime
         self.layouts: tuple[ImageLayout, ...] = load_dataset(dataset_dir, scenario.objects.classes)
+        self._cache = tempfile.TemporaryDirectory(prefix="cdw-twin-shapes-")
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
         self._drive: BeltDrive | None = None
         self._world: World | None = None
@@ -117,8 +122,12 @@ class Twin:
     def __enter__(self) -> Twin:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         self.close()
 
     def close(self) -> None:
@@ -129,6 +138,7 @@ class Twin:
         if self.client >= 0:
             pb.disconnect(physicsClientId=self.client)
             self.client = -1
+        self._cache.cleanup()
 
     def reset(self, seed: int | None = None) -> tuple[Observation, dict[str, object]]:
         """Start a new episode; ``seed`` overrides the scenario's seed."""
@@ -146,7 +156,7 @@ class Twin:
             enableConeFriction=0,
             physicsClientId=c,
         )
-        self._world = World(c, self.cell)
+        self._world = World(c, self.cell, Path(self._cache.name))
         self.robot = Robot(c, self.cell.robot)
         self._monitor = Monitor(c, self.cell, self._world, self.robot)
         stream = Stream(self.layouts, self.scenario, self.cell.belt, seeds)
@@ -190,8 +200,9 @@ class Twin:
         self._realtime_factor = realtime_factor
         self._wall_start = time.perf_counter() - self.time_s / realtime_factor
 
-    def step(self, action: ArmCommand | None = None
-             ) -> tuple[Observation, float, bool, bool, dict[str, object]]:
+    def step(
+        self, action: ArmCommand | None = None
+    ) -> tuple[Observation, float, bool, bool, dict[str, object]]:
         """Advance one physics step; returns Gymnasium's ``(obs, reward, terminated, truncated,
         info)``, the reward being the number of objects picked in this step."""
         events = self.advance(action)
@@ -200,21 +211,32 @@ class Twin:
         truncated = self.time_s >= self.scenario.duration_s
         return obs, float(picks), False, truncated, {}
 
+    def _started(self) -> tuple[World, Robot, Monitor, BeltDrive]:
+        if (
+            self._world is None
+            or self.robot is None
+            or self._monitor is None
+            or self._drive is None
+        ):
+            msg = "the twin has no episode: call reset() before step(), advance() or observe()"
+            raise ConfigError(msg)
+        return self._world, self.robot, self._monitor, self._drive
+
     def advance(self, action: ArmCommand | None = None) -> list[Event]:
         """Advance one physics step without building an observation; returns the new events."""
-        assert self._world is not None and self.robot is not None and self._monitor is not None
-        assert self._drive is not None
+        world, _, monitor, drive = self._started()
         if action is not None:
             self.command(action)
         self._apply_schedule()
         if self.step_count % self._fmu_every == 0:
-            self._belt_state = self._drive.step(self.dt_s * self._fmu_every, self.setpoint_mps,
-                                                self._monitor.load_mass_kg)
-        self._world.set_belt_speed(self._belt_state.belt_speed_mps, self.dt_s)
+            self._belt_state = drive.step(
+                self.dt_s * self._fmu_every, self.setpoint_mps, monitor.load_mass_kg
+            )
+        world.set_belt_speed(self._belt_state.belt_speed_mps, self.dt_s)
         self._spawn_due()
         pb.stepSimulation(physicsClientId=self.client)
         self.step_count += 1
-        new = self._monitor.update(self.step_count, self.time_s)
+        new = monitor.update(self.step_count, self.time_s)
         self._events.extend(new)
         if self.realtime:
             target = self._wall_start + self.time_s / self._realtime_factor
@@ -225,16 +247,16 @@ class Twin:
 
     def command(self, action: ArmCommand) -> None:
         """Set the arm (and gripper) targets; they hold until the next command."""
-        assert self.robot is not None
-        n = len(self.robot.arm_joints)
+        _, robot, _, _ = self._started()
+        n = len(robot.arm_joints)
         if len(action.joint_positions) != n:
             msg = f"arm command has {len(action.joint_positions)} joint positions, robot has {n}"
             raise ConfigError(msg)
         qd = None if action.joint_velocities is None else np.asarray(action.joint_velocities)
-        self.robot.command(np.asarray(action.joint_positions, dtype=float), qd)
+        robot.command(np.asarray(action.joint_positions, dtype=float), qd)
         if action.gripper_width_m is not None:
-            self.robot.command_gripper(action.gripper_width_m)
-        self.robot.apply_commands()
+            robot.command_gripper(action.gripper_width_m)
+        robot.apply_commands()
 
     def _apply_schedule(self) -> None:
         for t_s, speed in self.scenario.system.speed_schedule:
@@ -242,36 +264,42 @@ class Twin:
                 self.setpoint_mps = speed
 
     def _spawn_due(self) -> None:
-        assert self._monitor is not None and self._world is not None
-        while self._next_batch is not None and \
-                self._belt_state.belt_position_m >= self._next_batch.trigger_m:
+        world, _, monitor, _ = self._started()
+        while (
+            self._next_batch is not None
+            and self._belt_state.belt_position_m >= self._next_batch.trigger_m
+        ):
             for placement in self._next_batch.placements:
                 quat = pb.getQuaternionFromEuler([0.0, 0.0, placement.yaw_rad])
-                spawned = self._world.spawn(
-                    placement.spec, placement.position_m, quat, height_m=placement.height_m,
-                    friction=placement.friction, restitution=placement.restitution,
+                spawned = world.spawn(
+                    placement.spec,
+                    placement.position_m,
+                    quat,
+                    height_m=placement.height_m,
+                    friction=placement.friction,
+                    restitution=placement.restitution,
                 )
-                self._monitor.add(placement, spawned, self.step_count, self.time_s)
+                monitor.add(placement, spawned, self.step_count, self.time_s)
             self._next_batch = next(self._batches, None)
 
     # -- reading ----------------------------------------------------------------------------
     def observe(self, events: list[Event] | tuple[Event, ...] = ()) -> Observation:
         """Ground truth now."""
-        assert self.robot is not None and self._monitor is not None
-        q, qd = self.robot.joint_state()
-        pos, orn = self.robot.tcp_pose()
+        _, robot, monitor, _ = self._started()
+        q, qd = robot.joint_state()
+        pos, orn = robot.tcp_pose()
         return Observation(
             time_s=self.time_s,
             step=self.step_count,
             belt=self._belt_state,
             setpoint_mps=self.setpoint_mps,
-            load_mass_kg=self._monitor.load_mass_kg,
-            objects=self._monitor.ground_truth(),
+            load_mass_kg=monitor.load_mass_kg,
+            objects=monitor.ground_truth(),
             joint_positions=tuple(float(v) for v in q),
             joint_velocities=tuple(float(v) for v in qd),
             tcp_position_m=(float(pos[0]), float(pos[1]), float(pos[2])),
             tcp_orientation_xyzw=(float(orn[0]), float(orn[1]), float(orn[2]), float(orn[3])),
-            gripper_width_m=self.robot.gripper_width_m(),
+            gripper_width_m=robot.gripper_width_m(),
             events=tuple(events),
         )
 
@@ -282,8 +310,13 @@ class Twin:
 
     def record_fault(self, kind: str, detail: str) -> Event:
         """Log a fault (bad command, controller crash) as an event; scores stay honest."""
-        event = Event(time_s=self.time_s, step=self.step_count, type=EventType.FAULT,
-                      object_id=0, data={"kind": kind, "detail": detail})
+        event = Event(
+            time_s=self.time_s,
+            step=self.step_count,
+            type=EventType.FAULT,
+            object_id=0,
+            data={"kind": kind, "detail": detail},
+        )
         self._events.append(event)
         return event
 

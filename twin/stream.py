@@ -49,7 +49,8 @@ class ImageBatch:
 def _corners(x: float, y: float, yaw: float, length: float, width: float) -> np.ndarray:
     c, s = math.cos(yaw), math.sin(yaw)
     half = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]], dtype=float) * [0.5 * length, 0.5 * width]
-    return np.array([x, y]) + half @ np.array([[c, s], [-s, c]])
+    corners: np.ndarray = np.array([x, y]) + half @ np.array([[c, s], [-s, c]])
+    return corners
 
 
 def _overlap(a: np.ndarray, b: np.ndarray) -> bool:
@@ -64,16 +65,22 @@ def _overlap(a: np.ndarray, b: np.ndarray) -> bool:
     return True
 
 
-def _class_range(ranges: dict[str, tuple[float, float]], name: str,
-                 default: tuple[float, float]) -> tuple[float, float]:
+def _class_range(
+    ranges: dict[str, tuple[float, float]], name: str, default: tuple[float, float]
+) -> tuple[float, float]:
     return ranges.get(name, default)
 
 
 class Stream:
     """Yields image batches in order; infinite when ``system.repeat_images`` is set."""
 
-    def __init__(self, layouts: tuple[ImageLayout, ...], scenario: Scenario, belt: BeltConfig,
-                 seeds: SeedTree) -> None:
+    def __init__(
+        self,
+        layouts: tuple[ImageLayout, ...],
+        scenario: Scenario,
+        belt: BeltConfig,
+        seeds: SeedTree,
+    ) -> None:
         wanted = set(scenario.objects.images)
         chosen = [lay for lay in layouts if not wanted or lay.image in wanted]
         self._layouts = tuple(chosen)
@@ -115,8 +122,7 @@ class Stream:
             replace(p, position_m=(p.position_m[0] + advance, p.position_m[1], p.position_m[2]))
             for p in batch.placements
         )
-        return replace(batch, trigger_m=max(0.0, batch.trigger_m - prefill),
-                       placements=placements)
+        return replace(batch, trigger_m=max(0.0, batch.trigger_m - prefill), placements=placements)
 
     def _batch(self, layout: ImageLayout, trigger_m: float, cycle: int) -> ImageBatch:
         objects_cfg = self._scenario.objects
@@ -127,8 +133,10 @@ class Stream:
         footprints: list[tuple[np.ndarray, float]] = []
         x0 = self._belt.infeed_x_m + 0.5 * layout.length_m
         for spec in layout.objects:
-            if objects_cfg.max_objects is not None and \
-                    self._spawned_objects >= objects_cfg.max_objects:
+            if (
+                objects_cfg.max_objects is not None
+                and self._spawned_objects >= objects_cfg.max_objects
+            ):
                 break
             if spec.class_name not in objects_cfg.classes:
                 continue
@@ -138,8 +146,11 @@ class Stream:
                 height = float(rng.uniform(lo, hi))
             jitter = 0.0
             if objects_cfg.orientation_jitter_rad > 0:
-                jitter = float(rng.uniform(-objects_cfg.orientation_jitter_rad,
-                                           objects_cfg.orientation_jitter_rad))
+                jitter = float(
+                    rng.uniform(
+                        -objects_cfg.orientation_jitter_rad, objects_cfg.orientation_jitter_rad
+                    )
+                )
             f_lo, f_hi = _class_range(physics.friction, spec.class_name, (0.6, 0.6))
             r_lo, r_hi = _class_range(physics.restitution, spec.class_name, (0.1, 0.1))
             friction = float(phys_rng.uniform(f_lo, f_hi))
@@ -153,10 +164,16 @@ class Stream:
                     base_z = max(base_z, top)
             bottom = base_z + _CLEARANCE_M
             footprints.append((quad, bottom + height))
-            placements.append(Placement(
-                spec=spec, position_m=(x, y, bottom + 0.5 * height), yaw_rad=jitter,
-                height_m=height, friction=friction, restitution=restitution,
-            ))
+            placements.append(
+                Placement(
+                    spec=spec,
+                    position_m=(x, y, bottom + 0.5 * height),
+                    yaw_rad=jitter,
+                    height_m=height,
+                    friction=friction,
+                    restitution=restitution,
+                )
+            )
             self._spawned_objects += 1
         name = layout.image if cycle == 0 else f"{layout.image}#{cycle}"
         return ImageBatch(image=name, trigger_m=trigger_m, placements=tuple(placements))

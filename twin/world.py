@@ -13,9 +13,11 @@ is exact to within half the drift (+-5 cm).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import pybullet as pb
 
+from twin.collision import merged_collision_file
 from twin.config import BinConfig, CellConfig
 from twin.errors import SceneError
 from twin.objects import ObjectSpec, inertia_of
@@ -25,18 +27,24 @@ BELT_DRIFT_M = 0.1
 
 @dataclass(frozen=True)
 class SpawnedBody:
-    """A PyBullet body made from an object spec."""
+    """A PyBullet body made from an object spec.
+
+    PyBullet reports a body's pose as the pose of its inertial (principal-axes) frame; the object
+    frame (the mesh frame) is that pose times the inverse of ``inertial_quat_xyzw``.
+    """
 
     body: int
     mass_kg: float
     height_m: float
+    inertial_quat_xyzw: tuple[float, float, float, float]
 
 
 class World:
     """Belt, floor and bins in one PyBullet client; objects are added and removed over time."""
 
-    def __init__(self, client: int, cell: CellConfig) -> None:
+    def __init__(self, client: int, cell: CellConfig, cache_dir: Path) -> None:
         self.client = client
+        self.cache_dir = cache_dir
         self.cell = cell
         belt = cell.belt
         box_start_x = belt.start_x_m - BELT_DRIFT_M
@@ -48,18 +56,23 @@ class World:
         )
         shape = pb.createCollisionShape(
             pb.GEOM_BOX,
-            halfExtents=[0.5 * (box_end_x - box_start_x), 0.5 * belt.width_m,
-                         0.5 * belt.thickness_m],
+            halfExtents=[
+                0.5 * (box_end_x - box_start_x),
+                0.5 * belt.width_m,
+                0.5 * belt.thickness_m,
+            ],
             physicsClientId=client,
         )
-        self.belt = pb.createMultiBody(0.0, shape, basePosition=self._belt_pos,
-                                       physicsClientId=client)
-        pb.changeDynamics(self.belt, -1, lateralFriction=belt.lateral_friction,
-                          physicsClientId=client)
+        self.belt = pb.createMultiBody(
+            0.0, shape, basePosition=self._belt_pos, physicsClientId=client
+        )
+        pb.changeDynamics(
+            self.belt, -1, lateralFriction=belt.lateral_friction, physicsClientId=client
+        )
         floor = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=client)
-        self.floor = pb.createMultiBody(0.0, floor,
-                                        basePosition=[0.0, 0.0, cell.physics.floor_z_m],
-                                        physicsClientId=client)
+        self.floor = pb.createMultiBody(
+            0.0, floor, basePosition=[0.0, 0.0, cell.physics.floor_z_m], physicsClientId=client
+        )
         self.bins = {b.class_name: self._make_bin(b) for b in cell.bins}
         self._shapes: dict[tuple[str, float], int] = {}
         self.belt_speed_mps = 0.0
@@ -91,20 +104,33 @@ class World:
         self.belt_speed_mps = speed_mps
         self._drift_m += speed_mps * dt_s
         if abs(self._drift_m) >= BELT_DRIFT_M:
-            pb.resetBasePositionAndOrientation(self.belt, self._belt_pos, (0.0, 0.0, 0.0, 1.0),
-                                               physicsClientId=self.client)
+            pb.resetBasePositionAndOrientation(
+                self.belt, self._belt_pos, (0.0, 0.0, 0.0, 1.0), physicsClientId=self.client
+            )
             self._drift_m = speed_mps * dt_s
-        pb.resetBaseVelocity(self.belt, (speed_mps, 0.0, 0.0), (0.0, 0.0, 0.0),
-                             physicsClientId=self.client)
+        pb.resetBaseVelocity(
+            self.belt, (speed_mps, 0.0, 0.0), (0.0, 0.0, 0.0), physicsClientId=self.client
+        )
 
     def _collision_shape(self, spec: ObjectSpec, z_scale: float) -> int:
         key = (str(spec.collision_path), z_scale)
         shape = self._shapes.get(key)
         if shape is None:
+            path = spec.collision_path
+            if spec.convex_path is not None:
+                physics = self.cell.physics
+                path, _ = merged_collision_file(
+                    spec.convex_path,
+                    self.cache_dir,
+                    physics.hull_merge_tolerance,
+                    physics.max_convex_pieces,
+                )
             try:
                 shape = pb.createCollisionShape(
-                    pb.GEOM_MESH, fileName=str(spec.collision_path),
-                    meshScale=[1.0, 1.0, z_scale], physicsClientId=self.client,
+                    pb.GEOM_MESH,
+                    fileName=str(path),
+                    meshScale=[1.0, 1.0, z_scale],
+                    physicsClientId=self.client,
                 )
             except pb.error as exc:
                 msg = f"{spec.collision_path}: PyBullet cannot build a collision shape: {exc}"
@@ -141,11 +167,21 @@ class World:
         )
         moments = list(inertia.principal_kgm2)
         pb.changeDynamics(
-            body, -1, lateralFriction=friction, restitution=restitution,
-            spinningFriction=0.001, rollingFriction=0.0, localInertiaDiagonal=moments,
+            body,
+            -1,
+            lateralFriction=friction,
+            restitution=restitution,
+            spinningFriction=0.001,
+            rollingFriction=0.0,
+            localInertiaDiagonal=moments,
             physicsClientId=self.client,
         )
-        return SpawnedBody(body=body, mass_kg=mass_kg, height_m=height_m)
+        return SpawnedBody(
+            body=body,
+            mass_kg=mass_kg,
+            height_m=height_m,
+            inertial_quat_xyzw=inertia.frame_quat_xyzw,
+        )
 
     def remove(self, body: int) -> None:
         """Take a body out of the simulation."""

@@ -21,8 +21,9 @@ LABELS = {
 }
 
 
-def _run(meshes: Path, system: SystemLevel, seconds: float) -> list[tuple[float, float, float,
-                                                                          float, float]]:
+def _run(
+    meshes: Path, system: SystemLevel, seconds: float
+) -> list[tuple[float, float, float, float, float]]:
     """Per step: time, belt speed, belt position, test object's x velocity and x (NaN before)."""
     rows = []
     scenario = Scenario(duration_s=seconds, system=system)
@@ -43,8 +44,9 @@ def test_object_reaches_belt_speed_with_slip_then_follows_a_speed_change(
     mesh_polygons: Callable[..., Path],
 ) -> None:
     meshes = mesh_polygons(LABELS)
-    system = SystemLevel(belt_speed_mps=0.4, image_gap_m=0.3, repeat_images=False,
-                         speed_schedule=((5.0, 0.2),))
+    system = SystemLevel(
+        belt_speed_mps=0.4, image_gap_m=0.3, repeat_images=False, speed_schedule=((5.0, 0.2),)
+    )
     rows, _ = _run(meshes, system, 7.5)
     data = np.array(rows)
     t, belt_v, belt_x, vx, x = data.T
@@ -85,16 +87,21 @@ def test_workspace_entry_and_exit_match_the_analytic_times(
     system = SystemLevel(belt_speed_mps=0.4, image_gap_m=0.3, repeat_images=False)
     rows, events = _run(meshes, system, 10.0)
     data = np.array(rows)
-    t, belt_v, belt_x, vx, x = data.T
-    test_id = next(e.object_id for e in events
-                   if e.type is EventType.SPAWNED and e.data["source_id"].startswith("b_test"))
+    t, _, belt_x, vx, x = data.T
+    test_id = next(
+        e.object_id
+        for e in events
+        if e.type is EventType.SPAWNED and e.data["source_id"].startswith("b_test")
+    )
     from twin.config import WorkspaceConfig
 
     ws = WorkspaceConfig()
     # from a reference instant after landing, the object moves with the belt surface
     k1 = int(np.nonzero(~np.isnan(vx))[0][0]) + 120
-    for boundary, kind in ((ws.min_x_m, EventType.ENTERED_WORKSPACE),
-                           (ws.max_x_m, EventType.LEFT_WORKSPACE)):
+    for boundary, kind in (
+        (ws.min_x_m, EventType.ENTERED_WORKSPACE),
+        (ws.max_x_m, EventType.LEFT_WORKSPACE),
+    ):
         travel = boundary - x[k1]
         k_pred = int(np.searchsorted(belt_x - belt_x[k1], travel))
         t_pred = t[k_pred]

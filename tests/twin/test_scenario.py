@@ -1,0 +1,72 @@
+"""Scenarios round-trip through YAML and reject bad keys and values by name."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from twin.errors import ConfigError
+from twin.scenario import ObjectLevel, PerturbationLevel, Scenario, SystemLevel, seed_tree
+
+
+def test_round_trip_through_a_file(tmp_path: Path) -> None:
+    scenario = Scenario(
+        name="dense",
+        seed=4,
+        duration_s=30.0,
+        objects=ObjectLevel(
+            images=("a", "b"),
+            max_objects=9,
+            resample_heights=True,
+            height_ranges_m={"wood": (0.02, 0.05)},
+            orientation_jitter_rad=0.3,
+        ),
+        system=SystemLevel(
+            belt_speed_mps=0.6,
+            object_order="shuffled",
+            perturbation=PerturbationLevel(enabled=True, force_std_N=20.0),
+            speed_schedule=((10.0, 0.2),),
+            prefill_m=0.5,
+        ),
+    )
+    path = tmp_path / "s.yaml"
+    scenario.save(path)
+    assert Scenario.load(path) == scenario
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_empty_file_gives_the_defaults(tmp_path: Path) -> None:
+    path = tmp_path / "empty.yaml"
+    path.write_text("", encoding="utf-8")
+    assert Scenario.load(path) == Scenario()
+
+
+@pytest.mark.parametrize(
+    ("text", "pattern"),
+    [
+        ("speed: 3", r"unknown key 'speed'"),
+        ("system: {belt_speeed_mps: 0.3}", r"system: unknown key 'belt_speeed_mps'"),
+        ("system: {belt_speed_mps: 5}", r"system\.belt_speed_mps = 5\.0: must be in \[0, 2\]"),
+        ("system: {belt_speed_mps: fast}", r"system\.belt_speed_mps = 'fast': expected a number"),
+        ("system: {object_order: random}", r"object_order = 'random': must be one of"),
+        ("duration_s: -1", r"duration_s = -1\.0"),
+        ("physics: {friction: {wood: [0.9, 0.1]}}", r"physics\.friction\.wood = \[0\.9, 0\.1\]"),
+        ("[1, 2]", r"top level must be a mapping"),
+        ("a: [", r"not valid YAML"),
+    ],
+)
+def test_bad_scenarios_name_the_key(tmp_path: Path, text: str, pattern: str) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=pattern) as info:
+        Scenario.load(path)
+    assert str(path) in str(info.value)
+
+
+def test_seed_tree_is_reproducible_and_independent() -> None:
+    a, b, c = seed_tree(3), seed_tree(3), seed_tree(4)
+    assert a.fmu_seed == b.fmu_seed != c.fmu_seed
+    assert np.array_equal(a.objects.random(5), b.objects.random(5))
+    assert not np.array_equal(seed_tree(3).objects.random(5), seed_tree(3).physics.random(5))

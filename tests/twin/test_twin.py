@@ -1,0 +1,283 @@
+"""The twin end to end: determinism, a scripted pick, fates, masses, robots, bad input."""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pybullet as pb
+import pytest
+import trimesh
+from twin_helpers import box_px
+
+from twin.config import ROBOTS, CellConfig, RobotConfig
+from twin.errors import ConfigError, SceneError
+from twin.events import EventType
+from twin.scenario import ObjectLevel, Scenario, SystemLevel
+from twin.sim import ArmCommand, Twin
+
+ONE_BOX = {"img": [(1, box_px(500, 500, 100, 50))]}  # brick, 60 x 30 mm footprint
+
+
+def _still(prefill_m: float = 1.7) -> Scenario:
+    """One image parked in the workspace on a stopped belt."""
+    return Scenario(
+        duration_s=30.0,
+        system=SystemLevel(belt_speed_mps=0.0, prefill_m=prefill_m, repeat_images=False),
+    )
+
+
+def _ik(twin: Twin, position: tuple[float, float, float], yaw: float = 0.0) -> tuple[float, ...]:
+    assert twin.robot is not None
+    robot = twin.robot
+    orn = pb.getQuaternionFromEuler([np.pi, 0.0, yaw])
+    q = pb.calculateInverseKinematics(
+        robot.body,
+        robot.tcp_link,
+        position,
+        orn,
+        maxNumIterations=200,
+        residualThreshold=1e-6,
+        physicsClientId=twin.client,
+    )
+    return tuple(q[: len(robot.arm_joints)])
+
+
+def _hold(twin: Twin, command: ArmCommand, seconds: float) -> None:
+    end = twin.time_s + seconds
+    twin.command(command)
+    while twin.time_s < end - 1e-9:
+        twin.advance()
+
+
+def test_scripted_pick_yields_overlap_contact_pick_and_correct_bin(
+    mesh_polygons: Callable[..., Path],
+) -> None:
+    meshes = mesh_polygons(ONE_BOX)
+    with Twin(_still(), dataset_dir=meshes) as twin:
+        obs, _ = twin.reset(seed=0)
+        (obj,) = obs.objects
+        x, y, z = obj.position_m
+        z = z + 0.5 * obj.height_m - 0.02  # grasp 2 cm below the top: the palm stays clear
+        open_w, closed_w = 0.08, 0.0
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.3)), gripper_width_m=open_w), 2.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.1)), gripper_width_m=open_w), 1.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=open_w), 1.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=closed_w), 0.5)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, 0.3)), gripper_width_m=closed_w), 1.0)
+        bin_cfg = twin.cell.bin_for("brick")
+        assert bin_cfg is not None
+        over = (bin_cfg.centre_x_m, bin_cfg.centre_y_m, 0.25)
+        _hold(twin, ArmCommand(_ik(twin, (0.2, 0.0, 0.35)), gripper_width_m=closed_w), 1.0)
+        _hold(twin, ArmCommand(_ik(twin, over), gripper_width_m=closed_w), 1.5)
+        _hold(twin, ArmCommand(_ik(twin, over), gripper_width_m=open_w), 1.5)
+        kinds = [e.type for e in twin.events if e.object_id == obj.id]
+        scores = twin.scores()
+    grasp_kinds = [
+        k
+        for k in kinds
+        if k
+        in (
+            EventType.TCP_OVERLAP_START,
+            EventType.FINGER_CONTACT,
+            EventType.PICK_SUCCESS,
+            EventType.PLACED_IN_BIN,
+            EventType.PICK_DROPPED,
+            EventType.UNINTENDED_CONTACT,
+        )
+    ]
+    assert grasp_kinds == [
+        EventType.TCP_OVERLAP_START,
+        EventType.FINGER_CONTACT,
+        EventType.FINGER_CONTACT,
+        EventType.PICK_SUCCESS,
+        EventType.PLACED_IN_BIN,
+    ], kinds
+    placed = next(e for e in twin.events if e.type is EventType.PLACED_IN_BIN)
+    assert placed.data == {"bin": "brick", "correct": True}
+    pick = next(e for e in twin.events if e.type is EventType.PICK_SUCCESS)
+    assert pick.data["dwell_s"] >= 0.6
+    assert scores.picked == 1
+    assert scores.success_rate == 1.0
+    assert scores.correct_bin_ratio == 1.0
+
+
+def test_closing_without_dwell_does_not_pick(mesh_polygons: Callable[..., Path]) -> None:
+    meshes = mesh_polygons(ONE_BOX)
+    with Twin(_still(), dataset_dir=meshes) as twin:
+        obs, _ = twin.reset(seed=0)
+        x, y, z = obs.objects[0].position_m
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.3)), gripper_width_m=0.08), 2.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.1)), gripper_width_m=0.08), 1.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=0.0), 0.3)
+        assert EventType.PICK_SUCCESS not in [e.type for e in twin.events]
+
+
+def test_object_pushed_off_the_belt_falls_and_is_removed(
+    mesh_polygons: Callable[..., Path],
+) -> None:
+    meshes = mesh_polygons(ONE_BOX)
+    with Twin(_still(prefill_m=1.0), dataset_dir=meshes) as twin:
+        obs, _ = twin.reset(seed=0)
+        (obj,) = obs.objects
+        assert twin._monitor is not None
+        body = twin._monitor.body_of(obj.id)
+        assert body is not None
+        for _ in range(60):  # a sideways shove of 0.25 s
+            pb.applyExternalForce(
+                body,
+                -1,
+                (0.0, 12.0 * obj.mass_kg, 0.0),
+                obj.position_m,
+                pb.WORLD_FRAME,
+                physicsClientId=twin.client,
+            )
+            twin.advance()
+        while twin.time_s < 3.0:
+            twin.advance()
+        fell = [e for e in twin.events if e.type is EventType.FELL_OFF]
+        assert [e.object_id for e in fell] == [obj.id]
+        assert fell[0].data["where"] == "side"
+        assert twin.observe().objects == ()
+        assert twin._monitor.body_of(obj.id) is None
+
+
+def test_masses_and_inertias_match_the_metadata(builtin_meshes: Path) -> None:
+    scenario = Scenario(
+        objects=ObjectLevel(max_objects=12),
+        system=SystemLevel(belt_speed_mps=0.0, repeat_images=False),
+    )
+    rows = {}
+    for scene in builtin_meshes.glob("*/scene.csv"):
+        with scene.open(newline="") as handle:
+            for row in csv.DictReader(handle):
+                rows[row["object_id"]] = (row, scene.parent / row["mesh_path"])
+    with Twin(scenario, dataset_dir=builtin_meshes) as twin:
+        obs, _ = twin.reset(seed=0)
+        assert obs.objects
+        assert twin._monitor is not None
+        for gt in obs.objects:
+            row, mesh_path = rows[gt.source_id]
+            body = twin._monitor.body_of(gt.id)
+            assert body is not None
+            info = pb.getDynamicsInfo(body, -1, physicsClientId=twin.client)
+            assert info[0] == pytest.approx(float(row["mass_kg"]), rel=1e-9)
+            mesh = trimesh.load(mesh_path, force="mesh", process=False)
+            expected = np.sort(np.linalg.eigvalsh(mesh.moment_inertia / mesh.volume))
+            expected *= float(row["mass_kg"])
+            assert np.sort(info[2]) == pytest.approx(expected, rel=1e-6)
+
+
+def _run_positions(meshes: Path, seed: int) -> tuple[np.ndarray, list[str]]:
+    scenario = Scenario(
+        duration_s=3.0,
+        objects=ObjectLevel(orientation_jitter_rad=0.5, max_objects=20),
+        system=SystemLevel(belt_speed_mps=0.5, image_gap_m=0.05, prefill_m=1.0),
+    )
+    frames = []
+    with Twin(scenario, dataset_dir=meshes) as twin:
+        obs, _ = twin.reset(seed=seed)
+        home = np.array(twin.cell.robot.home_joint_positions)
+        while True:
+            q = tuple(home + 0.2 * np.sin(twin.time_s + np.arange(home.size)))
+            obs, _, _, truncated, _ = twin.step(ArmCommand(q))
+            frames.append(
+                [v for o in obs.objects for v in (*o.position_m, *o.orientation_xyzw)]
+                + list(obs.joint_positions)
+                + [obs.belt.belt_speed_mps]
+            )
+            if truncated:
+                break
+        events = [e.to_json() for e in twin.events]
+    width = max(len(f) for f in frames)
+    return np.array([f + [np.nan] * (width - len(f)) for f in frames]), events
+
+
+def test_same_seed_gives_identical_trajectories_and_events(builtin_meshes: Path) -> None:
+    a, events_a = _run_positions(builtin_meshes, 7)
+    b, events_b = _run_positions(builtin_meshes, 7)
+    assert a.shape == b.shape
+    assert np.array_equal(a, b, equal_nan=True)
+    assert events_a == events_b
+    c, _ = _run_positions(builtin_meshes, 8)
+    assert a.shape != c.shape or not np.array_equal(a, c, equal_nan=True)
+
+
+def test_second_robot_loads_and_follows_joint_targets(mesh_polygons: Callable[..., Path]) -> None:
+    meshes = mesh_polygons(ONE_BOX)
+    scenario = Scenario(robot="xarm6", system=SystemLevel(belt_speed_mps=0.2))
+    with Twin(scenario, dataset_dir=meshes) as twin:
+        obs, _ = twin.reset(seed=0)
+        assert len(obs.joint_positions) == 6
+        target = np.array(ROBOTS["xarm6"].home_joint_positions) + 0.3
+        _hold(twin, ArmCommand(tuple(target), gripper_width_m=0.0), 2.0)
+        obs = twin.observe()
+        assert np.allclose(obs.joint_positions, target, atol=0.02)
+        assert obs.belt.belt_speed_mps == pytest.approx(0.2, abs=0.01)
+
+
+# -- bad input ---------------------------------------------------------------------------------
+def test_missing_index_is_a_scene_error(tmp_path: Path) -> None:
+    with pytest.raises(SceneError, match=r"index\.csv: no such file"):
+        Twin(Scenario(), dataset_dir=tmp_path)
+
+
+def _corrupt(meshes: Path, field: str, value: str) -> Path:
+    scene = next(meshes.glob("*/scene.csv"))
+    with scene.open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    rows[0][field] = value
+    with scene.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return scene
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "pattern"),
+    [
+        ("mass_kg", "heavy", r"scene\.csv:2: field 'mass_kg' = 'heavy' is not a finite number"),
+        ("height_m", "-0.1", r"scene\.csv:2: field 'height_m' = -0\.1 must be positive"),
+        ("class_name", "plastic", r"scene\.csv:2: field 'class_name' = 'plastic' is not a known"),
+        ("mesh_path", "nowhere.obj", r"scene\.csv:2: field 'mesh_path': mesh .*nowhere\.obj"),
+    ],
+)
+def test_malformed_scene_rows_name_file_line_and_field(
+    mesh_polygons: Callable[..., Path],
+    field: str,
+    value: str,
+    pattern: str,
+) -> None:
+    meshes = mesh_polygons(ONE_BOX)
+    _corrupt(meshes, field, value)
+    with pytest.raises(SceneError, match=pattern):
+        Twin(Scenario(), dataset_dir=meshes)
+
+
+def test_urdf_without_the_tcp_link_is_rejected_before_running(
+    mesh_polygons: Callable[..., Path],
+) -> None:
+    meshes = mesh_polygons(ONE_BOX)
+    cell = CellConfig(robot=RobotConfig(tcp_link="panda_nosuchlink"))
+    with (
+        Twin(Scenario(), dataset_dir=meshes, cell=cell) as twin,
+        pytest.raises(SceneError, match=r"panda\.urdf: no TCP link named 'panda_nosuchlink'"),
+    ):
+        twin.reset(seed=0)
+
+
+def test_unknown_robot_and_bad_setpoint_are_config_errors(
+    mesh_polygons: Callable[..., Path],
+) -> None:
+    meshes = mesh_polygons(ONE_BOX)
+    with pytest.raises(ConfigError, match=r"robot = 'ur5'"):
+        Twin(Scenario(robot="ur5"), dataset_dir=meshes)
+    with Twin(Scenario(), dataset_dir=meshes) as twin:
+        twin.reset(seed=0)
+        with pytest.raises(ConfigError, match=r"setpoint nan"):
+            twin.set_belt_setpoint(float("nan"))
+        with pytest.raises(ConfigError, match="arm command has 3 joint positions, robot has 7"):
+            twin.command(ArmCommand((0.0, 0.0, 0.0)))
