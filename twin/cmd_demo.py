@@ -45,12 +45,15 @@ def _class_table(meshes: Path) -> list[list[str]]:
     rows = []
     for name, values in sorted(stats.items()):
         n = len(values)
-        rows.append([
-            name, str(n),
-            f"{1e4 * sum(v[0] for v in values) / n:.1f}",
-            f"{1e3 * sum(v[1] for v in values) / n:.1f}",
-            f"{sum(v[2] for v in values) / n:.3f}",
-        ])
+        rows.append(
+            [
+                name,
+                str(n),
+                f"{1e4 * sum(v[0] for v in values) / n:.1f}",
+                f"{1e3 * sum(v[1] for v in values) / n:.1f}",
+                f"{sum(v[2] for v in values) / n:.3f}",
+            ]
+        )
     return rows
 
 
@@ -66,15 +69,24 @@ def run(args: argparse.Namespace) -> int:
     sample, meshes = out / "sample", out / "meshes"
     write_sample(sample, images=args.images, seed=args.seed)
     summary = mesh_dataset(sample, meshes, MeshgenConfig(seed=args.seed))
-    print(f"meshgen: {summary.images} images, {summary.objects} objects, "
-          f"{len(summary.skips)} skipped {summary.skipped}, "
-          f"{summary.ms_per_image:.2f} ms/image, {summary.ms_per_object:.3f} ms/object -> {meshes}")
-    _print_table("Meshed objects by class", ["class", "objects", "area cm2", "height mm", "mass kg"],
-                 _class_table(meshes))
+    print(
+        f"meshgen: {summary.images} images, {summary.objects} objects, "
+        f"{len(summary.skips)} skipped {summary.skipped}, "
+        f"{summary.ms_per_image:.2f} ms/image, {summary.ms_per_object:.3f} ms/object -> {meshes}"
+    )
+    _print_table(
+        "Meshed objects by class",
+        ["class", "objects", "area cm2", "height mm", "mass kg"],
+        _class_table(meshes),
+    )
     rows = []
     for speed in SPEEDS_MPS:
-        scenario = Scenario(name=f"demo-{speed}", seed=args.seed, duration_s=args.seconds,
-                            system=SystemLevel(belt_speed_mps=speed))
+        scenario = Scenario(
+            name=f"demo-{speed}",
+            seed=args.seed,
+            duration_s=args.seconds,
+            system=SystemLevel(belt_speed_mps=speed),
+        )
         with Twin(scenario, dataset_dir=meshes) as twin:
             twin.reset()
             wall0 = time.perf_counter()
@@ -83,10 +95,19 @@ def run(args: argparse.Namespace) -> int:
                 _, _, _, truncated, _ = twin.step()
             wall = time.perf_counter() - wall0
             scores = twin.scores()
-        rows.append([f"{speed:.1f}", str(scores.spawned), str(scores.processed),
-                     str(scores.picked), str(scores.missed), f"{scores.miss_rate:.2f}",
-                     f"{twin.time_s / wall:.1f}"])
-    _print_table(f"Twin episodes ({args.seconds:.0f} s each, arm parked: no controller in the loop)",
-                 ["speed m/s", "spawned", "processed", "picked", "missed", "miss rate", "RTF"],
-                 rows)
+        rows.append(
+            [
+                f"{speed:.1f}",
+                str(scores.spawned),
+                str(scores.processed),
+                str(scores.picked),
+                str(scores.missed),
+                f"{scores.miss_rate:.2f}",
+                f"{twin.time_s / wall:.1f}",
+            ]
+        )
+    title = f"Twin episodes ({args.seconds:.0f} s each, arm parked: no controller in the loop)"
+    _print_table(
+        title, ["speed m/s", "spawned", "processed", "picked", "missed", "miss rate", "RTF"], rows
+    )
     return 0

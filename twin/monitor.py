@@ -38,7 +38,11 @@ _NEAR_TCP_M = 0.25
 
 @dataclass(frozen=True)
 class GroundTruth:
-    """The true state of one object (world frame, SI units)."""
+    """The true state of one object (world frame, SI units).
+
+    ``orientation_xyzw`` is the object (mesh) frame's; ``footprint_yaw_rad`` is the world yaw of
+    the footprint's long axis (length along it, width across it).
+    """
 
     id: int
     source_id: str
@@ -47,6 +51,7 @@ class GroundTruth:
     orientation_xyzw: tuple[float, float, float, float]
     linear_velocity_mps: tuple[float, float, float]
     angular_velocity_radps: tuple[float, float, float]
+    footprint_yaw_rad: float
     length_m: float
     width_m: float
     area_m2: float
@@ -131,6 +136,32 @@ class Monitor:
         )
         self._pending.append(event)
         return event
+
+    def pose_of(
+        self, object_id: int
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float, float]] | None:
+        """True pose (position, mesh-frame xyzw) of a simulated object, None once it is gone."""
+        if not 1 <= object_id <= len(self._records):
+            return None
+        record = self._records[object_id - 1]
+        if not record.active:
+            return None
+        _, orientation = pb.multiplyTransforms(
+            (0.0, 0.0, 0.0), record.orientation, (0.0, 0.0, 0.0), record.inertial_inv
+        )
+        return record.position, (orientation[0], orientation[1], orientation[2], orientation[3])
+
+    def poses(
+        self,
+    ) -> dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
+        """True poses of every simulated object on the belt."""
+        out = {}
+        for record in self._records:
+            if record.active and record.on_belt:
+                pose = self.pose_of(record.id)
+                if pose is not None:
+                    out[record.id] = pose
+        return out
 
     def body_of(self, object_id: int) -> int | None:
         """PyBullet body of a twin object id, if it is still simulated."""
@@ -378,6 +409,7 @@ class Monitor:
                     orientation_xyzw=tuple(orientation),
                     linear_velocity_mps=tuple(lin),
                     angular_velocity_radps=tuple(ang),
+                    footprint_yaw_rad=yaw_of(orientation) + spec.yaw_rad,
                     length_m=spec.length_m,
                     width_m=spec.width_m,
                     area_m2=spec.area_m2,

@@ -35,10 +35,12 @@ from twin.errors import ConfigError
 from twin.events import Event, EventType
 from twin.monitor import GroundTruth, Monitor
 from twin.objects import ImageLayout, load_dataset
+from twin.perception import DetectionFrame, Perception, PerceptionConfig
 from twin.robot import Robot
 from twin.scenario import Scenario, seed_tree
 from twin.scores import Scores, compute_scores
 from twin.stream import ImageBatch, Stream
+from twin.target_metric import TargetTracker
 from twin.world import World
 
 # Names of the belt-drive FMU's perturbation parameters (see fmus/belt_drive/readme.md).
@@ -87,6 +89,7 @@ class Twin:
         cell: CellConfig | None = None,
         fmu_path: Path | None = None,
         fmu_parameters: dict[str, float] | None = None,
+        perception: PerceptionConfig | None = None,
         realtime: bool = False,
         gui: bool = False,
     ) -> None:
@@ -102,6 +105,10 @@ class Twin:
         self._fmu_path = fmu_path
         self._fmu_parameters = dict(fmu_parameters or {})
         self.realtime = realtime
+        self.perception_config = perception or PerceptionConfig()
+        self.perception: Perception | None = None
+        self.targets = TargetTracker()
+        self._released: list[DetectionFrame] = []
         self.layouts: tuple[ImageLayout, ...] = load_dataset(dataset_dir, scenario.objects.classes)
         self._cache = tempfile.TemporaryDirectory(prefix="cdw-twin-shapes-")
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
@@ -177,6 +184,15 @@ class Twin:
         self.setpoint_mps = self.scenario.system.belt_speed_mps
         self._belt_state = BeltState(0.0, 0.0, 0.0, 0.0, 0.0)
         self._events = []
+        self.perception = Perception(
+            self.perception_config,
+            self.scenario.objects.classes,
+            self.cell.belt.surface_z_m,
+            self.dt_s,
+            seeds.perception,
+        )
+        self.targets = TargetTracker()
+        self._released = []
         self._spawn_due()
         self._wall_start = time.perf_counter()
         return self.observe(), {"seed": self.scenario.seed}
@@ -224,7 +240,7 @@ class Twin:
 
     def advance(self, action: ArmCommand | None = None) -> list[Event]:
         """Advance one physics step without building an observation; returns the new events."""
-        world, _, monitor, drive = self._started()
+        world, robot, monitor, drive = self._started()
         if action is not None:
             self.command(action)
         self._apply_schedule()
@@ -238,6 +254,16 @@ class Twin:
         self.step_count += 1
         new = monitor.update(self.step_count, self.time_s)
         self._events.extend(new)
+        if self.targets.active:
+            for event in new:
+                if event.type is EventType.PICK_SUCCESS:
+                    self.targets.finish(self.time_s)
+            tcp, _ = robot.tcp_pose()
+            self.targets.update(self.time_s, tcp, monitor.pose_of)
+        if self.perception is not None:
+            if self.perception.capture_due(self.step_count):
+                self.perception.capture(self.time_s, monitor.ground_truth())
+            self._released.extend(self.perception.released(self.time_s))
         if self.realtime:
             target = self._wall_start + self.time_s / self._realtime_factor
             delay = target - time.perf_counter()
@@ -257,6 +283,24 @@ class Twin:
         if action.gripper_width_m is not None:
             robot.command_gripper(action.gripper_width_m)
         robot.apply_commands()
+
+    def command_gripper(self, width_m: float) -> None:
+        """Set the gripper opening target (m); it holds until the next command."""
+        _, robot, _, _ = self._started()
+        robot.command_gripper(width_m)
+        robot.apply_commands()
+
+    def announce_target(
+        self, track_id: int, grasp_point: tuple[float, float, float], phase: str
+    ) -> None:
+        """The controller says which object it pursues (for the tracking-time metric)."""
+        _, _, monitor, _ = self._started()
+        self.targets.announce(self.time_s, track_id, grasp_point, phase, monitor.poses())
+
+    def take_detections(self) -> list[DetectionFrame]:
+        """Detection frames released since the last call (after their latency)."""
+        frames, self._released = self._released, []
+        return frames
 
     def _apply_schedule(self) -> None:
         for t_s, speed in self.scenario.system.speed_schedule:
@@ -302,6 +346,20 @@ class Twin:
             gripper_width_m=robot.gripper_width_m(),
             events=tuple(events),
         )
+
+    def observe_belt(self) -> BeltState:
+        """The belt drive's outputs at the last communication point."""
+        return self._belt_state
+
+    def observe_objects(self) -> tuple[GroundTruth, ...]:
+        """Ground truth of every object on the belt, held or in a bin."""
+        _, _, monitor, _ = self._started()
+        return monitor.ground_truth()
+
+    @property
+    def load_mass_kg(self) -> float:
+        """Mass currently on the belt (the FMU's load input)."""
+        return 0.0 if self._monitor is None else self._monitor.load_mass_kg
 
     @property
     def events(self) -> tuple[Event, ...]:

@@ -1,0 +1,218 @@
+"""Forward and inverse kinematics of the arm's tool centre point with Pinocchio.
+
+The model is built from the same URDF the twin loads; every joint that is not an arm joint
+(fingers, ...) is locked at its neutral position, so configurations ``q`` are ``(n_arm,) float``
+in the order of ``RobotConfig.arm_joint_names``. Poses are Pinocchio ``SE3`` objects named
+``aMb`` (pose of frame b in frame a); ``o`` is the world frame, ``base`` the robot base.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from control.config import IkConfig, RobotConfig, resolve_urdf_path
+from control.errors import RobotModelError
+
+FloatArray = NDArray[np.float64]
+
+_TCP_FRAME = "cdw_tcp"
+
+
+def _frozen(values: FloatArray) -> FloatArray:
+    out = np.array(values, dtype=np.float64)
+    out.flags.writeable = False
+    return out
+
+
+def down_rotation(yaw_rad: float) -> FloatArray:
+    """Rotation ``(3, 3) float`` of a tool pointing down (tool z = -world z), turned by yaw.
+
+    Equals ``Rz(yaw) @ Rx(pi)``; the tool's y axis (the Panda's finger axis) is
+    ``(sin yaw, -cos yaw, 0)``.
+    """
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    return np.array([[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]])
+
+
+def tool_pose(position_m: FloatArray | tuple[float, float, float], yaw_rad: float) -> pin.SE3:
+    """The world pose ``oMtool`` of a downward-pointing tool at ``position_m`` ``(3,) float``."""
+    return pin.SE3(down_rotation(yaw_rad), np.asarray(position_m, dtype=np.float64))
+
+
+def yaw_of(oMtool: pin.SE3) -> float:  # noqa: N803
+    """Yaw of a (nearly) downward-pointing tool pose, the inverse of :func:`down_rotation`."""
+    rotation = np.asarray(oMtool.rotation)
+    return math.atan2(float(rotation[1, 0]), float(rotation[0, 0]))
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class IkResult:
+    """Outcome of one IK solve.
+
+    ``q`` is ``(n_arm,) float`` (read-only) and always within the joint limits; ``success`` is
+    True when ``error_norm`` (norm of the ``log6`` pose error) fell below the tolerance within
+    ``iterations`` iterations.
+    """
+
+    q: FloatArray
+    success: bool
+    iterations: int
+    error_norm: float
+
+
+class Kinematics:
+    """FK and damped-least-squares IK of the tool centre point for one arm."""
+
+    def __init__(self, robot: RobotConfig, ik: IkConfig | None = None) -> None:
+        """Build the reduced Pinocchio model of ``robot`` (arm joints only) and its TCP frame.
+
+        Raises ``RobotModelError`` when the URDF cannot be parsed or a joint/link is missing.
+        """
+        self._ik = ik if ik is not None else IkConfig()
+        path = resolve_urdf_path(robot.urdf_path)
+        try:
+            full = pin.buildModelFromUrdf(str(path))
+        except (RuntimeError, ValueError) as exc:
+            msg = f"{path}: cannot build a Pinocchio model: {exc}"
+            raise RobotModelError(msg) from exc
+        lock: list[int] = []
+        for joint_id in range(1, full.njoints):
+            name = full.names[joint_id]
+            if name not in robot.arm_joint_names:
+                lock.append(joint_id)
+        for name in robot.arm_joint_names:
+            if not full.existJointName(name):
+                msg = f"{path}: robot.arm_joint_names: no joint {name!r} in the URDF"
+                raise RobotModelError(msg)
+            joint = full.joints[full.getJointId(name)]
+            if joint.nq != 1:
+                msg = f"{path}: arm joint {name!r} has {joint.nq} position variables, expected 1"
+                raise RobotModelError(msg)
+        for name in robot.finger_joint_names:
+            if not full.existJointName(name):
+                msg = f"{path}: robot.finger_joint_names: no joint {name!r} in the URDF"
+                raise RobotModelError(msg)
+        model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
+        order = [model.getJointId(name) for name in robot.arm_joint_names]
+        if order != sorted(order):
+            msg = f"{path}: robot.arm_joint_names {robot.arm_joint_names} are not in chain order"
+            raise RobotModelError(msg)
+        if not model.existFrame(robot.tcp_link):
+            msg = f"{path}: robot.tcp_link: no link or frame {robot.tcp_link!r} in the URDF"
+            raise RobotModelError(msg)
+        link = model.frames[model.getFrameId(robot.tcp_link)]
+        offset = pin.SE3(np.eye(3), np.asarray(robot.tcp_offset_m, dtype=np.float64))
+        self._tcp_id = model.addFrame(
+            pin.Frame(
+                _TCP_FRAME,
+                link.parentJoint,
+                model.getFrameId(robot.tcp_link),
+                link.placement * offset,
+                pin.FrameType.OP_FRAME,
+            )
+        )
+        self._model = model
+        self._data = model.createData()
+        self.urdf_path = path
+        """Resolved URDF file the model was built from."""
+        self.joint_names: tuple[str, ...] = tuple(robot.arm_joint_names)
+        """Arm joint names, the order of every ``q``."""
+        self.lower_rad: FloatArray = _frozen(model.lowerPositionLimit)
+        """Lower joint limits ``(n_arm,) float``."""
+        self.upper_rad: FloatArray = _frozen(model.upperPositionLimit)
+        """Upper joint limits ``(n_arm,) float``."""
+        self.velocity_limit_rps: FloatArray = _frozen(model.velocityLimit)
+        """Joint velocity limits ``(n_arm,) float`` from the URDF."""
+        quat = robot.base_orientation_xyzw
+        base_rotation = pin.Quaternion(quat[3], quat[0], quat[1], quat[2]).toRotationMatrix()
+        self.oMbase = pin.SE3(base_rotation, np.asarray(robot.base_position_m, dtype=np.float64))
+        """World pose of the robot base."""
+        self._baseMo = self.oMbase.inverse()
+
+    @property
+    def nq(self) -> int:
+        """Number of arm joints."""
+        return int(self._model.nq)
+
+    def within_limits(self, q: FloatArray, *, tolerance_rad: float = 1e-9) -> bool:
+        """True when ``q`` ``(n_arm,) float`` is finite and inside the joint limits."""
+        q = np.asarray(q, dtype=np.float64)
+        return bool(
+            q.shape == (self.nq,)
+            and np.all(np.isfinite(q))
+            and np.all(q >= self.lower_rad - tolerance_rad)
+            and np.all(q <= self.upper_rad + tolerance_rad)
+        )
+
+    def fk(self, q: FloatArray) -> pin.SE3:
+        """World pose ``oMtool`` of the TCP at configuration ``q`` ``(n_arm,) float``."""
+        pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
+        return self.oMbase * self._data.oMf[self._tcp_id]
+
+    def solve(self, oMtool: pin.SE3, q_init: FloatArray) -> IkResult:  # noqa: N803
+        """Damped least squares on the ``log6`` error from the warm start ``q_init``.
+
+        Every iterate is clipped to the joint limits and each step to ``max_joint_step_rad``;
+        the result is the last iterate (``success`` False when the tolerance was not met).
+        """
+        cfg = self._ik
+        model, data = self._model, self._data
+        baseMdes = self._baseMo * oMtool  # noqa: N806
+        q = np.clip(np.asarray(q_init, dtype=np.float64), self.lower_rad, self.upper_rad)
+        if not np.all(np.isfinite(q)) or not np.all(np.isfinite(oMtool.homogeneous)):
+            return IkResult(
+                q=_frozen(np.clip(np.nan_to_num(q), self.lower_rad, self.upper_rad)),
+                success=False,
+                iterations=0,
+                error_norm=math.inf,
+            )
+        damping = cfg.damping * np.eye(6)
+        error_norm = math.inf
+        for iteration in range(cfg.max_iterations + 1):
+            pin.framesForwardKinematics(model, data, q)
+            tcpMdes = data.oMf[self._tcp_id].actInv(baseMdes)  # noqa: N806
+            err = pin.log6(tcpMdes).vector
+            error_norm = float(np.linalg.norm(err))
+            if error_norm < cfg.tolerance:
+                return IkResult(
+                    q=_frozen(q), success=True, iterations=iteration, error_norm=error_norm
+                )
+            if iteration == cfg.max_iterations:
+                break
+            jac = pin.computeFrameJacobian(model, data, q, self._tcp_id, pin.LOCAL)
+            jac = -pin.Jlog6(tcpMdes.inverse()) @ jac
+            v = -jac.T @ np.linalg.solve(jac @ jac.T + damping, err)
+            dq = cfg.step * v
+            largest = float(np.max(np.abs(dq)))
+            if largest > cfg.max_joint_step_rad:
+                dq *= cfg.max_joint_step_rad / largest
+            q = np.clip(pin.integrate(model, q, dq), self.lower_rad, self.upper_rad)
+        return IkResult(
+            q=_frozen(q), success=False, iterations=cfg.max_iterations, error_norm=error_norm
+        )
+
+    def _jacobian_xyz_yaw(self, q: FloatArray) -> FloatArray:
+        """``(4, n_arm)`` Jacobian of the world ``(x, y, z, yaw)`` of the TCP."""
+        model, data = self._model, self._data
+        jac = pin.computeFrameJacobian(
+            model, data, np.asarray(q, dtype=np.float64), self._tcp_id, pin.LOCAL_WORLD_ALIGNED
+        )
+        rotation = np.asarray(self.oMbase.rotation)
+        linear = rotation @ jac[:3]
+        angular = rotation @ jac[3:]
+        return np.vstack([linear, angular[2:3]])
+
+    def tcp_velocity(self, q: FloatArray, dq: FloatArray) -> FloatArray:
+        """World ``(vx, vy, vz, yaw rate)`` ``(4,) float`` of the TCP for joint speeds ``dq``."""
+        return np.asarray(self._jacobian_xyz_yaw(q) @ np.asarray(dq, dtype=np.float64))
+
+    def joint_velocity(self, q: FloatArray, tcp_velocity: FloatArray) -> FloatArray:
+        """Least-squares joint velocities ``(n_arm,)`` giving the TCP velocity ``(4,)``."""
+        jac = self._jacobian_xyz_yaw(q)
+        solution, *_ = np.linalg.lstsq(jac, np.asarray(tcp_velocity, dtype=np.float64), rcond=None)
+        return np.asarray(solution)

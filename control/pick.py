@@ -1,0 +1,543 @@
+"""The pick state machine as pure logic: one :meth:`PickController.update` per control tick.
+
+Sequence per object: ``approach`` (Ruckig to a point above the predicted grasp point, arriving
+with the object's velocity), ``descend`` (to the grasp point, still moving with it), ``dwell``
+(track it for ``dwell_s``), ``close`` (gripper closes while tracking), ``lift``, ``carry`` (to the
+drop point above the class bin), ``release``, ``return`` (towards the ready pose; a new target may
+be taken from there). Errors (lost target, Ruckig error, IK failure) abort the pick, are counted,
+and never produce a joint command outside the limits: the last valid joint command is held.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from control.config import ControllerConfig
+from control.errors import ControlError, IkError, PlanningError
+from control.ik import Kinematics, tool_pose, yaw_of
+from control.planner import (
+    CartesianPlanner,
+    CartesianState,
+    CartesianTarget,
+    FeedbackTerm,
+    JointCommander,
+    JointPlanner,
+)
+from control.scheduler import grasp_height_m, schedule
+from control.tracking import Track
+
+FloatArray = NDArray[np.float64]
+Vec3 = tuple[float, float, float]
+
+
+class Phase(StrEnum):
+    """Phases of the pick sequence."""
+
+    IDLE = "idle"
+    APPROACH = "approach"
+    DESCEND = "descend"
+    DWELL = "dwell"
+    CLOSE = "close"
+    LIFT = "lift"
+    CARRY = "carry"
+    RELEASE = "release"
+    RETURN = "return"
+
+
+FOLLOWING_PHASES = frozenset({Phase.DESCEND, Phase.DWELL, Phase.CLOSE})
+"""Phases in which the TCP moves with the object and the feedback term is active."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class TcpMeasurement:
+    """Measured TCP: ``position_m`` ``(x, y, z)`` in the world frame and ``yaw_rad``."""
+
+    position_m: Vec3
+    yaw_rad: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class Command:
+    """Everything the arm and gripper are told in one control tick.
+
+    ``setpoint`` is the Ruckig state, ``commanded_position_m`` the setpoint plus feedback that
+    went into the IK, ``joint_positions_rad`` ``(n_arm,)`` is always within the joint limits,
+    ``grasp_point_m`` is the predicted grasp point of the target (None without a target).
+    """
+
+    t_s: float
+    phase: Phase
+    target_id: int | None
+    setpoint: CartesianState
+    commanded_position_m: Vec3
+    joint_positions_rad: tuple[float, ...]
+    gripper_width_m: float
+    grasp_point_m: Vec3 | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class PickStats:
+    """Counters since construction.
+
+    ``untargeted`` counts objects that were never targeted, by the last reason the scheduler gave;
+    ``aborted`` counts aborted picks by reason (``target_lost``, ``too_late``, ``ruckig_error``,
+    ``ik_failure``); ``errors`` counts every Ruckig/IK error, also outside a pick.
+    """
+
+    targeted: int
+    completed: int
+    completed_by_class: Mapping[str, int]
+    aborted: Mapping[str, int]
+    untargeted: Mapping[str, int]
+    errors: Mapping[str, int]
+
+
+def nearest_half_turn(yaw_rad: float, reference_rad: float) -> float:
+    """``yaw_rad + k * pi`` closest to ``reference_rad`` (a parallel gripper is symmetric)."""
+    return yaw_rad + math.pi * round((reference_rad - yaw_rad) / math.pi)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class JointGoal:
+    """A joint-space goal ``q`` ``(n_arm,) float`` at rest (carry, release, return, idle)."""
+
+    q: FloatArray
+
+
+class PickController:
+    """Pick state machine; pure logic, driven by :meth:`update` at the control rate."""
+
+    def __init__(
+        self,
+        config: ControllerConfig,
+        *,
+        kinematics: Kinematics | None = None,
+        q_init: FloatArray | None = None,
+    ) -> None:
+        """Prepare the controller at the ready pose, or at ``q_init`` ``(n_arm,)`` if given.
+
+        Raises ``ControlError`` when the ready pose has no IK solution.
+        """
+        self._cfg = config
+        self._kin = kinematics if kinematics is not None else Kinematics(config.robot, config.ik)
+        robot = config.robot
+        ready = self._kin.solve(
+            tool_pose(robot.ready_tcp_position_m, robot.ready_yaw_rad),
+            np.asarray(robot.ready_joint_positions_rad, dtype=np.float64),
+        )
+        if not ready.success:
+            msg = (
+                f"robot.ready_tcp_position_m {robot.ready_tcp_position_m} with ready_yaw_rad "
+                f"{robot.ready_yaw_rad} has no IK solution near ready_joint_positions_rad"
+            )
+            raise ControlError(msg)
+        self.q_ready: FloatArray = np.array(ready.q)
+        """Joint positions ``(n_arm,)`` of the ready pose."""
+        q0 = self.q_ready if q_init is None else np.asarray(q_init, dtype=np.float64)
+        oMtool = self._kin.fk(q0)  # noqa: N806
+        p = oMtool.translation
+        start = CartesianState(position=(float(p[0]), float(p[1]), float(p[2]), yaw_of(oMtool)))
+        self._ready_target = CartesianTarget(
+            position=(*robot.ready_tcp_position_m, robot.ready_yaw_rad)
+        )
+        self._planner = CartesianPlanner(config.motion, start)
+        self._joint_planner = JointPlanner(self._kin, config.motion)
+        self._joint_mode = False
+        self._joint_remaining_s = 0.0
+        self._drop_q = np.array(self.q_ready)
+        self._commander = JointCommander(self._kin, config.motion, q0)
+        self._feedback = FeedbackTerm(config.motion)
+        self._phase = Phase.RETURN
+        self._phase_start_s = -math.inf
+        self._target: Track | None = None
+        self._target_seen_s = -math.inf
+        self._grasp_yaw_rad = robot.ready_yaw_rad
+        self._intercept_estimate_s = math.nan
+        self._carrying = False
+        self._lift_target: CartesianTarget | None = None
+        self._ticks_since_command = 1
+        self._tracking_start_s = math.nan
+        self._excluded: set[int] = set()
+        self._targeted_ids: set[int] = set()
+        self._untargeted: dict[int, str] = {}
+        self._targeted = 0
+        self._completed = 0
+        self._completed_by_class: Counter[str] = Counter()
+        self._aborted: Counter[str] = Counter()
+        self._errors: Counter[str] = Counter()
+
+    @property
+    def phase(self) -> Phase:
+        """The current phase."""
+        return self._phase
+
+    @property
+    def tracking_start_s(self) -> float:
+        """Time the current target was chosen (NaN without a target)."""
+        return self._tracking_start_s
+
+    @property
+    def intercept_estimate_s(self) -> float:
+        """The scheduler's estimate of the time to intercept the current target (at choice)."""
+        return self._intercept_estimate_s
+
+    @property
+    def kinematics(self) -> Kinematics:
+        """The kinematics the controller commands with."""
+        return self._kin
+
+    def stats(self) -> PickStats:
+        """Counters of targeted, completed, aborted and untargeted objects."""
+        return PickStats(
+            targeted=self._targeted,
+            completed=self._completed,
+            completed_by_class=dict(self._completed_by_class),
+            aborted=dict(self._aborted),
+            untargeted=dict(Counter(self._untargeted.values())),
+            errors=dict(self._errors),
+        )
+
+    def _set_phase(self, phase: Phase, t_s: float) -> None:
+        self._phase = phase
+        self._phase_start_s = t_s
+
+    def _abort(self, reason: str, t_s: float) -> None:
+        self._aborted[reason] += 1
+        if self._target is not None:
+            self._excluded.add(self._target.track_id)
+        following = self._phase in FOLLOWING_PHASES
+        self._target = None
+        self._tracking_start_s = math.nan
+        self._carrying = False
+        if following:
+            self._start_lift(t_s)
+        else:
+            self._set_phase(Phase.RETURN, t_s)
+
+    def _start_lift(self, t_s: float) -> None:
+        state = self._planner.state
+        x, y, z, yaw = state.position
+        vx, vy = state.velocity[0], state.velocity[1]
+        stop_s = 0.1
+        self._lift_target = CartesianTarget(
+            position=(x + vx * stop_s, y + vy * stop_s, z + self._cfg.pick.lift_height_m, yaw)
+        )
+        self._set_phase(Phase.LIFT, t_s)
+
+    def _start_pick(self, track: Track, intercept_s: float, t_s: float) -> None:
+        self._target = track
+        self._target_seen_s = t_s
+        self._targeted += 1
+        self._targeted_ids.add(track.track_id)
+        self._untargeted.pop(track.track_id, None)
+        self._tracking_start_s = t_s
+        self._intercept_estimate_s = intercept_s
+        self._feedback.reset()
+        self._joint_mode = False
+        self._grasp_yaw_rad = nearest_half_turn(track.yaw_rad, self._planner.state.position[3])
+        self._set_phase(Phase.APPROACH, t_s)
+
+    def _schedule(self, t_s: float, tracks: Sequence[Track]) -> None:
+        result = schedule(
+            tracks,
+            now_s=t_s,
+            tcp_position_m=self._planner.state.position_m,
+            config=self._cfg,
+            excluded_ids=self._excluded | self._targeted_ids,
+        )
+        for item in result.untargeted:
+            if item.track_id not in self._targeted_ids:
+                self._untargeted[item.track_id] = item.reason
+        if result.target is not None:
+            self._start_pick(result.target, result.intercept_s, t_s)
+
+    def _object_state(
+        self, t_s: float, belt_velocity_mps: tuple[float, float], *, now_s: float | None = None
+    ) -> tuple[Vec3, Vec3] | None:
+        """Predicted grasp point and velocity of the target at ``t_s``.
+
+        While the target is not in the current tracks (``now_s`` after the last sighting), it is
+        extrapolated with the measured belt velocity.
+        """
+        track = self._target
+        if track is None:
+            return None
+        velocity = track.velocity_mps
+        unseen = (t_s if now_s is None else now_s) > self._target_seen_s
+        if unseen and all(math.isfinite(v) for v in belt_velocity_mps):
+            velocity = belt_velocity_mps
+        dt_s = t_s - track.stamp_s
+        x = track.position_m[0] + velocity[0] * dt_s
+        y = track.position_m[1] + velocity[1] * dt_s
+        return (x, y, grasp_height_m(track, self._cfg)), (velocity[0], velocity[1], 0.0)
+
+    def _track_target(self, t_s: float, tracks: Sequence[Track]) -> bool:
+        """Refresh the target snapshot; False when it has been lost for too long."""
+        if self._target is None:
+            return False
+        for track in tracks:
+            if track.track_id == self._target.track_id:
+                self._target = track
+                self._target_seen_s = t_s
+                self._grasp_yaw_rad = nearest_half_turn(track.yaw_rad, self._grasp_yaw_rad)
+                return True
+        return t_s - self._target_seen_s <= self._cfg.pick.lost_timeout_s
+
+    def _following_target(
+        self, t_s: float, belt_velocity_mps: tuple[float, float], height_m: float
+    ) -> tuple[CartesianTarget, Vec3]:
+        motion = self._cfg.motion
+        t_cmd = t_s + motion.command_latency_s
+        obj = self._object_state(t_cmd, belt_velocity_mps, now_s=t_s)
+        if obj is None:
+            msg = "following without a target"
+            raise ControlError(msg)
+        (x, y, z), (vx, vy, _) = obj
+        target = CartesianTarget(
+            position=(x, y, z + height_m, self._grasp_yaw_rad),
+            velocity=(vx, vy, 0.0, 0.0),
+        )
+        return target, (x, y, z)
+
+    def _arrived(self, target: CartesianTarget, height_m: float) -> bool:
+        """True when the setpoint is on the moving target (position and velocity)."""
+        del height_m
+        state = self._planner.state
+        period_s = self._cfg.motion.control_period_s
+        previous = [
+            p - v * period_s for p, v in zip(target.position[:3], target.velocity[:3], strict=True)
+        ]
+        relative_speed = math.dist(state.velocity[:3], target.velocity[:3])
+        return (
+            math.dist(state.position_m, previous) <= self._cfg.pick.arrive_tolerance_m
+            and relative_speed <= self._cfg.pick.arrive_speed_tolerance_mps
+        )
+
+    def _plan(
+        self, t_s: float, tracks: Sequence[Track], belt_velocity_mps: tuple[float, float]
+    ) -> tuple[CartesianTarget | JointGoal, Vec3 | None]:
+        """Run the phase transitions and return this tick's Ruckig goal and aim point."""
+        pick = self._cfg.pick
+        period_s = self._cfg.motion.control_period_s
+        phase = self._phase
+        belt_edge_y_m = self._cfg.belt.centreline_y_m - self._cfg.belt.width_m / 2
+        over_belt_side = self._planner.state.position[1] >= belt_edge_y_m
+        if phase == Phase.IDLE or (phase == Phase.RETURN and over_belt_side):
+            self._schedule(t_s, tracks)
+            phase = self._phase
+        if phase in (Phase.APPROACH, *FOLLOWING_PHASES):
+            if not self._track_target(t_s, tracks) and phase == Phase.APPROACH:
+                self._abort("target_lost", t_s)
+                return self._plan(t_s, (), belt_velocity_mps)
+            obj = self._object_state(t_s, belt_velocity_mps)
+            x_now = obj[0][0] if obj is not None else math.inf
+            if phase in (Phase.APPROACH, Phase.DESCEND, Phase.DWELL) and (
+                x_now > self._cfg.belt.pick_window_x_m[1]
+            ):
+                self._abort("too_late", t_s)
+                return self._plan(t_s, (), belt_velocity_mps)
+        if phase == Phase.APPROACH:
+            target, aim = self._following_target(t_s, belt_velocity_mps, pick.approach_height_m)
+            if self._arrived(target, pick.approach_height_m):
+                self._set_phase(Phase.DESCEND, t_s)
+                phase = Phase.DESCEND
+            else:
+                return target, aim
+        if phase == Phase.DESCEND:
+            target, aim = self._following_target(t_s, belt_velocity_mps, 0.0)
+            if self._arrived(target, 0.0):
+                self._set_phase(Phase.DWELL, t_s)
+            return target, aim
+        if phase == Phase.DWELL:
+            target, aim = self._following_target(t_s, belt_velocity_mps, 0.0)
+            yaw_error = abs(self._planner.state.position[3] - target.position[3])
+            if t_s - self._phase_start_s >= pick.dwell_s and yaw_error < pick.yaw_tolerance_rad:
+                self._set_phase(Phase.CLOSE, t_s)
+            return target, aim
+        if phase == Phase.CLOSE:
+            if t_s - self._phase_start_s >= pick.close_s:
+                self._carrying = True
+                self._start_lift(t_s)
+                return self._plan(t_s, tracks, belt_velocity_mps)
+            return self._following_target(t_s, belt_velocity_mps, 0.0)
+        if phase == Phase.LIFT:
+            lift = self._lift_target
+            if lift is None or (
+                self._planner.state.position[2] >= lift.position[2] - 0.2 * pick.lift_height_m
+            ):
+                if self._carrying:
+                    self._start_carry(t_s)
+                else:
+                    self._set_phase(Phase.RETURN, t_s)
+                return self._plan(t_s, tracks, belt_velocity_mps)
+            return lift, None
+        if phase == Phase.CARRY:
+            goal = JointGoal(q=self._drop_q)
+            if self._joint_remaining_s <= period_s and self._at_joint_goal(goal):
+                self._set_phase(Phase.RELEASE, t_s)
+            return goal, None
+        if phase == Phase.RELEASE:
+            if t_s - self._phase_start_s >= pick.release_s:
+                self._completed += 1
+                if self._target is not None:
+                    self._completed_by_class[self._target.class_name] += 1
+                self._target = None
+                self._carrying = False
+                self._tracking_start_s = math.nan
+                self._set_phase(Phase.RETURN, t_s)
+                return self._plan(t_s, tracks, belt_velocity_mps)
+            return JointGoal(q=self._drop_q), None
+        goal = JointGoal(q=self.q_ready)
+        if (
+            phase == Phase.RETURN
+            and self._joint_remaining_s <= period_s
+            and self._at_joint_goal(goal)
+        ):
+            self._set_phase(Phase.IDLE, t_s)
+        return goal, None
+
+    def _at_joint_goal(self, goal: JointGoal) -> bool:
+        return bool(np.max(np.abs(self._commander.q - goal.q)) < 1e-4)
+
+    def _start_carry(self, t_s: float) -> None:
+        """Solve the drop pose once, seeded by the ready pose turned towards the bin."""
+        robot = self._cfg.robot
+        class_name = self._target.class_name if self._target is not None else ""
+        drop = self._cfg.bins.get(class_name, robot.ready_tcp_position_m)
+        base = robot.base_position_m
+        ready = robot.ready_tcp_position_m
+        turn = math.atan2(drop[1] - base[1], drop[0] - base[0]) - math.atan2(
+            ready[1] - base[1], ready[0] - base[0]
+        )
+        lower, upper = float(self._kin.lower_rad[0]), float(self._kin.upper_rad[0])
+        turns = [turn + k * 2 * math.pi for k in (-1, 0, 1)]
+        inside = [a for a in turns if lower <= self.q_ready[0] + a <= upper] or [turn]
+        turn = min(inside, key=abs)
+        seed = np.array(self.q_ready)
+        seed[0] = np.clip(seed[0] + turn, lower, upper)
+        result = self._kin.solve(tool_pose(drop, robot.ready_yaw_rad + turn), seed)
+        if result.success:
+            self._drop_q = np.array(result.q)
+        else:
+            self._errors["ik_failure"] += 1
+            self._aborted["drop_unreachable"] += 1
+            self._drop_q = self._commander.q
+        self._set_phase(Phase.CARRY, t_s)
+
+    def _gripper_width_m(self) -> float:
+        opening = self._cfg.robot.gripper_max_opening_m
+        closed = self._phase == Phase.CLOSE or (
+            self._carrying and self._phase in (Phase.LIFT, Phase.CARRY)
+        )
+        if closed:
+            width = self._target.width_m if self._target is not None else 0.0
+            return float(np.clip(width - self._cfg.pick.grip_squeeze_m, 0.0, opening))
+        return opening
+
+    def _sync_cartesian(self, q: FloatArray, dq: FloatArray) -> None:
+        oMtool = self._kin.fk(q)  # noqa: N806
+        p = oMtool.translation
+        v = self._kin.tcp_velocity(q, dq)
+        self._planner.reset(
+            CartesianState(
+                position=(float(p[0]), float(p[1]), float(p[2]), yaw_of(oMtool)),
+                velocity=(float(v[0]), float(v[1]), float(v[2]), float(v[3])),
+            )
+        )
+
+    def _step_joint(self, goal: JointGoal) -> None:
+        if not self._joint_mode:
+            q = self._commander.q
+            velocity = np.asarray(self._planner.state.velocity, dtype=np.float64)
+            self._joint_planner.reset(q, self._kin.joint_velocity(q, velocity))
+            self._joint_mode = True
+        try:
+            step = self._joint_planner.step(goal.q)
+        except PlanningError:
+            self._errors["ruckig_error"] += 1
+            return
+        self._joint_remaining_s = step.remaining_s
+        self._commander.reset(step.q)
+        self._sync_cartesian(step.q, step.dq)
+
+    def _step_cartesian(
+        self, target: CartesianTarget, t_s: float, belt: tuple[float, float]
+    ) -> None:
+        try:
+            self._planner.step(target)
+        except PlanningError:
+            self._errors["ruckig_error"] += 1
+            if self._target is not None and not self._carrying:
+                self._abort("ruckig_error", t_s)
+                goal, _ = self._plan(t_s, (), belt)
+                if isinstance(goal, JointGoal):
+                    self._step_joint(goal)
+                else:
+                    with contextlib.suppress(PlanningError):
+                        self._planner.step(goal)
+
+    def update(
+        self,
+        t_s: float,
+        measured_tcp: TcpMeasurement,
+        tracks: Sequence[Track],
+        belt_velocity_mps: tuple[float, float],
+    ) -> Command:
+        """Advance one control tick at ``t_s`` and return the command for the arm and gripper.
+
+        ``tracks`` are the tracker's confirmed tracks (any stamp; they are extrapolated to the
+        time the command takes effect), ``belt_velocity_mps`` the measured ``(vx, vy)``.
+        """
+        goal, aim = self._plan(t_s, tracks, belt_velocity_mps)
+        if isinstance(goal, JointGoal):
+            self._step_joint(goal)
+            self._feedback.reset()
+            position = self._planner.state.position_m
+        else:
+            if self._joint_mode:
+                self._joint_mode = False
+            self._step_cartesian(goal, t_s, belt_velocity_mps)
+            position = self._command_cartesian(t_s, measured_tcp)
+        setpoint = self._planner.state
+        q = self._commander.q
+        return Command(
+            t_s=t_s,
+            phase=self._phase,
+            target_id=self._target.track_id if self._target is not None else None,
+            setpoint=setpoint,
+            commanded_position_m=position,
+            joint_positions_rad=tuple(float(v) for v in q),
+            gripper_width_m=self._gripper_width_m(),
+            grasp_point_m=aim,
+        )
+
+    def _command_cartesian(self, t_s: float, measured_tcp: TcpMeasurement) -> Vec3:
+        setpoint = self._planner.state
+        position = setpoint.position_m
+        if self._phase in FOLLOWING_PHASES:
+            dt_s = self._cfg.motion.control_period_s
+            correction = self._feedback.correction(position, measured_tcp.position_m, dt_s)
+            position = (
+                position[0] + correction[0],
+                position[1] + correction[1],
+                position[2] + correction[2],
+            )
+        else:
+            self._feedback.reset()
+        try:
+            self._commander.command(position, setpoint.position[3], ticks=self._ticks_since_command)
+            self._ticks_since_command = 1
+        except IkError:
+            self._errors["ik_failure"] += 1
+            self._ticks_since_command += 1
+            if self._target is not None and not self._carrying:
+                self._abort("ik_failure", t_s)
+        return position

@@ -1,0 +1,399 @@
+"""Online Cartesian trajectories of the TCP with Ruckig, feedback, and the joint-space command.
+
+The planned degrees of freedom are ``(x, y, z, yaw)`` of a downward-pointing tool. Each control
+period :meth:`CartesianPlanner.step` advances one Ruckig cycle towards a target position **and**
+velocity (the object's, feed-forward) within the velocity, acceleration and jerk limits of
+``MotionConfig``. :class:`FeedbackTerm` adds a clipped PI correction on the measured tracking
+error, :class:`JointCommander` turns a Cartesian setpoint into joint positions with the
+warm-started IK, refusing anything outside the joint limits, and :class:`JointPlanner` plans the
+joint-space transfer moves (carry to a bin, return to ready).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from ruckig import InputParameter, Result, Ruckig, RuckigError, Synchronization, Trajectory
+
+from control.config import MotionConfig
+from control.errors import IkError, PlanningError
+from control.ik import IkResult, Kinematics, tool_pose
+
+Vec4 = tuple[float, float, float, float]
+FloatArray = NDArray[np.float64]
+
+_ZERO4: Vec4 = (0.0, 0.0, 0.0, 0.0)
+
+
+def _vec4(values: object) -> Vec4:
+    x, y, z, w = (float(v) for v in values)  # type: ignore[attr-defined]
+    return (x, y, z, w)
+
+
+@dataclass(frozen=True, kw_only=True)
+class CartesianState:
+    """Kinematic state of the TCP: ``(x, y, z, yaw)`` position, velocity and acceleration.
+
+    Units: m, m/s, m/s^2 for x, y, z; rad, rad/s, rad/s^2 for yaw.
+    """
+
+    position: Vec4
+    velocity: Vec4 = _ZERO4
+    acceleration: Vec4 = _ZERO4
+
+    @property
+    def position_m(self) -> tuple[float, float, float]:
+        """The ``(x, y, z)`` part of :attr:`position`."""
+        return (self.position[0], self.position[1], self.position[2])
+
+
+@dataclass(frozen=True, kw_only=True)
+class CartesianTarget:
+    """Where (``(x, y, z, yaw)``) and how fast (``(vx, vy, vz, yaw rate)``) to arrive."""
+
+    position: Vec4
+    velocity: Vec4 = _ZERO4
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlannerStep:
+    """One control period of the planner.
+
+    ``state`` is the new setpoint, ``remaining_s`` the time left of the current trajectory,
+    ``position_remaining_s`` the time left until x, y and z reach their target (the degrees of
+    freedom are not synchronised, so yaw may take longer), and ``finished`` is True when the
+    target state has been reached.
+    """
+
+    state: CartesianState
+    remaining_s: float
+    position_remaining_s: float
+    finished: bool
+
+
+class _AxisGroup:
+    """One Ruckig instance over a group of axes, planned in a frame moving with the target."""
+
+    def __init__(self, dofs: int, period_s: float) -> None:
+        self.otg = Ruckig(dofs, period_s)
+        self.input = InputParameter(dofs)
+        self.trajectory = Trajectory(dofs)
+        self.dofs = dofs
+        self.fallbacks = 0
+
+    def solve(
+        self,
+        relative_position: list[float],
+        relative_velocity: list[float],
+        acceleration: list[float],
+        limits: tuple[list[float], list[float], list[float], list[float]],
+        period_s: float,
+    ) -> tuple[list[float], list[float], list[float], float]:
+        """New relative (position, velocity, acceleration) after ``period_s`` and time left."""
+        inp = self.input
+        inp.current_position = relative_position
+        inp.current_velocity = relative_velocity
+        inp.current_acceleration = acceleration
+        inp.target_position = [0.0] * self.dofs
+        inp.target_velocity = [0.0] * self.dofs
+        inp.target_acceleration = [0.0] * self.dofs
+        inp.min_velocity, inp.max_velocity, inp.max_acceleration, inp.max_jerk = limits
+        inp.synchronization = Synchronization.Time
+        try:
+            result = self.otg.calculate(inp, self.trajectory)
+        except RuckigError:
+            result = Result.Error
+        if result not in (Result.Working, Result.Finished):
+            self.fallbacks += 1
+            inp.synchronization = Synchronization.No
+            try:
+                result = self.otg.calculate(inp, self.trajectory)
+            except RuckigError as exc:
+                msg = f"Ruckig rejected the input: {str(exc).strip()}"
+                raise PlanningError(msg) from exc
+        if result not in (Result.Working, Result.Finished):
+            msg = f"Ruckig returned {result}"
+            raise PlanningError(msg)
+        duration_s = float(self.trajectory.duration)
+        dt_s = min(period_s, duration_s)
+        position, velocity, accel = self.trajectory.at_time(dt_s)
+        return list(position), list(velocity), list(accel), max(duration_s - dt_s, 0.0)
+
+
+class CartesianPlanner:
+    """Ruckig (free edition: no intermediate waypoints) over ``(x, y, z, yaw)``.
+
+    x, y and z form one time-synchronised group (a straight-ish path); yaw is planned by its own
+    Ruckig instance, so a slow turn does not delay the position intercept. When Ruckig's
+    synchronisation fails numerically the step is retried with the axes planned alone.
+    """
+
+    def __init__(self, motion: MotionConfig, initial: CartesianState) -> None:
+        """Create the generators at ``initial`` with the limits of ``motion``."""
+        self._motion = motion
+        self._xyz = _AxisGroup(3, motion.control_period_s)
+        self._yaw = _AxisGroup(1, motion.control_period_s)
+        self._state = initial
+        self.reset(initial)
+
+    @property
+    def sync_fallbacks(self) -> int:
+        """Steps where time synchronisation failed and each axis was planned alone."""
+        return self._xyz.fallbacks
+
+    @property
+    def state(self) -> CartesianState:
+        """The current setpoint."""
+        return self._state
+
+    def reset(self, state: CartesianState) -> None:
+        """Restart from ``state`` (e.g. the measured TCP after an abort)."""
+        values = (*state.position, *state.velocity, *state.acceleration)
+        if not all(math.isfinite(v) for v in values):
+            msg = f"planner reset to a non-finite state {state}"
+            raise PlanningError(msg)
+        self._state = state
+
+    def step(self, target: CartesianTarget, *, speed_scale: float = 1.0) -> PlannerStep:
+        """Advance one control period towards a target moving at constant velocity.
+
+        ``target.position`` is where the target is when the new setpoint takes effect and
+        ``target.velocity`` how it moves (the object's velocity, or zero for a fixed point).
+        Ruckig plans in the frame moving with the target (relative goal: zero offset, zero
+        relative velocity, velocity limits shifted by the target velocity), so the world
+        trajectory intercepts the moving target exactly and then moves with it (feed-forward of
+        the target velocity). ``speed_scale`` in (0, 1] scales the velocity and acceleration
+        limits. Raises ``PlanningError`` for non-finite targets, a target velocity at or above
+        the limits or any other Ruckig error; the state is then unchanged.
+        """
+        values = (*target.position, *target.velocity)
+        if not all(math.isfinite(v) for v in values):
+            msg = f"non-finite Ruckig target {target}"
+            raise PlanningError(msg)
+        if not 0.0 < speed_scale <= 1.0:
+            msg = f"speed_scale {speed_scale} is not in (0, 1]"
+            raise PlanningError(msg)
+        motion = self._motion
+        vmax = [v * speed_scale for v in motion.max_velocity]
+        if any(abs(v) >= limit for v, limit in zip(target.velocity, vmax, strict=True)):
+            msg = f"target velocity {target.velocity} is not below the velocity limits {vmax}"
+            raise PlanningError(msg)
+        state = self._state
+        period_s = motion.control_period_s
+        relative = [
+            c - (g - v * period_s)
+            for c, g, v in zip(state.position, target.position, target.velocity, strict=True)
+        ]
+        relative_velocity = [c - v for c, v in zip(state.velocity, target.velocity, strict=True)]
+        v_hi = [limit - v for v, limit in zip(target.velocity, vmax, strict=True)]
+        v_lo = [-limit - v for v, limit in zip(target.velocity, vmax, strict=True)]
+        amax = [a * speed_scale for a in motion.max_acceleration]
+        jmax = list(motion.max_jerk)
+        try:
+            p3, v3, a3, left_xyz = self._xyz.solve(
+                relative[:3],
+                relative_velocity[:3],
+                list(state.acceleration[:3]),
+                (v_lo[:3], v_hi[:3], amax[:3], jmax[:3]),
+                period_s,
+            )
+            p1, v1, a1, left_yaw = self._yaw.solve(
+                relative[3:],
+                relative_velocity[3:],
+                list(state.acceleration[3:]),
+                (v_lo[3:], v_hi[3:], amax[3:], jmax[3:]),
+                period_s,
+            )
+        except PlanningError as exc:
+            msg = f"Ruckig failed for target {target}: {exc}"
+            raise PlanningError(msg) from exc
+        self._state = CartesianState(
+            position=_vec4(r + g for r, g in zip(p3 + p1, target.position, strict=True)),
+            velocity=_vec4(r + v for r, v in zip(v3 + v1, target.velocity, strict=True)),
+            acceleration=_vec4(a3 + a1),
+        )
+        return PlannerStep(
+            state=self._state,
+            remaining_s=max(left_xyz, left_yaw),
+            position_remaining_s=left_xyz,
+            finished=max(left_xyz, left_yaw) == 0.0,
+        )
+
+
+class FeedbackTerm:
+    """Clipped PI correction of the position setpoint from the measured tracking error.
+
+    The measured TCP is compared with the setpoint of ``command_latency_s`` ago (the time the arm
+    takes to reach a command and report it), so a pure measurement delay is not mistaken for a
+    tracking error.
+    """
+
+    def __init__(self, motion: MotionConfig) -> None:
+        """Start with zero integral and no setpoint history."""
+        self._kp = motion.feedback_kp
+        self._ki = motion.feedback_ki_per_s
+        self._limit = motion.feedback_max_m
+        self._delay_ticks = max(round(motion.command_latency_s / motion.control_period_s), 0)
+        self._history: deque[FloatArray] = deque(maxlen=self._delay_ticks + 1)
+        self._integral = np.zeros(3)
+
+    def reset(self) -> None:
+        """Forget the integral and the history (call when a new target is tracked)."""
+        self._integral = np.zeros(3)
+        self._history.clear()
+
+    def correction(
+        self,
+        setpoint_m: tuple[float, float, float],
+        measured_m: tuple[float, float, float],
+        dt_s: float,
+    ) -> tuple[float, float, float]:
+        """The ``(3,)`` offset (m) to add to ``setpoint_m`` given the measured TCP position.
+
+        ``setpoint_m`` is the corrected command of the previous ticks' series (the history is
+        kept here). Non-finite measurements give no correction; the integral is clamped.
+        """
+        self._history.append(np.asarray(setpoint_m, dtype=np.float64))
+        if len(self._history) <= self._delay_ticks:
+            return (0.0, 0.0, 0.0)
+        error = self._history[0] - np.asarray(measured_m, dtype=np.float64)
+        if not np.all(np.isfinite(error)):
+            return (0.0, 0.0, 0.0)
+        if self._ki > 0.0:
+            self._integral = np.clip(
+                self._integral + error * dt_s, -self._limit / self._ki, self._limit / self._ki
+            )
+        out = np.clip(self._kp * error + self._ki * self._integral, -self._limit, self._limit)
+        return (float(out[0]), float(out[1]), float(out[2]))
+
+
+class JointCommander:
+    """Cartesian setpoint to joint positions with the IK warm-started from the last command."""
+
+    def __init__(self, kinematics: Kinematics, motion: MotionConfig, q_init: FloatArray) -> None:
+        """Start from ``q_init`` ``(n_arm,) float`` (clipped into the limits)."""
+        self._kin = kinematics
+        self._max_step_rad = np.asarray(
+            kinematics.velocity_limit_rps * motion.control_period_s * motion.joint_velocity_margin
+        )
+        self._q = np.clip(
+            np.asarray(q_init, dtype=np.float64), kinematics.lower_rad, kinematics.upper_rad
+        )
+
+    @property
+    def q(self) -> FloatArray:
+        """The last accepted joint command ``(n_arm,) float``."""
+        return self._q.copy()
+
+    def reset(self, q: FloatArray) -> None:
+        """Continue from ``q`` (e.g. measured joint positions)."""
+        self._q = np.clip(np.asarray(q, dtype=np.float64), self._kin.lower_rad, self._kin.upper_rad)
+
+    def command(
+        self, position_m: tuple[float, float, float], yaw_rad: float, *, ticks: int = 1
+    ) -> IkResult:
+        """Solve the IK for the setpoint and accept it as the new command.
+
+        ``ticks`` is the number of control periods since the last accepted command (it scales the
+        per-joint step check). Raises ``IkError`` when the IK does not converge, the solution is
+        outside the joint limits or a joint would move faster than its limit allows; the last
+        accepted command is then kept.
+        """
+        if not all(math.isfinite(v) for v in (*position_m, yaw_rad)):
+            msg = f"non-finite Cartesian setpoint {position_m}, yaw {yaw_rad}"
+            raise IkError(msg)
+        result = self._kin.solve(tool_pose(position_m, yaw_rad), self._q)
+        if not result.success:
+            msg = (
+                f"IK did not converge for position {position_m} yaw {yaw_rad:.3f} "
+                f"(error {result.error_norm:.2e} after {result.iterations} iterations)"
+            )
+            raise IkError(msg)
+        if not self._kin.within_limits(result.q):
+            msg = f"IK solution {result.q} is outside the joint limits"
+            raise IkError(msg)
+        step = np.abs(result.q - self._q)
+        allowed = self._max_step_rad * max(ticks, 1)
+        if np.any(step > allowed):
+            joint = int(np.argmax(step - allowed))
+            msg = (
+                f"joint {self._kin.joint_names[joint]} would move {step[joint]:.3f} rad in "
+                f"{max(ticks, 1)} tick(s), allowed {allowed[joint]:.3f} rad"
+            )
+            raise IkError(msg)
+        self._q = np.array(result.q)
+        return result
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class JointStep:
+    """One control period of a joint-space move: ``q`` and ``dq`` are ``(n_arm,) float``."""
+
+    q: FloatArray
+    dq: FloatArray
+    remaining_s: float
+
+
+class JointPlanner:
+    """Ruckig in joint space for transfer moves (carry to a bin, return to ready).
+
+    Joint velocity limits are the URDF's scaled by ``transfer_speed_scale``; positions are kept
+    inside the joint limits by Ruckig and by a final check.
+    """
+
+    def __init__(self, kinematics: Kinematics, motion: MotionConfig) -> None:
+        """Create the generator with the joint limits of ``kinematics``."""
+        self._kin = kinematics
+        n = kinematics.nq
+        self._period_s = motion.control_period_s
+        self._otg = Ruckig(n, motion.control_period_s)
+        self._input = InputParameter(n)
+        self._trajectory = Trajectory(n)
+        self._input.max_velocity = list(kinematics.velocity_limit_rps * motion.transfer_speed_scale)
+        self._input.max_acceleration = [motion.joint_max_acceleration_rps2] * n
+        self._input.max_jerk = [motion.joint_max_jerk_rps3] * n
+        self._q = np.zeros(n)
+        self._dq = np.zeros(n)
+        self._ddq = np.zeros(n)
+
+    def reset(self, q: FloatArray, dq: FloatArray | None = None) -> None:
+        """Continue from ``q`` (and ``dq``, clipped to the velocity limits), zero acceleration."""
+        vmax = np.asarray(self._input.max_velocity)
+        self._q = np.clip(np.asarray(q, dtype=np.float64), self._kin.lower_rad, self._kin.upper_rad)
+        velocity = np.zeros_like(self._q) if dq is None else np.asarray(dq, dtype=np.float64)
+        self._dq = np.clip(np.nan_to_num(velocity), -vmax, vmax)
+        self._ddq = np.zeros_like(self._q)
+
+    def step(self, q_target: FloatArray) -> JointStep:
+        """Advance one control period towards ``q_target`` ``(n_arm,)`` (at rest).
+
+        Raises ``PlanningError`` when the target is outside the limits or Ruckig fails.
+        """
+        q_target = np.asarray(q_target, dtype=np.float64)
+        if not self._kin.within_limits(q_target):
+            msg = f"joint target {q_target} is outside the joint limits"
+            raise PlanningError(msg)
+        inp = self._input
+        inp.current_position = list(self._q)
+        inp.current_velocity = list(self._dq)
+        inp.current_acceleration = list(self._ddq)
+        inp.target_position = list(q_target)
+        try:
+            result = self._otg.calculate(inp, self._trajectory)
+        except RuckigError as exc:
+            msg = f"Ruckig rejected joint target {q_target}: {str(exc).strip()}"
+            raise PlanningError(msg) from exc
+        if result not in (Result.Working, Result.Finished):
+            msg = f"Ruckig returned {result} for joint target {q_target}"
+            raise PlanningError(msg)
+        dt_s = min(self._period_s, float(self._trajectory.duration))
+        q, dq, ddq = self._trajectory.at_time(dt_s)
+        self._q = np.clip(np.asarray(q), self._kin.lower_rad, self._kin.upper_rad)
+        self._dq = np.asarray(dq)
+        self._ddq = np.asarray(ddq)
+        remaining_s = max(float(self._trajectory.duration) - dt_s, 0.0)
+        return JointStep(q=self._q.copy(), dq=self._dq.copy(), remaining_s=remaining_s)

@@ -1,0 +1,186 @@
+"""Choose the next object to pick, and say why every other object is not picked.
+
+An object is a candidate when its class has a bin, its footprint's narrow side fits the gripper,
+the arm can intercept it inside the pick window and finish the dwell before it leaves the window,
+and its grasp point stays within reach until the gripper has closed. Among candidates the
+highest class priority wins, then the least time left in the window, then the shortest time to
+intercept.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Collection, Sequence
+from dataclasses import dataclass
+
+from control.config import ControllerConfig
+from control.tracking import Track
+
+UNTARGETED_REASONS: tuple[str, ...] = (
+    "low_confidence",
+    "no_bin",
+    "too_wide",
+    "excluded",
+    "too_late",
+    "upstream",
+    "out_of_reach",
+    "lower_priority",
+)
+"""Every reason an object can be left untargeted, in the order they are checked."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Untargeted:
+    """An object that was not chosen, and why (one of :data:`UNTARGETED_REASONS`)."""
+
+    track_id: int
+    reason: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class Schedule:
+    """Result of one scheduling decision.
+
+    ``target`` is None when nothing can be picked; ``intercept_s`` is the estimated time from now
+    until the TCP reaches the target's grasp point; ``time_left_s`` the time until the target
+    leaves the pick window.
+    """
+
+    target: Track | None
+    intercept_s: float
+    time_left_s: float
+    untargeted: tuple[Untargeted, ...]
+
+
+def move_time_s(
+    distance_m: float, max_velocity: float, max_acceleration: float, max_jerk: float
+) -> float:
+    """Estimate of a jerk-limited rest-to-rest move time over ``distance_m``.
+
+    Long moves (cruise at ``max_velocity``): ``d / v + v / a + a / j``; medium moves (peak
+    acceleration reached): ``2 sqrt(d / a) + a / j``; short moves (jerk only):
+    ``(32 d / j) ** (1/3)``. Monotonic in the distance.
+    """
+    d, v, a, j = abs(distance_m), max_velocity, max_acceleration, max_jerk
+    if d == 0.0:
+        return 0.0
+    if d <= 2.0 * a**3 / j**2:
+        return float((32.0 * d / j) ** (1.0 / 3.0))
+    cruise_from_m = v * v / a + v * a / j
+    if d < cruise_from_m:
+        return max(2.0 * math.sqrt(d / a) + a / j, float((32.0 * d / j) ** (1.0 / 3.0)))
+    return d / v + v / a + a / j
+
+
+def grasp_height_m(track: Track, config: ControllerConfig) -> float:
+    """World z of the grasp point of ``track`` (part-way up the object, never at the belt)."""
+    pick = config.pick
+    return config.belt.surface_z_m + max(
+        track.height_m * pick.grasp_height_fraction, pick.min_grasp_height_m
+    )
+
+
+def intercept_time_s(
+    track: Track,
+    now_s: float,
+    tcp_position_m: tuple[float, float, float],
+    config: ControllerConfig,
+) -> float:
+    """Estimated time from ``now_s`` until the TCP reaches the grasp point of the moving track."""
+    motion = config.motion
+    v, a, j = motion.max_velocity[0], motion.max_acceleration[0], motion.max_jerk[0]
+    z = grasp_height_m(track, config) + config.pick.approach_height_m
+    t_s = 0.0
+    for _ in range(3):
+        x, y = track.position_at(now_s + t_s)
+        distance = math.dist(tcp_position_m, (x, y, z))
+        t_s = move_time_s(distance, v, a, j)
+    descend_s = move_time_s(
+        config.pick.approach_height_m,
+        motion.max_velocity[2],
+        motion.max_acceleration[2],
+        motion.max_jerk[2],
+    )
+    return t_s + descend_s + config.scheduler.time_margin_s
+
+
+def _reason(
+    track: Track,
+    now_s: float,
+    intercept_s: float,
+    config: ControllerConfig,
+    excluded_ids: Collection[int],
+) -> str | None:
+    belt, sched = config.belt, config.scheduler
+    if track.class_confidence < sched.min_confidence:
+        return "low_confidence"
+    if track.class_name not in config.bins:
+        return "no_bin"
+    if min(track.width_m, track.length_m) > (
+        config.robot.gripper_max_opening_m - sched.grasp_width_margin_m
+    ):
+        return "too_wide"
+    x_min, x_max = belt.pick_window_x_m
+    x_meet, y_meet = track.position_at(now_s + intercept_s)
+    x_done, y_done = track.position_at(
+        now_s + intercept_s + config.pick.dwell_s + config.pick.close_s
+    )
+    if track.track_id in excluded_ids:
+        return "excluded"
+    x_dwelt, _ = track.position_at(now_s + intercept_s + config.pick.dwell_s)
+    if x_dwelt > x_max or track.position_m[0] > x_max:
+        return "too_late"
+    if x_meet < x_min:
+        return "upstream"
+    z = grasp_height_m(track, config)
+    base = config.robot.base_position_m
+    reach = max(math.dist(base, (x_meet, y_meet, z)), math.dist(base, (x_done, y_done, z)))
+    off_belt = abs(track.position_m[1] - belt.centreline_y_m) > belt.width_m / 2
+    if off_belt or reach > sched.max_reach_m:
+        return "out_of_reach"
+    return None
+
+
+def schedule(
+    tracks: Sequence[Track],
+    *,
+    now_s: float,
+    tcp_position_m: tuple[float, float, float],
+    config: ControllerConfig,
+    excluded_ids: Collection[int] = (),
+) -> Schedule:
+    """Choose the next target among confirmed ``tracks`` (already predicted to ``now_s``).
+
+    ``excluded_ids`` are tracks that must not be chosen again (e.g. a failed pick).
+    """
+    x_max = config.belt.pick_window_x_m[1]
+    ranked: list[tuple[tuple[float, float, float, int], Track, float, float]] = []
+    untargeted: list[Untargeted] = []
+    for track in tracks:
+        if not track.confirmed:
+            continue
+        intercept_s = intercept_time_s(track, now_s, tcp_position_m, config)
+        reason = _reason(track, now_s, intercept_s, config, excluded_ids)
+        if reason is not None:
+            untargeted.append(Untargeted(track_id=track.track_id, reason=reason))
+            continue
+        vx = track.velocity_mps[0]
+        time_left_s = (x_max - track.position_m[0]) / vx if vx > 1e-6 else math.inf
+        priority = config.scheduler.class_priorities.get(track.class_name, 0.0)
+        key = (-priority, time_left_s, intercept_s, track.track_id)
+        ranked.append((key, track, intercept_s, time_left_s))
+    if not ranked:
+        return Schedule(
+            target=None, intercept_s=math.nan, time_left_s=math.nan, untargeted=tuple(untargeted)
+        )
+    ranked.sort(key=lambda item: item[0])
+    _, target, intercept_s, time_left_s = ranked[0]
+    untargeted.extend(
+        Untargeted(track_id=item[1].track_id, reason="lower_priority") for item in ranked[1:]
+    )
+    return Schedule(
+        target=target,
+        intercept_s=intercept_s,
+        time_left_s=time_left_s,
+        untargeted=tuple(untargeted),
+    )

@@ -1,0 +1,148 @@
+"""The pick state machine in closed loop with an ideal (kinematic) arm, and its bad inputs."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from control.config import ControllerConfig
+from control.kinematic_sim import run_episode
+from control.pick import Command, Phase, PickController, TcpMeasurement, nearest_half_turn
+from control.tracking import Track
+
+FOLLOW_SEQUENCE = [Phase.IDLE, Phase.APPROACH, Phase.DESCEND, Phase.DWELL, Phase.CLOSE, Phase.LIFT]
+
+
+@pytest.mark.parametrize("speed_mps", [0.2, 0.4, 0.6])
+def test_closed_loop_reaches_and_dwells_within_4mm(speed_mps: float) -> None:
+    config = ControllerConfig()
+    result = run_episode(speed_mps, seed=1, duration_s=3.0)
+    assert [phase for _, phase in result.phases][: len(FOLLOW_SEQUENCE)] == FOLLOW_SEQUENCE
+    # Kinematic arm: within 4 mm in under 1 s, and it stays there through dwell and close.
+    assert 0.0 < result.tracking_time_4mm_s < 1.0
+    assert result.max_follow_error_m < 0.004
+    starts = {phase: t for t, phase in reversed(result.phases)}
+    assert starts[Phase.CLOSE] - starts[Phase.DWELL] >= config.pick.dwell_s - 1e-9
+    assert result.max_joint_limit_violation_rad == 0.0
+    assert result.stats.aborted == {}
+    assert result.stats.errors == {}
+
+
+def test_full_pick_drops_into_the_class_bin() -> None:
+    config = ControllerConfig()
+    result = run_episode(0.4, seed=2, duration_s=6.5)
+    assert result.stats.completed_by_class == {"brick": 1}
+    assert result.release_tcp_m is not None
+    assert math.dist(result.release_tcp_m, config.bins["brick"]) < 1e-3
+    assert [phase for _, phase in result.phases][-3:] == [Phase.RELEASE, Phase.RETURN, Phase.IDLE]
+    assert result.max_joint_limit_violation_rad == 0.0
+
+
+def _track(x0: float, t_s: float = 0.0, *, vx: float = 0.4, y: float = 0.5) -> Track:
+    """The track of an object that was at ``x0`` at t = 0, as estimated at ``t_s``."""
+    return Track(
+        track_id=1,
+        stamp_s=t_s,
+        class_name="wood",
+        class_confidence=1.0,
+        position_m=(x0 + vx * t_s, y),
+        velocity_mps=(vx, 0.0),
+        position_std_m=0.001,
+        yaw_rad=0.2,
+        length_m=0.1,
+        width_m=0.04,
+        height_m=0.03,
+        hits=10,
+        confirmed=True,
+        last_update_s=0.0,
+    )
+
+
+def _drive(
+    controller: PickController,
+    tracks_at: Callable[[float], tuple[Track, ...]],
+    ticks: int,
+    belt: tuple[float, float] = (0.4, 0.0),
+) -> list[Command]:
+    """Run the controller with an ideal arm; every joint command must be within the limits."""
+    kin = controller.kinematics
+    q = controller.q_ready
+    commands: list[Command] = []
+    for k in range(ticks):
+        t_s = k * 0.005
+        pose = kin.fk(q)
+        x, y, z = (float(v) for v in pose.translation)
+        measured = TcpMeasurement(position_m=(x, y, z), yaw_rad=0.0)
+        command = controller.update(t_s, measured, tracks_at(t_s), belt)
+        q = np.asarray(command.joint_positions_rad)
+        assert kin.within_limits(q)
+        commands.append(command)
+    return commands
+
+
+def test_ruckig_error_aborts_and_keeps_joint_commands_in_limits() -> None:
+    controller = PickController(ControllerConfig())
+    fine = _track(-0.45)
+
+    def tracks_at(t_s: float) -> tuple[Track, ...]:
+        # After 0.1 s the target's velocity estimate explodes beyond the Cartesian limits.
+        if t_s < 0.1:
+            return (fine,)
+        return (
+            Track(
+                **{
+                    **fine.__dict__,
+                    "stamp_s": t_s,
+                    "position_m": fine.position_at(t_s),
+                    "velocity_mps": (3.0, 0.0),
+                }
+            ),
+        )
+
+    commands = _drive(controller, tracks_at, 200)
+    stats = controller.stats()
+    assert stats.aborted.get("ruckig_error", 0) == 1
+    assert stats.errors["ruckig_error"] >= 1
+    assert commands[-1].phase in (Phase.RETURN, Phase.IDLE, Phase.LIFT)
+    assert commands[-1].target_id is None
+
+
+def test_ik_failure_aborts_and_holds_a_valid_command() -> None:
+    controller = PickController(ControllerConfig())
+
+    def tracks_at(t_s: float) -> tuple[Track, ...]:
+        # The estimate jumps far beyond the arm's reach after the target was chosen.
+        return (_track(-0.45, t_s, y=0.5 if t_s < 0.1 else 1.4),)
+
+    commands = _drive(controller, tracks_at, 300)
+    stats = controller.stats()
+    assert stats.targeted >= 1
+    assert stats.aborted.get("ik_failure", 0) >= 1
+    assert stats.errors["ik_failure"] >= 1
+    failed = next(i for i, c in enumerate(commands) if c.target_id is None and i > 0)
+    # The joint command is held (never extrapolated) when the IK fails.
+    assert commands[failed].joint_positions_rad == commands[failed - 1].joint_positions_rad
+
+
+def test_lost_target_aborts_the_approach() -> None:
+    controller = PickController(ControllerConfig())
+
+    def tracks_at(t_s: float) -> tuple[Track, ...]:
+        return (_track(-0.45, t_s),) if t_s < 0.05 else ()
+
+    commands = _drive(controller, tracks_at, 200)
+    assert controller.stats().aborted == {"target_lost": 1}
+    assert commands[-1].target_id is None
+
+
+def test_grasp_yaw_is_across_the_narrow_side() -> None:
+    assert nearest_half_turn(0.2, math.pi / 2) == pytest.approx(0.2)
+    assert nearest_half_turn(-1.4, math.pi / 2) == pytest.approx(-1.4 + math.pi)
+    # The tool's finger axis (sin yaw, -cos yaw) is perpendicular to the object's long side.
+    yaw = nearest_half_turn(0.7, 1.5)
+    finger_axis = (math.sin(yaw), -math.cos(yaw))
+    long_side = (math.cos(0.7), math.sin(0.7))
+    assert abs(finger_axis[0] * long_side[0] + finger_axis[1] * long_side[1]) < 1e-12

@@ -1,0 +1,150 @@
+"""Ruckig planning: limits respected when sampled finely, intercept of moving targets, errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from control.config import ControllerConfig, MotionConfig
+from control.errors import IkError, PlanningError
+from control.ik import Kinematics
+from control.planner import (
+    CartesianPlanner,
+    CartesianState,
+    CartesianTarget,
+    FeedbackTerm,
+    JointCommander,
+    JointPlanner,
+)
+
+TOL = 1e-6
+
+
+def _limits_respected(states: list[CartesianState], motion: MotionConfig) -> None:
+    dt = motion.control_period_s
+    vel = np.array([s.velocity for s in states])
+    acc = np.array([s.acceleration for s in states])
+    pos = np.array([s.position for s in states])
+    assert np.all(np.abs(vel) <= np.array(motion.max_velocity) * (1 + TOL))
+    assert np.all(np.abs(acc) <= np.array(motion.max_acceleration) * (1 + TOL))
+    jerk = np.diff(acc, axis=0) / dt
+    assert np.all(np.abs(jerk) <= np.array(motion.max_jerk) * (1 + 1e-3))
+    # Positions and velocities are consistent (no jumps): finite differences match.
+    assert np.all(np.abs(np.diff(pos, axis=0) / dt) <= np.array(motion.max_velocity) * 1.01)
+
+
+@pytest.mark.parametrize("speed_mps", [0.0, 0.2, 0.4, 0.6])
+def test_intercept_respects_limits_and_matches_target(speed_mps: float) -> None:
+    motion = MotionConfig(control_period_s=0.001)
+    planner = CartesianPlanner(motion, CartesianState(position=(0.0, 0.45, 0.3, 1.57)))
+    states = [planner.state]
+    caught_at = None
+    for k in range(1500):
+        t_s = (k + 1) * motion.control_period_s
+        target = CartesianTarget(
+            position=(-0.5 + speed_mps * t_s, 0.55, 0.05, 0.3),
+            velocity=(speed_mps, 0.0, 0.0, 0.0),
+        )
+        step = planner.step(target)
+        states.append(step.state)
+        gap = math.dist(step.state.position_m, target.position[:3])
+        if caught_at is None and gap < 1e-6 and step.position_remaining_s == 0.0:
+            caught_at = t_s
+    _limits_respected(states, motion)
+    assert caught_at is not None
+    assert caught_at < 1.0
+    final = states[-1]
+    assert final.velocity[0] == pytest.approx(speed_mps, abs=1e-9)
+    assert final.position[3] == pytest.approx(0.3, abs=1e-9)
+
+
+def test_limits_respected_with_jumping_target() -> None:
+    motion = MotionConfig(control_period_s=0.002)
+    planner = CartesianPlanner(motion, CartesianState(position=(0.0, 0.45, 0.3, 0.0)))
+    rng = np.random.default_rng(5)
+    states = [planner.state]
+    target = CartesianTarget(position=(0.0, 0.45, 0.3, 0.0))
+    for k in range(2000):
+        if k % 150 == 0:
+            goal = rng.uniform((-0.3, 0.3, 0.0, -1.0), (0.3, 0.7, 0.3, 1.0))
+            target = CartesianTarget(position=tuple(goal), velocity=(0.3, 0.0, 0.0, 0.0))
+        target = CartesianTarget(
+            position=(target.position[0] + 0.3 * motion.control_period_s, *target.position[1:]),
+            velocity=target.velocity,
+        )
+        states.append(planner.step(target).state)
+    _limits_respected(states, motion)
+
+
+def test_bad_targets_raise_and_leave_state_unchanged() -> None:
+    motion = MotionConfig()
+    planner = CartesianPlanner(motion, CartesianState(position=(0.0, 0.45, 0.3, 0.0)))
+    before = planner.state
+    with pytest.raises(PlanningError, match="non-finite"):
+        planner.step(CartesianTarget(position=(math.nan, 0.5, 0.1, 0.0)))
+    with pytest.raises(PlanningError, match="not below the velocity limits"):
+        planner.step(CartesianTarget(position=(0.0, 0.5, 0.1, 0.0), velocity=(5.0, 0, 0, 0)))
+    assert planner.state == before
+
+
+def _lag_after_ramp(motion: MotionConfig) -> float:
+    """Final error of a lagging first-order arm following a 0.4 m/s ramp with feedback."""
+    feedback = FeedbackTerm(motion)
+    arm = np.zeros(3)
+    previous = np.zeros(3)
+    for k in range(2000):
+        setpoint = np.array([0.4 * k * motion.control_period_s, 0.0, 0.0])
+        # The measured arm answers the command of one tick ago (command_latency_s = 1 tick).
+        sp = (float(setpoint[0]), 0.0, 0.0)
+        measured = (float(arm[0]), float(arm[1]), float(arm[2]))
+        command = setpoint + np.asarray(feedback.correction(sp, measured, 0.005))
+        arm = arm + 0.2 * (command - arm)
+        previous = setpoint
+    return float(abs(previous[0] - arm[0]))
+
+
+def test_feedback_removes_steady_lag_and_is_clipped() -> None:
+    with_feedback = MotionConfig(command_latency_s=0.005, feedback_kp=0.5, feedback_ki_per_s=5.0)
+    without = MotionConfig(command_latency_s=0.005, feedback_kp=0.0, feedback_ki_per_s=0.0)
+    assert _lag_after_ramp(without) > 0.005
+    assert _lag_after_ramp(with_feedback) < 1e-4
+    feedback = FeedbackTerm(with_feedback)
+    feedback.correction((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.005)
+    huge = feedback.correction((1.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.005)
+    assert max(abs(v) for v in huge) <= with_feedback.feedback_max_m + 1e-12
+
+
+def test_joint_commander_refuses_bad_commands() -> None:
+    config = ControllerConfig()
+    kin = Kinematics(config.robot, config.ik)
+    q0 = np.asarray(config.robot.ready_joint_positions_rad)
+    commander = JointCommander(kin, config.motion, q0)
+    commander.command(config.robot.ready_tcp_position_m, config.robot.ready_yaw_rad, ticks=100)
+    q_ok = commander.q
+    with pytest.raises(IkError, match="did not converge"):
+        commander.command((1.5, 0.0, 0.3), 0.0)
+    with pytest.raises(IkError, match="would move"):
+        commander.command((0.2, 0.6, 0.1), 1.0)
+    with pytest.raises(IkError, match="non-finite"):
+        commander.command((math.inf, 0.5, 0.1), 0.0)
+    assert np.array_equal(commander.q, q_ok)
+    assert kin.within_limits(commander.q)
+
+
+def test_joint_planner_respects_limits() -> None:
+    config = ControllerConfig()
+    kin = Kinematics(config.robot, config.ik)
+    planner = JointPlanner(kin, config.motion)
+    q = np.asarray(config.robot.ready_joint_positions_rad)
+    planner.reset(q)
+    goal = np.clip(q + np.array([-3.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]), kin.lower_rad, kin.upper_rad)
+    vmax = kin.velocity_limit_rps * config.motion.transfer_speed_scale
+    for _ in range(2000):
+        step = planner.step(goal)
+        assert kin.within_limits(step.q)
+        assert np.all(np.abs(step.dq) <= vmax * (1 + TOL))
+    assert np.allclose(step.q, goal)
+    with pytest.raises(PlanningError, match="outside the joint limits"):
+        planner.step(kin.upper_rad + 0.1)

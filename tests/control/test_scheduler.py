@@ -1,0 +1,115 @@
+"""Scheduling: priorities, urgency and the reason for every untargeted object."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from control.config import ControllerConfig, SchedulerConfig
+from control.scheduler import UNTARGETED_REASONS, move_time_s, schedule
+from control.tracking import Track
+
+TCP = (0.0, 0.45, 0.30)
+
+
+def _track(
+    track_id: int,
+    x: float,
+    *,
+    y: float = 0.5,
+    width: float = 0.05,
+    class_name: str = "brick",
+    vx: float = 0.2,
+    confidence: float = 1.0,
+) -> Track:
+    return Track(
+        track_id=track_id,
+        stamp_s=0.0,
+        class_name=class_name,
+        class_confidence=confidence,
+        position_m=(x, y),
+        velocity_mps=(vx, 0.0),
+        position_std_m=0.001,
+        yaw_rad=0.0,
+        length_m=max(0.12, width),
+        width_m=width,
+        height_m=0.04,
+        hits=10,
+        confirmed=True,
+        last_update_s=0.0,
+    )
+
+
+def _reasons(result_untargeted: tuple[object, ...]) -> dict[int, str]:
+    return {u.track_id: u.reason for u in result_untargeted}  # type: ignore[attr-defined]
+
+
+def test_every_untargeted_object_has_its_reason() -> None:
+    config = ControllerConfig()
+    tracks = [
+        _track(1, -0.2),
+        _track(2, -0.15, width=0.09),
+        _track(3, -0.1, y=0.95),
+        _track(4, 0.3),
+        _track(5, -1.5),
+        _track(6, -0.1, confidence=0.1),
+        _track(7, 0.0),
+        _track(8, -0.05),
+    ]
+    result = schedule(tracks, now_s=0.0, tcp_position_m=TCP, config=config, excluded_ids={8})
+    reasons = _reasons(result.untargeted)
+    assert result.target is not None
+    assert result.target.track_id == 7
+    assert reasons == {
+        1: "lower_priority",
+        2: "too_wide",
+        3: "out_of_reach",
+        4: "too_late",
+        5: "upstream",
+        6: "low_confidence",
+        8: "excluded",
+    }
+    assert set(reasons.values()) <= set(UNTARGETED_REASONS)
+    assert 0.0 < result.intercept_s < 1.0
+    assert math.isclose(result.time_left_s, (0.35 - 0.0) / 0.2)
+
+
+def test_class_priority_beats_urgency() -> None:
+    priorities = {"concrete": 1.0, "brick": 1.0, "wood": 5.0, "rubber": 1.0}
+    config = ControllerConfig(scheduler=SchedulerConfig(class_priorities=priorities))
+    tracks = [_track(1, 0.0), _track(2, -0.2, class_name="wood")]
+    result = schedule(tracks, now_s=0.0, tcp_position_m=TCP, config=config)
+    assert result.target is not None
+    assert result.target.track_id == 2
+    assert _reasons(result.untargeted) == {1: "lower_priority"}
+
+
+def test_narrow_side_decides_graspability() -> None:
+    config = ControllerConfig()
+    long_thin = _track(1, -0.1, width=0.07)
+    result = schedule([long_thin], now_s=0.0, tcp_position_m=TCP, config=config)
+    assert result.target is not None
+    wide = _track(2, -0.1, width=0.08)
+    result = schedule([wide], now_s=0.0, tcp_position_m=TCP, config=config)
+    assert result.target is None
+    assert _reasons(result.untargeted) == {2: "too_wide"}
+
+
+def test_unknown_class_has_no_bin_and_nothing_is_targeted_when_empty() -> None:
+    config = ControllerConfig()
+    result = schedule(
+        [_track(1, -0.1, class_name="glass")], now_s=0.0, tcp_position_m=TCP, config=config
+    )
+    assert result.target is None
+    assert _reasons(result.untargeted) == {1: "no_bin"}
+    empty = schedule([], now_s=0.0, tcp_position_m=TCP, config=config)
+    assert empty.target is None
+    assert empty.untargeted == ()
+
+
+def test_move_time_is_monotonic_and_bounded() -> None:
+    times = [move_time_s(d, 0.8, 12.0, 300.0) for d in np.linspace(0.0, 1.0, 400)]
+    assert times == sorted(times)
+    assert times[0] == 0.0
+    assert times[-1] >= 1.0 / 0.8

@@ -1,0 +1,110 @@
+"""Validation of commands arriving from outside (ROS), free of ROS so it is tested without it.
+
+A command is accepted whole or rejected whole with a reason; the physics never sees a rejected
+one. Reasons are short stable strings used as counter keys in the episode log.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Rejected:
+    """Why a command was refused: ``reason`` is a counter key, ``detail`` says what was wrong."""
+
+    reason: str
+    detail: str
+
+
+@dataclass(frozen=True)
+class JointTarget:
+    """Accepted arm targets in the arm's joint order, ``(n,)`` each."""
+
+    positions: tuple[float, ...]
+    velocities: tuple[float, ...] | None
+
+
+def validate_joint_command(
+    names: Sequence[str],
+    positions: Sequence[float],
+    velocities: Sequence[float],
+    *,
+    arm_joints: Sequence[str],
+    lower: np.ndarray,
+    upper: np.ndarray,
+    velocity_limit: np.ndarray,
+) -> JointTarget | Rejected:
+    """Check a one-point joint trajectory against the arm; reorder it to the arm's joints."""
+    if len(names) != len(arm_joints) or len(positions) != len(arm_joints):
+        return Rejected(
+            "wrong_joint_count",
+            f"{len(names)} names and {len(positions)} positions for {len(arm_joints)} arm joints",
+        )
+    if sorted(names) != sorted(arm_joints):
+        unknown = sorted(set(names) - set(arm_joints))
+        return Rejected("unknown_joint", f"joint names {unknown} are not the arm's")
+    if velocities and len(velocities) != len(positions):
+        return Rejected(
+            "wrong_joint_count", f"{len(velocities)} velocities for {len(positions)} positions"
+        )
+    order = [list(names).index(j) for j in arm_joints]
+    q = np.array([positions[i] for i in order], dtype=float)
+    if not np.all(np.isfinite(q)):
+        return Rejected("not_finite", f"positions {q.tolist()} contain NaN or inf")
+    tol = 1e-6
+    bad = np.nonzero((q < lower - tol) | (q > upper + tol))[0]
+    if bad.size:
+        j = int(bad[0])
+        return Rejected(
+            "beyond_limits",
+            f"{arm_joints[j]} = {q[j]:.4f} rad outside [{lower[j]:.4f}, {upper[j]:.4f}]",
+        )
+    qd: tuple[float, ...] | None = None
+    if velocities:
+        v = np.array([velocities[i] for i in order], dtype=float)
+        if not np.all(np.isfinite(v)):
+            return Rejected("not_finite", f"velocities {v.tolist()} contain NaN or inf")
+        over = np.nonzero(np.abs(v) > velocity_limit + tol)[0]
+        if over.size:
+            j = int(over[0])
+            return Rejected(
+                "beyond_limits",
+                f"{arm_joints[j]} velocity {v[j]:.3f} beyond {velocity_limit[j]:.3f}",
+            )
+        qd = tuple(float(x) for x in v)
+    return JointTarget(positions=tuple(float(x) for x in q), velocities=qd)
+
+
+def validate_gripper(width_m: float, max_opening_m: float) -> float | Rejected:
+    """A gripper opening in [0, max_opening_m]."""
+    if not math.isfinite(width_m):
+        return Rejected("not_finite", f"gripper width {width_m!r}")
+    if not -1e-9 <= width_m <= max_opening_m + 1e-9:
+        return Rejected(
+            "beyond_limits", f"gripper width {width_m:.4f} m outside [0, {max_opening_m:.4f}]"
+        )
+    return min(max(width_m, 0.0), max_opening_m)
+
+
+def validate_setpoint(speed_mps: float, max_mps: float = 2.0) -> float | Rejected:
+    """A belt speed setpoint in [0, max_mps]."""
+    if not math.isfinite(speed_mps):
+        return Rejected("not_finite", f"belt setpoint {speed_mps!r}")
+    if not 0.0 <= speed_mps <= max_mps:
+        return Rejected("bad_setpoint", f"belt setpoint {speed_mps} m/s outside [0, {max_mps}]")
+    return speed_mps
+
+
+def validate_priorities(classes: Sequence[str], known: Sequence[str]) -> tuple[str, ...] | Rejected:
+    """A class order naming only known classes, each once."""
+    unknown = [c for c in classes if c not in known]
+    if unknown:
+        return Rejected("unknown_class", f"priorities name unknown classes {unknown}")
+    if len(set(classes)) != len(classes):
+        return Rejected("duplicate_class", f"priorities repeat a class: {list(classes)}")
+    return tuple(classes)

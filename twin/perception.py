@@ -1,0 +1,167 @@
+"""Simulated perception: what a camera-based detector over the belt would report.
+
+Every ``1 / rate_hz`` seconds a frame is captured from the ground truth: objects lying on the belt
+inside the camera's field of view (an x interval over the belt's width). Each detection carries
+the footprint centroid on the belt surface, the long-axis yaw (modulo pi), length, width and
+height, with Gaussian position and yaw noise, a per-object drop probability and a
+misclassification probability (a uniformly chosen other class). The frame is released
+``latency_s`` after capture, stamped with its capture time. ``PerceptionConfig.zero_noise()``
+gives the exact ground truth with no delay, drop or confusion. All randomness comes from the
+generator passed in (the scenario's seed tree).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from twin.errors import ConfigError
+from twin.monitor import GroundTruth
+
+
+@dataclass(frozen=True)
+class PerceptionConfig:
+    """Camera field of view, rate and error model."""
+
+    rate_hz: float = 30.0
+    fov_min_x_m: float = -1.4
+    fov_max_x_m: float = 0.45
+    position_noise_m: float = 0.002
+    yaw_noise_rad: float = 0.02
+    latency_s: float = 0.03
+    drop_rate: float = 0.02
+    misclassification_rate: float = 0.01
+
+    def __post_init__(self) -> None:
+        checks = (
+            ("rate_hz", self.rate_hz > 0),
+            ("fov_max_x_m", self.fov_max_x_m > self.fov_min_x_m),
+            ("position_noise_m", self.position_noise_m >= 0),
+            ("yaw_noise_rad", self.yaw_noise_rad >= 0),
+            ("latency_s", self.latency_s >= 0),
+            ("drop_rate", 0 <= self.drop_rate < 1),
+            ("misclassification_rate", 0 <= self.misclassification_rate <= 1),
+        )
+        for name, ok in checks:
+            if not ok:
+                msg = f"perception.{name} = {getattr(self, name)!r} is out of range"
+                raise ConfigError(msg)
+
+    @classmethod
+    def zero_noise(cls) -> PerceptionConfig:
+        """Exact ground truth, no latency, no drops, no confusion."""
+        return cls(
+            position_noise_m=0.0,
+            yaw_noise_rad=0.0,
+            latency_s=0.0,
+            drop_rate=0.0,
+            misclassification_rate=0.0,
+        )
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One detected object (world frame, centroid on the belt surface)."""
+
+    class_name: str
+    confidence: float
+    x_m: float
+    y_m: float
+    z_m: float
+    yaw_rad: float
+    length_m: float
+    width_m: float
+    height_m: float
+
+
+@dataclass(frozen=True)
+class DetectionFrame:
+    """The detections of one capture."""
+
+    capture_time_s: float
+    release_time_s: float
+    detections: tuple[Detection, ...]
+
+
+def wrap_half_pi(angle_rad: float) -> float:
+    """An axis direction folded into (-pi/2, pi/2]."""
+    a = math.fmod(angle_rad, math.pi)
+    if a <= -math.pi / 2:
+        a += math.pi
+    elif a > math.pi / 2:
+        a -= math.pi
+    return a
+
+
+class Perception:
+    """Captures frames on a fixed step grid and releases them after the latency."""
+
+    def __init__(
+        self,
+        config: PerceptionConfig,
+        classes: Iterable[str],
+        surface_z_m: float,
+        dt_s: float,
+        rng: np.random.Generator,
+    ) -> None:
+        self.config = config
+        self.classes = tuple(classes)
+        self.surface_z_m = surface_z_m
+        self.every_n_steps = max(1, round(1.0 / (config.rate_hz * dt_s)))
+        self.rng = rng
+        self._queue: deque[DetectionFrame] = deque()
+
+    def capture_due(self, step: int) -> bool:
+        """Whether a frame is captured at this step."""
+        return step % self.every_n_steps == 0
+
+    def capture(self, time_s: float, objects: Iterable[GroundTruth]) -> DetectionFrame:
+        """Take a frame from the ground truth and queue it for release."""
+        cfg = self.config
+        detections = []
+        for obj in objects:
+            x, y, _ = obj.position_m
+            if not obj.on_belt or not cfg.fov_min_x_m <= x <= cfg.fov_max_x_m:
+                continue
+            # draw every random number for every candidate so streams stay aligned
+            drop, confuse, pick = self.rng.random(3)
+            noise = self.rng.standard_normal(3)
+            if drop < cfg.drop_rate:
+                continue
+            name = obj.class_name
+            if confuse < cfg.misclassification_rate and len(self.classes) > 1:
+                others = [c for c in self.classes if c != name]
+                name = others[int(pick * len(others))]
+            detections.append(
+                Detection(
+                    class_name=name,
+                    confidence=1.0,
+                    x_m=x + cfg.position_noise_m * float(noise[0]),
+                    y_m=y + cfg.position_noise_m * float(noise[1]),
+                    z_m=self.surface_z_m,
+                    yaw_rad=wrap_half_pi(
+                        obj.footprint_yaw_rad + cfg.yaw_noise_rad * float(noise[2])
+                    ),
+                    length_m=obj.length_m,
+                    width_m=obj.width_m,
+                    height_m=obj.height_m,
+                )
+            )
+        frame = DetectionFrame(
+            capture_time_s=time_s,
+            release_time_s=time_s + cfg.latency_s,
+            detections=tuple(detections),
+        )
+        self._queue.append(frame)
+        return frame
+
+    def released(self, time_s: float) -> list[DetectionFrame]:
+        """Frames whose latency has elapsed by ``time_s``, oldest first."""
+        out = []
+        while self._queue and self._queue[0].release_time_s <= time_s + 1e-9:
+            out.append(self._queue.popleft())
+        return out

@@ -1,0 +1,395 @@
+"""The twin as a ROS 2 node: a thin shell around :class:`twin.sim.Twin`.
+
+It converts messages to domain values and back and calls the twin; there is no simulation logic
+here. Topics, types, rates and QoS are documented in ``docs/interfaces.md``. The loop runs in one
+thread: it serves callbacks (commands, pings) while waiting for the next physics step, so a ping
+is echoed at once, from inside the step loop.
+
+Modes: ``realtime`` paces the physics to the wall clock; ``lockstep`` steps tick k+1 only when the
+controller has acknowledged tick k (see the LockstepTick/StepAck handshake in the docs).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import Counter
+from dataclasses import dataclass
+
+import rclpy
+from builtin_interfaces.msg import Time as TimeMsg
+from cdw_interfaces.msg import (
+    BeltState,
+    Detection,
+    DetectionArray,
+    LockstepTick,
+    ObjectState,
+    ObjectStateArray,
+    PickTarget,
+    Ping,
+    SortingEvent,
+    SortingPriorities,
+    StepAck,
+)
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, String
+from trajectory_msgs.msg import JointTrajectory
+
+from twin.commands import (
+    JointTarget,
+    Rejected,
+    validate_gripper,
+    validate_joint_command,
+    validate_priorities,
+    validate_setpoint,
+)
+from twin.events import Event
+from twin.perception import DetectionFrame
+from twin.sim import ArmCommand, Twin
+
+
+def _qos(depth: int, *, reliable: bool = True, latched: bool = False) -> QoSProfile:
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    )
+
+
+STATE_QOS = _qos(10)
+EVENT_QOS = _qos(1000)
+STREAM_QOS = _qos(100)
+CLOCK_QOS = _qos(1, reliable=False)
+GT_QOS = _qos(1, reliable=False)
+LATCHED_QOS = _qos(1, latched=True)
+
+
+def to_time(t_s: float) -> TimeMsg:
+    """A ROS time from seconds."""
+    sec = int(t_s)
+    return TimeMsg(sec=sec, nanosec=round((t_s - sec) * 1e9) % 1_000_000_000)
+
+
+@dataclass
+class NodeCounters:
+    """What the node has seen and done; written to the episode log."""
+
+    published: Counter[str]
+    received_commands: int = 0
+    rejected: Counter[str] | None = None
+    lockstep_timeouts: int = 0
+
+
+class TwinNode(Node):
+    """Publishes the twin's state and takes commands; :func:`run_loop` drives it."""
+
+    def __init__(
+        self, twin: Twin, *, lockstep: bool, state_every: int = 4, ground_truth_every: int = 8
+    ) -> None:
+        super().__init__("cdw_twin")
+        self.twin = twin
+        self.lockstep = lockstep
+        self.state_every = state_every
+        self.ground_truth_every = ground_truth_every
+        self.counters = NodeCounters(published=Counter(), rejected=Counter())
+        self.priorities: tuple[str, ...] = ()
+        self.last_ack_tick = -1
+        self.acked_commands = 0
+        self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
+        self.pub_joints = self.create_publisher(JointState, "/joint_states", STATE_QOS)
+        self.pub_tcp = self.create_publisher(PoseStamped, "/tcp_pose", STATE_QOS)
+        self.pub_belt = self.create_publisher(BeltState, "/conveyor/state", STATE_QOS)
+        self.pub_det = self.create_publisher(DetectionArray, "/objects/detections", STATE_QOS)
+        self.pub_gt = self.create_publisher(ObjectStateArray, "/objects/ground_truth", GT_QOS)
+        self.pub_events = self.create_publisher(SortingEvent, "/events", EVENT_QOS)
+        self.pub_echo = self.create_publisher(Ping, "/ping/echo", STREAM_QOS)
+        self.pub_tick = self.create_publisher(LockstepTick, "/lockstep/tick", STREAM_QOS)
+        self.pub_faults = self.create_publisher(String, "/twin/faults", STREAM_QOS)
+        self.create_subscription(
+            JointTrajectory, "/arm_controller/joint_trajectory", self._on_trajectory, STATE_QOS
+        )
+        self.create_subscription(Float64, "/gripper/command", self._on_gripper, STATE_QOS)
+        self.create_subscription(Float64, "/conveyor/speed_setpoint", self._on_setpoint, STATE_QOS)
+        self.create_subscription(
+            SortingPriorities, "/sorting/priorities", self._on_priorities, LATCHED_QOS
+        )
+        self.create_subscription(PickTarget, "/controller/target", self._on_target, STATE_QOS)
+        self.create_subscription(Ping, "/ping", self._on_ping, STREAM_QOS)
+        self.create_subscription(StepAck, "/lockstep/ack", self._on_ack, STREAM_QOS)
+        assert twin.robot is not None
+        robot = twin.robot
+        self._arm_names = list(twin.cell.robot.arm_joints)
+        self._joint_names = self._arm_names + list(twin.cell.robot.finger_joints)
+        self._limits = robot.limits
+
+    # -- commands ---------------------------------------------------------------------------
+    def _reject(self, topic: str, rejected: Rejected) -> None:
+        assert self.counters.rejected is not None
+        self.counters.rejected[rejected.reason] += 1
+        text = f"{topic}: rejected ({rejected.reason}): {rejected.detail}"
+        self.get_logger().error(text)
+        self.pub_faults.publish(String(data=text))
+        self.twin.record_fault(rejected.reason, text)
+
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        self.counters.received_commands += 1
+        if not msg.points:
+            self._reject("/arm_controller/joint_trajectory", Rejected("empty", "no points"))
+            return
+        point = msg.points[0]
+        result = validate_joint_command(
+            list(msg.joint_names),
+            list(point.positions),
+            list(point.velocities),
+            arm_joints=self._arm_names,
+            lower=self._limits.lower,
+            upper=self._limits.upper,
+            velocity_limit=self._limits.velocity,
+        )
+        if isinstance(result, Rejected):
+            self._reject("/arm_controller/joint_trajectory", result)
+            return
+        assert isinstance(result, JointTarget)
+        self.twin.command(ArmCommand(result.positions, result.velocities))
+
+    def _on_gripper(self, msg: Float64) -> None:
+        self.counters.received_commands += 1
+        result = validate_gripper(msg.data, self.twin.cell.robot.max_opening_m)
+        if isinstance(result, Rejected):
+            self._reject("/gripper/command", result)
+            return
+        self.twin.command_gripper(result)
+
+    def _on_setpoint(self, msg: Float64) -> None:
+        self.counters.received_commands += 1
+        result = validate_setpoint(msg.data)
+        if isinstance(result, Rejected):
+            self._reject("/conveyor/speed_setpoint", result)
+            return
+        self.twin.set_belt_setpoint(result)
+
+    def _on_priorities(self, msg: SortingPriorities) -> None:
+        self.counters.received_commands += 1
+        result = validate_priorities(list(msg.classes), self.twin.scenario.objects.classes)
+        if isinstance(result, Rejected):
+            self._reject("/sorting/priorities", result)
+            return
+        self.priorities = result
+
+    def _on_target(self, msg: PickTarget) -> None:
+        self.counters.received_commands += 1
+        p = msg.grasp_point
+        self.twin.announce_target(int(msg.track_id), (p.x, p.y, p.z), msg.phase)
+
+    def _on_ping(self, msg: Ping) -> None:
+        msg.sim_step = self.twin.step_count
+        msg.echo_ns = time.monotonic_ns()
+        self.pub_echo.publish(msg)
+
+    def _on_ack(self, msg: StepAck) -> None:
+        self.last_ack_tick = max(self.last_ack_tick, int(msg.tick))
+        self.acked_commands = max(self.acked_commands, int(msg.n_commands))
+
+    # -- publishing -------------------------------------------------------------------------
+    def _count(self, topic: str) -> None:
+        self.counters.published[topic] += 1
+
+    def publish_step(self, events: list[Event]) -> None:
+        """Publish everything due after a physics step."""
+        twin = self.twin
+        step = twin.step_count
+        stamp = to_time(twin.time_s)
+        self.pub_clock.publish(Clock(clock=stamp))
+        robot = twin.robot
+        assert robot is not None
+        q, qd = robot.joint_state()
+        width = robot.gripper_width_m()
+        fingers = [0.5 * width] * len(twin.cell.robot.finger_joints)
+        joints = JointState()
+        joints.header.stamp = stamp
+        joints.name = self._joint_names
+        joints.position = [float(v) for v in q] + fingers
+        joints.velocity = [float(v) for v in qd] + [0.0] * len(fingers)
+        self.pub_joints.publish(joints)
+        self._count("/joint_states")
+        pos, orn = robot.tcp_pose()
+        pose = PoseStamped()
+        pose.header.stamp = stamp
+        pose.header.frame_id = "world"
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = pos
+        o = pose.pose.orientation
+        o.x, o.y, o.z, o.w = orn
+        self.pub_tcp.publish(pose)
+        if step % self.state_every == 0:
+            self.publish_belt(stamp)
+        for frame in twin.take_detections():
+            self.publish_detections(frame)
+        if step % self.ground_truth_every == 0 and self.pub_gt.get_subscription_count() > 0:
+            self.publish_ground_truth(stamp)
+        for event in events:
+            self.publish_event(event)
+        if self.lockstep:
+            published = self.counters.published
+            self.pub_tick.publish(
+                LockstepTick(
+                    tick=step,
+                    stamp=stamp,
+                    n_joint_states=published["/joint_states"],
+                    n_belt_states=published["/conveyor/state"],
+                    n_detections=published["/objects/detections"],
+                )
+            )
+
+    def publish_belt(self, stamp: TimeMsg) -> None:
+        """``/conveyor/state``."""
+        twin = self.twin
+        belt = twin.observe_belt()
+        msg = BeltState(
+            setpoint_mps=twin.setpoint_mps,
+            speed_mps=belt.belt_speed_mps,
+            position_m=belt.belt_position_m,
+            motor_torque_nm=belt.motor_torque_Nm,
+            motor_current_a=belt.motor_current_A,
+            load_mass_kg=twin.load_mass_kg,
+        )
+        msg.header.stamp = stamp
+        msg.header.frame_id = "world"
+        self.pub_belt.publish(msg)
+        self._count("/conveyor/state")
+
+    def publish_detections(self, frame: DetectionFrame) -> None:
+        """``/objects/detections``: one released frame, stamped with its capture time."""
+        msg = DetectionArray()
+        msg.header.stamp = to_time(frame.capture_time_s)
+        msg.header.frame_id = "world"
+        for d in frame.detections:
+            det = Detection(
+                class_name=d.class_name,
+                confidence=d.confidence,
+                yaw_rad=d.yaw_rad,
+                length_m=d.length_m,
+                width_m=d.width_m,
+                height_m=d.height_m,
+            )
+            det.position.x, det.position.y, det.position.z = d.x_m, d.y_m, d.z_m
+            msg.detections.append(det)
+        self.pub_det.publish(msg)
+        self._count("/objects/detections")
+
+    def publish_ground_truth(self, stamp: TimeMsg) -> None:
+        """``/objects/ground_truth`` (evaluation only)."""
+        msg = ObjectStateArray()
+        msg.header.stamp = stamp
+        msg.header.frame_id = "world"
+        for gt in self.twin.observe_objects():
+            state = ObjectState(
+                id=gt.id,
+                class_name=gt.class_name,
+                length_m=gt.length_m,
+                width_m=gt.width_m,
+                height_m=gt.height_m,
+                area_m2=gt.area_m2,
+                volume_m3=gt.volume_m3,
+                mass_kg=gt.mass_kg,
+                on_belt=gt.on_belt,
+                in_workspace=gt.in_workspace,
+                held=gt.held,
+                in_bin=gt.in_bin,
+            )
+            p, o = state.pose.position, state.pose.orientation
+            p.x, p.y, p.z = gt.position_m
+            o.x, o.y, o.z, o.w = gt.orientation_xyzw
+            lin, ang = state.twist.linear, state.twist.angular
+            lin.x, lin.y, lin.z = gt.linear_velocity_mps
+            ang.x, ang.y, ang.z = gt.angular_velocity_radps
+            msg.objects.append(state)
+        self.pub_gt.publish(msg)
+
+    def publish_event(self, event: Event) -> None:
+        """``/events``."""
+        msg = SortingEvent(
+            type=str(event.type),
+            object_id=event.object_id,
+            class_name=event.class_name,
+            detail=json.dumps(event.data),
+        )
+        msg.header.stamp = to_time(event.time_s)
+        self.pub_events.publish(msg)
+
+
+def run_loop(
+    node: TwinNode,
+    executor: object,
+    *,
+    realtime_factor: float = 1.0,
+    ack_timeout_s: float = 2.0,
+    start_timeout_s: float = 30.0,
+) -> None:
+    """Step the twin until its scenario's duration, serving callbacks between steps."""
+    twin = node.twin
+    spin_once = executor.spin_once  # type: ignore[attr-defined]
+    duration = twin.scenario.duration_s
+    node.publish_step([])
+    if node.lockstep:
+        deadline = time.monotonic() + start_timeout_s
+        while node.last_ack_tick < 0 and time.monotonic() < deadline:
+            spin_once(timeout_sec=0.05)
+            node.publish_step([]) if node.last_ack_tick < 0 else None
+        controller_alive = node.last_ack_tick >= 0
+        if not controller_alive:
+            twin.record_fault("controller_timeout", "no controller acknowledged the first tick")
+        while twin.time_s < duration - 1e-9:
+            tick = twin.step_count
+            if controller_alive or node.last_ack_tick >= tick:
+                wait_until = time.monotonic() + ack_timeout_s
+                while not (
+                    node.last_ack_tick >= tick
+                    and node.counters.received_commands >= node.acked_commands
+                ):
+                    remaining = wait_until - time.monotonic()
+                    if remaining <= 0:
+                        break
+                    spin_once(timeout_sec=min(remaining, 0.05))
+                ok = node.last_ack_tick >= tick
+                if controller_alive and not ok:
+                    node.counters.lockstep_timeouts += 1
+                    twin.record_fault(
+                        "controller_timeout",
+                        f"no acknowledgement of tick {tick} within {ack_timeout_s} s",
+                    )
+                controller_alive = ok
+            else:
+                spin_once(timeout_sec=0.0)
+            events = twin.advance()
+            node.publish_step(events)
+        return
+    twin.pace(realtime_factor)
+    period = twin.dt_s / realtime_factor
+    next_wall = time.perf_counter()
+    twin.realtime = False  # the loop below paces; Twin.advance must not sleep as well
+    while twin.time_s < duration - 1e-9:
+        while True:
+            remaining = next_wall - time.perf_counter()
+            if remaining <= 0:
+                break
+            spin_once(timeout_sec=remaining)
+        events = twin.advance()
+        node.publish_step(events)
+        next_wall += period
+        if next_wall < time.perf_counter() - 0.25:
+            next_wall = time.perf_counter()
+
+
+def make_executor() -> object:
+    """The EventsExecutor (3-6x lower latency here than the default one)."""
+    from rclpy.experimental import events_executor
+
+    return events_executor.EventsExecutor()
+
+
+__all__ = ["TwinNode", "make_executor", "rclpy", "run_loop", "to_time"]
