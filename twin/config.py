@@ -111,12 +111,16 @@ class BinConfig:
 
 
 def default_bins() -> tuple[BinConfig, ...]:
-    """One bin per sorted class, behind the robot."""
+    """One bin per sorted class, between the robot and the belt, either side of the base.
+
+    Close to the pick window so a carry is short (the reference layout put them behind the
+    robot, which caps one arm at about 11 picks per minute).
+    """
     return (
-        BinConfig(class_name="concrete", centre_x_m=-0.35, centre_y_m=-0.45),
-        BinConfig(class_name="brick", centre_x_m=-0.10, centre_y_m=-0.55),
-        BinConfig(class_name="wood", centre_x_m=0.15, centre_y_m=-0.55),
-        BinConfig(class_name="rubber", centre_x_m=0.40, centre_y_m=-0.45),
+        BinConfig(class_name="concrete", centre_x_m=-0.60, centre_y_m=0.0),
+        BinConfig(class_name="brick", centre_x_m=-0.33, centre_y_m=0.0),
+        BinConfig(class_name="wood", centre_x_m=0.33, centre_y_m=0.0),
+        BinConfig(class_name="rubber", centre_x_m=0.60, centre_y_m=0.0),
     )
 
 

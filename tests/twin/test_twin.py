@@ -69,8 +69,9 @@ def test_scripted_pick_yields_overlap_contact_pick_and_correct_bin(
         _hold(twin, ArmCommand(_ik(twin, (x, y, 0.3)), gripper_width_m=closed_w), 1.0)
         bin_cfg = twin.cell.bin_for("brick")
         assert bin_cfg is not None
-        over = (bin_cfg.centre_x_m, bin_cfg.centre_y_m, 0.25)
-        _hold(twin, ArmCommand(_ik(twin, (0.2, 0.0, 0.35)), gripper_width_m=closed_w), 1.0)
+        over = (bin_cfg.centre_x_m, bin_cfg.centre_y_m, 0.2)
+        waypoint = (bin_cfg.centre_x_m, 0.35, 0.3)
+        _hold(twin, ArmCommand(_ik(twin, waypoint), gripper_width_m=closed_w), 1.0)
         _hold(twin, ArmCommand(_ik(twin, over), gripper_width_m=closed_w), 1.5)
         _hold(twin, ArmCommand(_ik(twin, over), gripper_width_m=open_w), 1.5)
         kinds = [e.type for e in twin.events if e.object_id == obj.id]
