@@ -11,12 +11,14 @@ controller has acknowledged tick k (see the LockstepTick/StepAck handshake in th
 
 from __future__ import annotations
 
+import gc
 import json
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
-import rclpy
 from builtin_interfaces.msg import Time as TimeMsg
 from cdw_interfaces.msg import (
     BeltState,
@@ -32,6 +34,7 @@ from cdw_interfaces.msg import (
     StepAck,
 )
 from geometry_msgs.msg import PoseStamped
+from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -81,6 +84,7 @@ class NodeCounters:
 
     published: Counter[str]
     received_commands: int = 0
+    pending_commands: int = 0
     rejected: Counter[str] | None = None
     lockstep_timeouts: int = 0
 
@@ -98,8 +102,9 @@ class TwinNode(Node):
         self.ground_truth_every = ground_truth_every
         self.counters = NodeCounters(published=Counter(), rejected=Counter())
         self.priorities: tuple[str, ...] = ()
+        self.acks: dict[int, int] = {}
         self.last_ack_tick = -1
-        self.acked_commands = 0
+        self._tick_counts: Counter[str] = Counter()
         self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
         self.pub_joints = self.create_publisher(JointState, "/joint_states", STATE_QOS)
         self.pub_tcp = self.create_publisher(PoseStamped, "/tcp_pose", STATE_QOS)
@@ -128,6 +133,10 @@ class TwinNode(Node):
         self._limits = robot.limits
 
     # -- commands ---------------------------------------------------------------------------
+    def _received(self) -> None:
+        self.counters.received_commands += 1
+        self.counters.pending_commands += 1
+
     def _reject(self, topic: str, rejected: Rejected) -> None:
         assert self.counters.rejected is not None
         self.counters.rejected[rejected.reason] += 1
@@ -137,7 +146,7 @@ class TwinNode(Node):
         self.twin.record_fault(rejected.reason, text)
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
-        self.counters.received_commands += 1
+        self._received()
         if not msg.points:
             self._reject("/arm_controller/joint_trajectory", Rejected("empty", "no points"))
             return
@@ -158,7 +167,7 @@ class TwinNode(Node):
         self.twin.command(ArmCommand(result.positions, result.velocities))
 
     def _on_gripper(self, msg: Float64) -> None:
-        self.counters.received_commands += 1
+        self._received()
         result = validate_gripper(msg.data, self.twin.cell.robot.max_opening_m)
         if isinstance(result, Rejected):
             self._reject("/gripper/command", result)
@@ -166,7 +175,7 @@ class TwinNode(Node):
         self.twin.command_gripper(result)
 
     def _on_setpoint(self, msg: Float64) -> None:
-        self.counters.received_commands += 1
+        self._received()
         result = validate_setpoint(msg.data)
         if isinstance(result, Rejected):
             self._reject("/conveyor/speed_setpoint", result)
@@ -174,7 +183,7 @@ class TwinNode(Node):
         self.twin.set_belt_setpoint(result)
 
     def _on_priorities(self, msg: SortingPriorities) -> None:
-        self.counters.received_commands += 1
+        self._received()
         result = validate_priorities(list(msg.classes), self.twin.scenario.objects.classes)
         if isinstance(result, Rejected):
             self._reject("/sorting/priorities", result)
@@ -182,7 +191,7 @@ class TwinNode(Node):
         self.priorities = result
 
     def _on_target(self, msg: PickTarget) -> None:
-        self.counters.received_commands += 1
+        self._received()
         p = msg.grasp_point
         self.twin.announce_target(int(msg.track_id), (p.x, p.y, p.z), msg.phase)
 
@@ -192,12 +201,32 @@ class TwinNode(Node):
         self.pub_echo.publish(msg)
 
     def _on_ack(self, msg: StepAck) -> None:
-        self.last_ack_tick = max(self.last_ack_tick, int(msg.tick))
-        self.acked_commands = max(self.acked_commands, int(msg.n_commands))
+        tick = int(msg.tick)
+        self.acks[tick] = int(msg.n_commands)
+        self.last_ack_tick = max(self.last_ack_tick, tick)
+
+    def tick_ready(self, tick: int) -> bool:
+        """Lockstep: the ack of ``tick`` and all the commands it announces have arrived."""
+        n = self.acks.get(tick)
+        return n is not None and self.counters.pending_commands >= n
+
+    def consume_tick(self, tick: int) -> None:
+        """Lockstep: the commands of ``tick`` are applied; forget it and older acks."""
+        self.counters.pending_commands -= self.acks.pop(tick, 0)
+        for old in [t for t in self.acks if t < tick]:
+            del self.acks[old]
+
+    def peers_matched(self) -> bool:
+        """Whether a controller subscribes to the tick and state topics and acks us."""
+        return (
+            self.pub_tick.get_subscription_count() > 0
+            and self.pub_joints.get_subscription_count() > 0
+        )
 
     # -- publishing -------------------------------------------------------------------------
     def _count(self, topic: str) -> None:
         self.counters.published[topic] += 1
+        self._tick_counts[topic] += 1
 
     def publish_step(self, events: list[Event]) -> None:
         """Publish everything due after a physics step."""
@@ -324,72 +353,82 @@ class TwinNode(Node):
 
 def run_loop(
     node: TwinNode,
-    executor: object,
+    executor: Any,
     *,
     realtime_factor: float = 1.0,
     ack_timeout_s: float = 2.0,
-    start_timeout_s: float = 30.0,
+    start_timeout_s: float = 60.0,
 ) -> None:
     """Step the twin until its scenario's duration, serving callbacks between steps."""
     twin = node.twin
-    spin_once = executor.spin_once  # type: ignore[attr-defined]
+    spin_once = executor.spin_once
     duration = twin.scenario.duration_s
-    node.publish_step([])
+    gc.collect()
+    gc.freeze()  # everything built so far is long-lived: keep the collector off it
     if node.lockstep:
-        deadline = time.monotonic() + start_timeout_s
-        while node.last_ack_tick < 0 and time.monotonic() < deadline:
-            spin_once(timeout_sec=0.05)
-            node.publish_step([]) if node.last_ack_tick < 0 else None
-        controller_alive = node.last_ack_tick >= 0
-        if not controller_alive:
-            twin.record_fault("controller_timeout", "no controller acknowledged the first tick")
-        while twin.time_s < duration - 1e-9:
-            tick = twin.step_count
-            if controller_alive or node.last_ack_tick >= tick:
-                wait_until = time.monotonic() + ack_timeout_s
-                while not (
-                    node.last_ack_tick >= tick
-                    and node.counters.received_commands >= node.acked_commands
-                ):
-                    remaining = wait_until - time.monotonic()
-                    if remaining <= 0:
-                        break
-                    spin_once(timeout_sec=min(remaining, 0.05))
-                ok = node.last_ack_tick >= tick
-                if controller_alive and not ok:
-                    node.counters.lockstep_timeouts += 1
-                    twin.record_fault(
-                        "controller_timeout",
-                        f"no acknowledgement of tick {tick} within {ack_timeout_s} s",
-                    )
-                controller_alive = ok
-            else:
-                spin_once(timeout_sec=0.0)
-            events = twin.advance()
-            node.publish_step(events)
+        _lockstep(node, spin_once, duration, ack_timeout_s, start_timeout_s)
         return
-    twin.pace(realtime_factor)
+    node.publish_step([])
     period = twin.dt_s / realtime_factor
     next_wall = time.perf_counter()
-    twin.realtime = False  # the loop below paces; Twin.advance must not sleep as well
     while twin.time_s < duration - 1e-9:
+        spin_once(timeout_sec=0.0)
         while True:
             remaining = next_wall - time.perf_counter()
             if remaining <= 0:
                 break
             spin_once(timeout_sec=remaining)
         events = twin.advance()
+        spin_once(timeout_sec=0.0)
         node.publish_step(events)
         next_wall += period
         if next_wall < time.perf_counter() - 0.25:
             next_wall = time.perf_counter()
 
 
-def make_executor() -> object:
+def _lockstep(
+    node: TwinNode,
+    spin_once: Callable[..., None],
+    duration: float,
+    ack_timeout_s: float,
+    start_timeout_s: float,
+) -> None:
+    twin = node.twin
+    deadline = time.monotonic() + start_timeout_s
+    while not node.peers_matched() and time.monotonic() < deadline:
+        spin_once(timeout_sec=0.05)
+    controller_alive = node.peers_matched()
+    if not controller_alive:
+        twin.record_fault("controller_timeout", "no controller subscribed before the start")
+    first_wait = start_timeout_s
+    node.publish_step([])
+    while twin.time_s < duration - 1e-9:
+        tick = twin.step_count
+        if controller_alive or node.last_ack_tick >= tick:
+            wait_until = time.monotonic() + (first_wait if tick == 0 else ack_timeout_s)
+            while not node.tick_ready(tick):
+                remaining = wait_until - time.monotonic()
+                if remaining <= 0:
+                    break
+                spin_once(timeout_sec=min(remaining, 0.05))
+            ok = node.tick_ready(tick)
+            if controller_alive and not ok:
+                node.counters.lockstep_timeouts += 1
+                twin.record_fault(
+                    "controller_timeout",
+                    f"no acknowledgement of tick {tick} within {ack_timeout_s} s",
+                )
+            controller_alive = ok
+            node.consume_tick(tick)
+        else:
+            spin_once(timeout_sec=0.0)
+        events = twin.advance()
+        node.publish_step(events)
+
+
+def make_executor() -> Any:
     """The EventsExecutor (3-6x lower latency here than the default one)."""
-    from rclpy.experimental import events_executor
-
-    return events_executor.EventsExecutor()
+    return EventsExecutor()
 
 
-__all__ = ["TwinNode", "make_executor", "rclpy", "run_loop", "to_time"]
+__all__ = ["TwinNode", "make_executor", "run_loop", "to_time"]

@@ -164,6 +164,7 @@ class Twin:
             physicsClientId=c,
         )
         self._world = World(c, self.cell, Path(self._cache.name))
+        self._world.prepare([spec for layout in self.layouts for spec in layout.objects])
         self.robot = Robot(c, self.cell.robot)
         self._monitor = Monitor(c, self.cell, self._world, self.robot)
         stream = Stream(self.layouts, self.scenario, self.cell.belt, seeds)

@@ -141,6 +141,12 @@ class World:
             self._shapes[key] = shape
         return shape
 
+    def prepare(self, specs: list[ObjectSpec]) -> None:
+        """Build collision shapes and inertias ahead of time, so spawning never stalls a step."""
+        for spec in specs:
+            self._collision_shape(spec, 1.0)
+            inertia_of(spec, 1.0)
+
     def spawn(
         self,
         spec: ObjectSpec,

@@ -1,0 +1,122 @@
+"""``cdw-twin bench rtt``: round-trip latency between a client process and the twin node.
+
+Starts the twin node (realtime, the standard 40-object scene on a prefilled belt, physics running)
+in its own process on an isolated ROS domain, then pings it from this process at ``--rate`` Hz:
+each ``Ping`` carries the client's monotonic send time and is echoed on ``/ping/echo`` by the twin
+from inside its step loop. Prints ``p50_ms``, ``p95_ms``, ``p99_ms``, ``max_ms`` and ``lost``
+(pings without an echo within 1 s of the last one sent).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the benchmark's options."""
+    parser.add_argument("--rate", type=float, default=100.0, help="pings per second (100)")
+    parser.add_argument("--count", type=int, default=2000, help="pings (2000)")
+    parser.add_argument("--objects", type=int, default=40, help="objects in the scene (40)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _twin_command(objects: int, seconds: float) -> list[str]:
+    return [sys.executable, "-m", "twin.cli", "twin-node", "--mode", "realtime",
+            "--objects", str(objects), "--prefill", "2.2", "--speed", "0.2",
+            "--duration", f"{seconds:.1f}"]
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmark."""
+    import rclpy
+    from cdw_interfaces.msg import Ping
+    from rosgraph_msgs.msg import Clock
+
+    from twin.ros_isolation import clean_stale_fastdds_shm, ros_domain
+    from twin.ros_node import CLOCK_QOS, STREAM_QOS, make_executor
+
+    clean_stale_fastdds_shm()
+    seconds = args.count / args.rate + 30.0
+    with ros_domain() as domain:
+        os.environ.update(domain.env)
+        twin = subprocess.Popen(_twin_command(args.objects, seconds), env=domain.env,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        rclpy.init()
+        node = rclpy.create_node("rtt_client")
+        executor = make_executor()
+        executor.add_node(node)
+        clock_seen = {"n": 0}
+        rtts: dict[int, float] = {}
+        sent: dict[int, int] = {}
+
+        def on_clock(_: Clock) -> None:
+            clock_seen["n"] += 1
+
+        def on_echo(msg: Ping) -> None:
+            now = time.monotonic_ns()
+            if msg.seq in sent and msg.seq not in rtts:
+                rtts[msg.seq] = (now - msg.client_send_ns) / 1e6
+
+        node.create_subscription(Clock, "/clock", on_clock, CLOCK_QOS)
+        node.create_subscription(Ping, "/ping/echo", on_echo, STREAM_QOS)
+        pub = node.create_publisher(Ping, "/ping", STREAM_QOS)
+        result: dict[str, Any]
+        try:
+            deadline = time.monotonic() + 120.0
+            while (clock_seen["n"] < 240 or pub.get_subscription_count() == 0) and \
+                    time.monotonic() < deadline:
+                if twin.poll() is not None:
+                    msg = f"the twin node exited early: {twin.stderr.read().decode()[-2000:]}"
+                    raise RuntimeError(msg)
+                executor.spin_once(timeout_sec=0.05)
+            period_ns = int(1e9 / args.rate)
+            next_ns = time.monotonic_ns()
+            for seq in range(args.count):
+                while True:
+                    wait = (next_ns - time.monotonic_ns()) / 1e9
+                    if wait <= 0:
+                        break
+                    executor.spin_once(timeout_sec=wait)
+                sent[seq] = time.monotonic_ns()
+                pub.publish(Ping(seq=seq, client_send_ns=sent[seq]))
+                next_ns += period_ns
+            end = time.monotonic() + 1.0
+            while time.monotonic() < end and len(rtts) < len(sent):
+                executor.spin_once(timeout_sec=0.05)
+            values = np.array([rtts[s] for s in sorted(rtts)])
+            result = {
+                "rate_hz": args.rate,
+                "count": args.count,
+                "objects": args.objects,
+                "received": int(values.size),
+                "lost": len(sent) - int(values.size),
+                "p50_ms": float(np.percentile(values, 50)),
+                "p95_ms": float(np.percentile(values, 95)),
+                "p99_ms": float(np.percentile(values, 99)),
+                "max_ms": float(values.max()),
+                "mean_ms": float(values.mean()),
+                "series_ms": [round(float(v), 4) for v in values],
+            }
+        finally:
+            node.destroy_node()
+            rclpy.shutdown()
+            twin.terminate()
+            try:
+                twin.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                twin.kill()
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, value in result.items():
+            if key != "series_ms":
+                print(f"{key:>10}: {value}")
+    return 0
