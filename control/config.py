@@ -6,7 +6,7 @@ The YAML file has the layout ROS 2 uses for node parameters::
       ros__parameters:
         robot: {urdf_path: franka_panda/panda.urdf, tcp_link: panda_grasptarget, ...}
         belt: {...}
-        bins: {concrete: [-0.35, -0.45, 0.25], ...}
+        bins: {concrete: [-0.60, 0.0, 0.15], ...}
         ...
 
 Every key is optional (the defaults describe the reference cell), unknown keys are errors, and
@@ -222,7 +222,7 @@ class MotionConfig:
     ``joint_velocity_margin`` scales the URDF joint velocity limits for the per-tick step check.
     """
 
-    control_period_s: float = field(default=0.005, metadata=_meta("float"))
+    control_period_s: float = field(default=1.0 / 120.0, metadata=_meta("float"))
     command_latency_s: float = field(default=0.01, metadata=_meta("float"))
     max_velocity: tuple[float, float, float, float] = field(
         default=(0.8, 0.8, 0.8, 1.2), metadata=_meta("vec")
@@ -287,16 +287,21 @@ class MotionConfig:
 class PickConfig:
     """Pick sequence geometry and timing.
 
-    The grasp point is at ``surface_z + max(height * grasp_height_fraction, min_grasp_height_m)``;
-    the approach ends ``approach_height_m`` above it. ``arrive_tolerance_m`` and
-    ``arrive_speed_tolerance_mps`` decide when a Ruckig segment has caught its moving target;
-    the gripper closes only once the yaw is within ``yaw_tolerance_rad`` of the grasp yaw.
+    The grasp point is ``grasp_below_top_m`` below the object's top (the Panda's palm touches
+    the object when the TCP is lower than about 2 cm below the top), but not below
+    ``height * grasp_height_fraction`` nor ``min_grasp_height_m`` above the belt surface:
+    ``surface_z + max(height - grasp_below_top_m, height * grasp_height_fraction,
+    min_grasp_height_m)``. The approach ends ``approach_height_m`` above it.
+    ``arrive_tolerance_m`` and ``arrive_speed_tolerance_mps`` decide when a Ruckig segment has
+    caught its moving target; the gripper closes only once the yaw is within
+    ``yaw_tolerance_rad`` of the grasp yaw.
     ``lost_timeout_s`` aborts an approach whose target track vanished for that long (later
     phases extrapolate it with the belt velocity). ``grip_squeeze_m`` is how much narrower than
     the object the gripper is commanded to close.
     """
 
     approach_height_m: float = field(default=0.03, metadata=_meta("float"))
+    grasp_below_top_m: float = field(default=0.02, metadata=_meta("float"))
     grasp_height_fraction: float = field(default=0.5, metadata=_meta("float"))
     min_grasp_height_m: float = field(default=0.01, metadata=_meta("float"))
     lift_height_m: float = field(default=0.2, metadata=_meta("float"))
@@ -349,12 +354,38 @@ class SchedulerConfig:
         _require(self.time_margin_s >= 0.0, "scheduler.time_margin_s", self.time_margin_s, ">= 0")
 
 
+@dataclass(frozen=True, kw_only=True)
+class NodeConfig:
+    """The ROS 2 node around the pure controller.
+
+    ``physics_dt_s`` is the cell's step (one ``/joint_states`` message and one lockstep tick per
+    step); the control update runs every ``motion.control_period_s / physics_dt_s`` steps, which
+    must be a whole number. ``target_refresh_every`` and ``gripper_refresh_every`` repeat an
+    unchanged ``/controller/target`` or ``/gripper/command`` every that many control updates
+    (a change is always sent at once). ``log_throttle_s`` is the least time between two log
+    lines about the same kind of bad input (wall clock, logging only).
+    """
+
+    physics_dt_s: float = field(default=1.0 / 240.0, metadata=_meta("float"))
+    target_refresh_every: int = field(default=12, metadata=_meta("int"))
+    gripper_refresh_every: int = field(default=12, metadata=_meta("int"))
+    log_throttle_s: float = field(default=2.0, metadata=_meta("float"))
+
+    def __post_init__(self) -> None:
+        """Validate every field."""
+        _require(self.physics_dt_s > 0.0, "node.physics_dt_s", self.physics_dt_s, "must be > 0")
+        for name in ("target_refresh_every", "gripper_refresh_every"):
+            value = cast(int, getattr(self, name))
+            _require(value >= 1, f"node.{name}", value, "must be >= 1")
+        _require(self.log_throttle_s >= 0.0, "node.log_throttle_s", self.log_throttle_s, ">= 0")
+
+
 def _default_bins() -> dict[str, tuple[float, float, float]]:
     return {
-        "concrete": (-0.35, -0.45, 0.25),
-        "brick": (-0.1, -0.55, 0.25),
-        "wood": (0.15, -0.55, 0.25),
-        "rubber": (0.4, -0.45, 0.25),
+        "concrete": (-0.60, 0.0, 0.15),
+        "brick": (-0.33, 0.0, 0.15),
+        "wood": (0.33, 0.0, 0.15),
+        "rubber": (0.60, 0.0, 0.15),
     }
 
 
@@ -375,9 +406,22 @@ class ControllerConfig:
     motion: MotionConfig = field(default_factory=MotionConfig, metadata=_meta("nested"))
     pick: PickConfig = field(default_factory=PickConfig, metadata=_meta("nested"))
     scheduler: SchedulerConfig = field(default_factory=SchedulerConfig, metadata=_meta("nested"))
+    node: NodeConfig = field(default_factory=NodeConfig, metadata=_meta("nested"))
+
+    @property
+    def steps_per_update(self) -> int:
+        """Cell steps per control update: ``motion.control_period_s / node.physics_dt_s``."""
+        return max(round(self.motion.control_period_s / self.node.physics_dt_s), 1)
 
     def __post_init__(self) -> None:
-        """Check that bins and priorities cover exactly the tracked classes."""
+        """Check that bins and priorities cover the tracked classes and the rates fit."""
+        ratio = self.motion.control_period_s / self.node.physics_dt_s
+        _require(
+            ratio >= 1.0 - 1e-6 and abs(ratio - round(ratio)) < 1e-6,
+            "motion.control_period_s",
+            self.motion.control_period_s,
+            f"must be a whole multiple of node.physics_dt_s ({self.node.physics_dt_s})",
+        )
         for name, point in self.bins.items():
             _require(_finite(point), f"bins.{name}", point, "must be finite")
         for name in self.tracking.class_names:

@@ -18,6 +18,7 @@ import numpy as np
 from control.config import ControllerConfig
 from control.ik import yaw_of
 from control.pick import Command, Phase, PickController, PickStats, TcpMeasurement
+from control.scheduler import grasp_z_m
 from control.tracking import Detection, Tracker
 
 
@@ -83,9 +84,7 @@ def run_episode(
     in_flight: deque[np.ndarray] = deque([controller.q_ready.copy()] * delay_ticks)
     pending: deque[tuple[float, Detection]] = deque()
     frame = 0
-    grasp_z = cfg.belt.surface_z_m + max(
-        obj.height_m * cfg.pick.grasp_height_fraction, cfg.pick.min_grasp_height_m
-    )
+    grasp_z = grasp_z_m(obj.height_m, cfg)
     history: list[tuple[float, Phase, float]] = []
     phases: list[tuple[float, Phase]] = []
     worst_violation = 0.0

@@ -14,7 +14,7 @@ import contextlib
 import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import StrEnum
 
 import numpy as np
@@ -193,6 +193,11 @@ class PickController:
     def kinematics(self) -> Kinematics:
         """The kinematics the controller commands with."""
         return self._kin
+
+    def set_class_priorities(self, priorities: Mapping[str, float]) -> None:
+        """Replace the scheduler's class priorities (larger is picked first) from now on."""
+        scheduler = replace(self._cfg.scheduler, class_priorities=dict(priorities))
+        self._cfg = replace(self._cfg, scheduler=scheduler)
 
     def stats(self) -> PickStats:
         """Counters of targeted, completed, aborted and untargeted objects."""

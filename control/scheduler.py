@@ -72,12 +72,23 @@ def move_time_s(
     return d / v + v / a + a / j
 
 
-def grasp_height_m(track: Track, config: ControllerConfig) -> float:
-    """World z of the grasp point of ``track`` (part-way up the object, never at the belt)."""
+def grasp_z_m(height_m: float, config: ControllerConfig) -> float:
+    """World z of the grasp point of an object ``height_m`` tall lying on the belt.
+
+    ``pick.grasp_below_top_m`` below its top, but not below ``pick.grasp_height_fraction`` of
+    its height nor ``pick.min_grasp_height_m`` above the belt surface.
+    """
     pick = config.pick
     return config.belt.surface_z_m + max(
-        track.height_m * pick.grasp_height_fraction, pick.min_grasp_height_m
+        height_m - pick.grasp_below_top_m,
+        height_m * pick.grasp_height_fraction,
+        pick.min_grasp_height_m,
     )
+
+
+def grasp_height_m(track: Track, config: ControllerConfig) -> float:
+    """World z of the grasp point of ``track`` (see :func:`grasp_z_m`)."""
+    return grasp_z_m(track.height_m, config)
 
 
 def intercept_time_s(

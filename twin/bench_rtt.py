@@ -29,9 +29,22 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _twin_command(objects: int, seconds: float) -> list[str]:
-    return [sys.executable, "-m", "twin.cli", "twin-node", "--mode", "realtime",
-            "--objects", str(objects), "--prefill", "2.2", "--speed", "0.2",
-            "--duration", f"{seconds:.1f}"]
+    return [
+        sys.executable,
+        "-m",
+        "twin.cli",
+        "twin-node",
+        "--mode",
+        "realtime",
+        "--objects",
+        str(objects),
+        "--prefill",
+        "2.2",
+        "--speed",
+        "0.2",
+        "--duration",
+        f"{seconds:.1f}",
+    ]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,8 +60,12 @@ def run(args: argparse.Namespace) -> int:
     seconds = args.count / args.rate + 30.0
     with ros_domain() as domain:
         os.environ.update(domain.env)
-        twin = subprocess.Popen(_twin_command(args.objects, seconds), env=domain.env,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        twin = subprocess.Popen(
+            _twin_command(args.objects, seconds),
+            env=domain.env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
         rclpy.init()
         node = rclpy.create_node("rtt_client")
         executor = make_executor()
@@ -71,10 +88,12 @@ def run(args: argparse.Namespace) -> int:
         result: dict[str, Any]
         try:
             deadline = time.monotonic() + 120.0
-            while (clock_seen["n"] < 240 or pub.get_subscription_count() == 0) and \
-                    time.monotonic() < deadline:
+            while (
+                clock_seen["n"] < 240 or pub.get_subscription_count() == 0
+            ) and time.monotonic() < deadline:
                 if twin.poll() is not None:
-                    msg = f"the twin node exited early: {twin.stderr.read().decode()[-2000:]}"
+                    err = twin.stderr.read().decode() if twin.stderr else ""
+                    msg = f"the twin node exited early: {err[-2000:]}"
                     raise RuntimeError(msg)
                 executor.spin_once(timeout_sec=0.05)
             period_ns = int(1e9 / args.rate)

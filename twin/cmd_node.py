@@ -20,7 +20,8 @@ from types import FrameType
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from twin.scenario import Scenario  # noqa: F401 (annotation only)
+    from twin.scenario import Scenario
+    from twin.sim import Twin
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -75,6 +76,17 @@ def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path]:
     return scenario, dataset
 
 
+def _final_state(twin: Twin) -> dict[str, object]:
+    """Exact end state (for determinism checks): joints and every object's pose."""
+    obs = twin.observe()
+    return {
+        "step": obs.step,
+        "joint_positions": list(obs.joint_positions),
+        "belt_position_m": obs.belt.belt_position_m,
+        "objects": {str(o.id): [*o.position_m, *o.orientation_xyzw] for o in obs.objects},
+    }
+
+
 def run(args: argparse.Namespace) -> int:
     """Run one episode as a ROS 2 node."""
     import rclpy
@@ -126,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
             "rejected_commands": dict(node.counters.rejected or {}),
             "lockstep_timeouts": node.counters.lockstep_timeouts,
             "priorities": list(node.priorities),
+            "final_state": _final_state(twin),
         }
         if args.out is not None:
             write_episode(args.out, twin.events, summary)

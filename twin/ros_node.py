@@ -263,16 +263,17 @@ class TwinNode(Node):
         for event in events:
             self.publish_event(event)
         if self.lockstep:
-            published = self.counters.published
+            counts = self._tick_counts
             self.pub_tick.publish(
                 LockstepTick(
                     tick=step,
                     stamp=stamp,
-                    n_joint_states=published["/joint_states"],
-                    n_belt_states=published["/conveyor/state"],
-                    n_detections=published["/objects/detections"],
+                    n_joint_states=counts["/joint_states"],
+                    n_belt_states=counts["/conveyor/state"],
+                    n_detections=counts["/objects/detections"],
                 )
             )
+        self._tick_counts = Counter()
 
     def publish_belt(self, stamp: TimeMsg) -> None:
         """``/conveyor/state``."""

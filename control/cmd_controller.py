@@ -1,0 +1,121 @@
+"""``cdw-twin controller``: run the controller as a ROS 2 node until SIGINT/SIGTERM or --duration.
+
+Examples::
+
+    cdw-twin controller --lockstep --stats-out out/controller_stats.json
+    python -m control --params-file my_cell.yaml --duration 60
+
+The node uses sim time (``/clock``) in both modes. On shutdown it writes its counters (pick
+statistics, rejected detections, skipped commands, control-loop timing) as JSON to
+``--stats-out`` (atomically: a temporary file renamed into place).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import sys
+import tempfile
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+DEFAULT_PARAMS = Path(__file__).resolve().parent / "config" / "default.yaml"
+"""The reference cell's parameter file."""
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the controller's options to ``parser``."""
+    parser.add_argument(
+        "--params-file",
+        type=Path,
+        default=DEFAULT_PARAMS,
+        help="ROS 2 parameter YAML file (default: control/config/default.yaml)",
+    )
+    parser.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="answer the twin's /lockstep/tick with /lockstep/ack (deterministic closed loop)",
+    )
+    parser.add_argument("--stats-out", type=Path, help="write the counters as JSON on shutdown")
+    parser.add_argument(
+        "--duration", type=float, help="stop once /clock passes this many seconds of sim time"
+    )
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write ``data`` as JSON to ``path`` via a temporary file in the same directory."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            json.dump(data, handle, indent=2, sort_keys=True, allow_nan=False)
+            handle.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the node; returns 0 on a clean shutdown, 2 on a configuration error."""
+    import rclpy
+    from rclpy.experimental.events_executor import EventsExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from rclpy.utilities import try_shutdown
+
+    from control.config import load_config
+    from control.errors import ControlError
+    from control.node import ControllerNode
+
+    if args.duration is not None and not args.duration > 0.0:
+        print(f"--duration: {args.duration!r} must be > 0 s", file=sys.stderr)
+        return 2
+    try:
+        config = load_config(args.params_file)
+    except ControlError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    stop: list[int] = []
+
+    def _request_stop(signum: int, frame: FrameType | None) -> None:
+        del frame
+        stop.append(signum)
+
+    rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
+    previous = {sig: signal.signal(sig, _request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    node: ControllerNode | None = None
+    try:
+        try:
+            node = ControllerNode(config, lockstep=args.lockstep)
+        except ControlError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        executor = EventsExecutor()
+        executor.add_node(node)
+        node.get_logger().info(
+            f"controller up ({'lockstep' if args.lockstep else 'realtime'}, "
+            f"{1.0 / config.motion.control_period_s:.0f} Hz, params {args.params_file})"
+        )
+        while not stop:
+            executor.spin_once(timeout_sec=0.1)
+            if args.duration is not None and node.sim_time_s() >= args.duration:
+                break
+        return 0
+    finally:
+        if node is not None:
+            if args.stats_out is not None:
+                write_json_atomic(args.stats_out, node.summary())
+            node.destroy_node()
+        try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point for ``python -m control``."""
+    parser = argparse.ArgumentParser(prog="python -m control", description=__doc__)
+    configure(parser)
+    return run(parser.parse_args(argv))

@@ -1,0 +1,470 @@
+"""The controller as a ROS 2 node: a thin shell around the pure tracker and pick controller.
+
+It converts messages to the controller's dataclasses and back; the logic lives in
+:mod:`control.tracking`, :mod:`control.scheduler` and :mod:`control.pick`. Topics, types and
+QoS follow ``docs/interfaces.md``.
+
+When the control update runs:
+
+- realtime: on every ``steps_per_update``-th ``/joint_states`` message (every 2nd at 120 Hz
+  control and 240 Hz state), at the sim time of that message. The update runs as soon as a
+  fresh state is there, so no timer phase adds latency, and no wall clock is involved.
+- lockstep: on ``/lockstep/tick`` k, once the messages the tick counts have all arrived; every
+  ``steps_per_update``-th tick at the tick's sim time. Every tick is acknowledged with the
+  cumulative number of command messages published so far.
+
+Incoming messages are queued with their arrival index and applied in a fixed order (belt,
+detections, joint states) up to the counts of the tick, so the same inputs give the same
+outputs regardless of the DDS delivery order across topics.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter, deque
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from builtin_interfaces.msg import Time as TimeMsg
+from cdw_interfaces.msg import (
+    BeltState,
+    DetectionArray,
+    LockstepTick,
+    PickTarget,
+    SortingPriorities,
+    StepAck,
+)
+from numpy.typing import NDArray
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from control.config import ControllerConfig
+from control.errors import ControlError
+from control.ik import Kinematics, yaw_of
+from control.pick import FOLLOWING_PHASES, Command, Phase, PickController, TcpMeasurement
+from control.tracking import Detection, Track, Tracker
+
+FloatArray = NDArray[np.float64]
+
+PURSUIT_PHASES = frozenset({Phase.APPROACH, *FOLLOWING_PHASES})
+"""Phases whose announced grasp point is predicted by ``command_latency_s`` (and corrected)."""
+
+
+def _qos(depth: int, *, latched: bool = False) -> QoSProfile:
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    )
+
+
+STATE_QOS = _qos(10)
+STREAM_QOS = _qos(100)
+LATCHED_QOS = _qos(1, latched=True)
+
+COMMAND_TOPICS: tuple[str, ...] = (
+    "/arm_controller/joint_trajectory",
+    "/gripper/command",
+    "/controller/target",
+)
+"""Topics whose messages count in ``StepAck.n_commands``."""
+
+
+def stamp_to_s(stamp: TimeMsg) -> float:
+    """Seconds of a ROS time."""
+    return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
+
+
+def to_time(t_s: float) -> TimeMsg:
+    """A ROS time from seconds (``t_s >= 0``)."""
+    sec = math.floor(t_s)
+    return TimeMsg(sec=sec, nanosec=min(round((t_s - sec) * 1e9), 999_999_999))
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class JointSample:
+    """Measured arm joints at ``stamp_s``: ``positions_rad`` ``(n_arm,) float``."""
+
+    stamp_s: float
+    positions_rad: FloatArray
+
+
+def joint_sample(msg: JointState, arm_joint_names: Sequence[str]) -> JointSample | None:
+    """The arm joints of a ``JointState`` in ``arm_joint_names`` order; None if any is missing
+    or not finite."""
+    index = {name: i for i, name in enumerate(msg.name)}
+    if len(msg.position) != len(msg.name) or any(n not in index for n in arm_joint_names):
+        return None
+    q = np.array([msg.position[index[n]] for n in arm_joint_names], dtype=np.float64)
+    if not np.all(np.isfinite(q)):
+        return None
+    return JointSample(stamp_s=stamp_to_s(msg.header.stamp), positions_rad=q)
+
+
+def detections_of(msg: DetectionArray) -> tuple[float, list[Detection]]:
+    """Capture time and detections of one camera frame (validation is the tracker's job)."""
+    stamp_s = stamp_to_s(msg.header.stamp)
+    detections = [
+        Detection(
+            stamp_s=stamp_s,
+            class_name=str(d.class_name),
+            confidence=float(d.confidence),
+            x_m=float(d.position.x),
+            y_m=float(d.position.y),
+            yaw_rad=float(d.yaw_rad),
+            length_m=float(d.length_m),
+            width_m=float(d.width_m),
+            height_m=float(d.height_m),
+        )
+        for d in msg.detections
+    ]
+    return stamp_s, detections
+
+
+def priorities_of(
+    classes: Sequence[str], known: Sequence[str]
+) -> tuple[dict[str, float], list[str]]:
+    """Class priorities from an ordered class list (first is highest); unknown names returned.
+
+    Listed classes get ``len(classes) - index``; known classes not listed get 0 (picked last).
+    """
+    unknown = [name for name in classes if name not in known]
+    listed = [name for name in classes if name in known]
+    priorities = dict.fromkeys(known, 0.0)
+    for i, name in enumerate(listed):
+        priorities[name] = max(priorities[name], float(len(listed) - i))
+    return priorities, unknown
+
+
+def _timing(values_s: Sequence[float]) -> dict[str, float | None]:
+    """Mean, 95th percentile and maximum in microseconds (None without samples)."""
+    if not values_s:
+        return {"mean": None, "p95": None, "max": None}
+    us = 1e6 * np.asarray(values_s, dtype=np.float64)
+    return {
+        "mean": float(np.mean(us)),
+        "p95": float(np.percentile(us, 95.0)),
+        "max": float(np.max(us)),
+    }
+
+
+class ControllerNode(Node):
+    """Tracks detections, picks objects and streams arm, gripper and target commands."""
+
+    def __init__(
+        self, config: ControllerConfig, *, lockstep: bool, node_name: str = "controller"
+    ) -> None:
+        """Create publishers and subscriptions; ``use_sim_time`` is always true.
+
+        Raises ``ControlError`` (``RobotModelError``, ``ControlConfigError``) when the robot
+        model cannot be built.
+        """
+        super().__init__(
+            node_name,
+            parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)],
+        )
+        self.config = config
+        self.lockstep = lockstep
+        self._kin = Kinematics(config.robot, config.ik)
+        self._tracker = Tracker(config.tracking)
+        self._controller: PickController | None = None
+        self._arm_names = tuple(config.robot.arm_joint_names)
+        self._steps_per_update = config.steps_per_update
+        self._period_s = config.motion.control_period_s
+        self._priorities: dict[str, float] | None = None
+        self._belt_velocity_mps: tuple[float, float] = (0.0, 0.0)
+        self._joint: JointSample | None = None
+        self._received: Counter[str] = Counter()
+        self._joint_inbox: deque[tuple[int, JointState]] = deque()
+        self._belt_inbox: deque[tuple[int, BeltState]] = deque()
+        self._det_inbox: deque[tuple[int, DetectionArray]] = deque()
+        self._ticks: deque[tuple[LockstepTick, float]] = deque()
+        self._offsets: tuple[int, int, int] | None = None
+        self._last_control_tick = -1
+        self._last_update_s = -math.inf
+        self._last_q_cmd: FloatArray | None = None
+        self._last_gripper: float | None = None
+        self._last_target_key: tuple[int, str] | None = None
+        self._updates = 0
+        self.published: Counter[str] = Counter()
+        self.skipped: Counter[str] = Counter()
+        self.ticks_acked = 0
+        self.update_wall_s: deque[float] = deque(maxlen=200_000)
+        self.tick_to_ack_wall_s: deque[float] = deque(maxlen=200_000)
+        self._logged: dict[str, float] = {}
+
+        self.pub_traj = self.create_publisher(
+            JointTrajectory, "/arm_controller/joint_trajectory", STATE_QOS
+        )
+        self.pub_gripper = self.create_publisher(Float64, "/gripper/command", STATE_QOS)
+        self.pub_target = self.create_publisher(PickTarget, "/controller/target", STATE_QOS)
+        self.pub_ack = self.create_publisher(StepAck, "/lockstep/ack", STREAM_QOS)
+        self.create_subscription(JointState, "/joint_states", self._on_joint_state, STATE_QOS)
+        self.create_subscription(BeltState, "/conveyor/state", self._on_belt, STATE_QOS)
+        self.create_subscription(
+            DetectionArray, "/objects/detections", self._on_detections, STATE_QOS
+        )
+        self.create_subscription(
+            SortingPriorities, "/sorting/priorities", self._on_priorities, LATCHED_QOS
+        )
+        if lockstep:
+            self.create_subscription(LockstepTick, "/lockstep/tick", self._on_tick, STREAM_QOS)
+
+    # -- inputs -----------------------------------------------------------------------------
+    def _on_joint_state(self, msg: JointState) -> None:
+        self._received["/joint_states"] += 1
+        count = self._received["/joint_states"]
+        self._joint_inbox.append((count, msg))
+        if self.lockstep:
+            self._drain_ticks()
+        elif count % self._steps_per_update == 0:
+            self._consume(None)
+            if self._joint is not None:
+                self._control(self._joint.stamp_s)
+
+    def _on_belt(self, msg: BeltState) -> None:
+        self._received["/conveyor/state"] += 1
+        self._belt_inbox.append((self._received["/conveyor/state"], msg))
+        if self.lockstep:
+            self._drain_ticks()
+
+    def _on_detections(self, msg: DetectionArray) -> None:
+        self._received["/objects/detections"] += 1
+        self._det_inbox.append((self._received["/objects/detections"], msg))
+        if self.lockstep:
+            self._drain_ticks()
+
+    def _on_priorities(self, msg: SortingPriorities) -> None:
+        known = self.config.tracking.class_names
+        priorities, unknown = priorities_of(list(msg.classes), known)
+        if unknown:
+            self.skipped["unknown_priority_class"] += len(unknown)
+            self._warn("priorities", f"/sorting/priorities: unknown classes {unknown} ignored")
+        self._priorities = priorities
+        if self._controller is not None:
+            self._controller.set_class_priorities(priorities)
+
+    def _on_tick(self, msg: LockstepTick) -> None:
+        self._ticks.append((msg, time.perf_counter()))
+        self._drain_ticks()
+
+    def _consume(self, counts: tuple[int, int, int] | None) -> None:
+        """Apply queued messages up to ``counts`` (joint, belt, detections; None: all)."""
+        n_joint, n_belt, n_det = counts if counts is not None else (None, None, None)
+        while self._belt_inbox and (n_belt is None or self._belt_inbox[0][0] <= n_belt):
+            belt = self._belt_inbox.popleft()[1]
+            if math.isfinite(belt.speed_mps):
+                self._belt_velocity_mps = (float(belt.speed_mps), 0.0)
+            else:
+                self.skipped["bad_belt_state"] += 1
+        while self._det_inbox and (n_det is None or self._det_inbox[0][0] <= n_det):
+            stamp_s, detections = detections_of(self._det_inbox.popleft()[1])
+            self._tracker.update(stamp_s, detections, self._belt_velocity_mps)
+        while self._joint_inbox and (n_joint is None or self._joint_inbox[0][0] <= n_joint):
+            sample = joint_sample(self._joint_inbox.popleft()[1], self._arm_names)
+            if sample is None:
+                self.skipped["bad_joint_state"] += 1
+                self._warn("joints", "/joint_states: arm joints missing or not finite, ignored")
+            else:
+                self._joint = sample
+
+    def _drain_ticks(self) -> None:
+        """Handle every queued tick whose counted messages have all arrived, in order."""
+        while self._ticks:
+            tick, arrived_wall_s = self._ticks[0]
+            counted = (int(tick.n_joint_states), int(tick.n_belt_states), int(tick.n_detections))
+            received = (
+                self._received["/joint_states"],
+                self._received["/conveyor/state"],
+                self._received["/objects/detections"],
+            )
+            if self._offsets is None:
+                # Started after the cell (or discovery missed the first messages): whatever was
+                # published before the first tick seen is not coming.
+                self._offsets = (
+                    max(counted[0] - received[0], 0),
+                    max(counted[1] - received[1], 0),
+                    max(counted[2] - received[2], 0),
+                )
+            off = self._offsets
+            need = (counted[0] - off[0], counted[1] - off[1], counted[2] - off[2])
+            if any(r < n for r, n in zip(received, need, strict=True)):
+                return
+            self._ticks.popleft()
+            self._consume(need)
+            k = int(tick.tick)
+            if k > self._last_control_tick and k % self._steps_per_update == 0:
+                self._last_control_tick = k
+                self._control(stamp_to_s(tick.stamp))
+            self.pub_ack.publish(StepAck(tick=k, n_commands=self.n_commands))
+            self.ticks_acked += 1
+            self.tick_to_ack_wall_s.append(time.perf_counter() - arrived_wall_s)
+
+    # -- control ----------------------------------------------------------------------------
+    @property
+    def n_commands(self) -> int:
+        """Cumulative command messages published (the lockstep acknowledgement's count)."""
+        return sum(self.published[topic] for topic in COMMAND_TOPICS)
+
+    def _ensure_controller(self, q: FloatArray) -> PickController:
+        if self._controller is None:
+            self._controller = PickController(self.config, kinematics=self._kin, q_init=q)
+            if self._priorities is not None:
+                self._controller.set_class_priorities(self._priorities)
+        return self._controller
+
+    def _control(self, t_s: float) -> None:
+        """One control update at sim time ``t_s`` with the latest measured state."""
+        joint = self._joint
+        if joint is None:
+            self.skipped["no_joint_state"] += 1
+            return
+        if not t_s > self._last_update_s:
+            self.skipped["stale_time"] += 1
+            return
+        self._last_update_s = t_s
+        start = time.perf_counter()
+        before = self._error_counts()
+        try:
+            controller = self._ensure_controller(joint.positions_rad)
+            oMtool = self._kin.fk(joint.positions_rad)  # noqa: N806
+            p = oMtool.translation
+            measured = TcpMeasurement(
+                position_m=(float(p[0]), float(p[1]), float(p[2])), yaw_rad=yaw_of(oMtool)
+            )
+            tracks = self._tracker.predict_to(t_s)
+            command = controller.update(t_s, measured, tracks, self._belt_velocity_mps)
+        except (ControlError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            self.skipped["controller_error"] += 1
+            self._warn("controller", f"control update at t={t_s:.4f} s failed: {exc}")
+            return
+        self._publish(command, tracks)
+        self._updates += 1
+        self._log_new_errors(before)
+        self.update_wall_s.append(time.perf_counter() - start)
+
+    def _publish(self, command: Command, tracks: Sequence[Track]) -> None:
+        q = np.asarray(command.joint_positions_rad, dtype=np.float64)
+        stamp = to_time(command.t_s)
+        if self._kin.within_limits(q):
+            limit = self._kin.velocity_limit_rps
+            if self._last_q_cmd is None:
+                dq = np.zeros_like(q)
+            else:
+                dq = np.clip((q - self._last_q_cmd) / self._period_s, -limit, limit)
+            self._last_q_cmd = q
+            msg = JointTrajectory()
+            msg.header.stamp = stamp
+            msg.joint_names = list(self._arm_names)
+            msg.points = [
+                JointTrajectoryPoint(
+                    positions=[float(v) for v in q], velocities=[float(v) for v in dq]
+                )
+            ]
+            self.pub_traj.publish(msg)
+            self.published[COMMAND_TOPICS[0]] += 1
+        else:
+            self.skipped["unsafe_command"] += 1
+            self._warn("unsafe", f"joint command {q.tolist()} outside the limits, not sent")
+        width = float(
+            np.clip(command.gripper_width_m, 0.0, self.config.robot.gripper_max_opening_m)
+        )
+        refresh = self._updates % self.config.node.gripper_refresh_every == 0
+        if math.isfinite(width) and (width != self._last_gripper or refresh):
+            self.pub_gripper.publish(Float64(data=width))
+            self.published[COMMAND_TOPICS[1]] += 1
+            self._last_gripper = width
+        key = (command.target_id or 0, str(command.phase))
+        refresh = self._updates % self.config.node.target_refresh_every == 0
+        if key != self._last_target_key or refresh:
+            self.pub_target.publish(self._target_msg(command, tracks, stamp))
+            self.published[COMMAND_TOPICS[2]] += 1
+            self._last_target_key = key
+
+    def _target_msg(self, command: Command, tracks: Sequence[Track], stamp: TimeMsg) -> PickTarget:
+        msg = PickTarget(track_id=command.target_id or 0, phase=str(command.phase))
+        msg.header.stamp = stamp
+        msg.header.frame_id = "world"
+        track = next((t for t in tracks if t.track_id == command.target_id), None)
+        velocity = track.velocity_mps if track is not None else self._belt_velocity_mps
+        if command.target_id is not None:
+            msg.class_name = track.class_name if track is not None else ""
+            msg.velocity.x, msg.velocity.y = float(velocity[0]), float(velocity[1])
+        yaw = command.setpoint.position[3]
+        if track is not None:
+            yaw = track.yaw_rad + math.pi * round((yaw - track.yaw_rad) / math.pi)
+        msg.yaw_rad = math.atan2(math.sin(yaw), math.cos(yaw))
+        point = command.grasp_point_m
+        if point is not None:
+            lead_s = (
+                self.config.motion.command_latency_s if command.phase in PURSUIT_PHASES else 0.0
+            )
+            msg.grasp_point.x = float(point[0] - velocity[0] * lead_s)
+            msg.grasp_point.y = float(point[1] - velocity[1] * lead_s)
+            msg.grasp_point.z = float(point[2])
+        return msg
+
+    # -- bookkeeping ------------------------------------------------------------------------
+    def _error_counts(self) -> dict[str, int]:
+        counts = {f"rejected.{k}": v for k, v in self._tracker.rejected.items()}
+        if self._controller is not None:
+            stats = self._controller.stats()
+            counts.update({f"error.{k}": v for k, v in stats.errors.items()})
+            counts.update({f"aborted.{k}": v for k, v in stats.aborted.items()})
+        return counts
+
+    def _log_new_errors(self, before: Mapping[str, int]) -> None:
+        after = self._error_counts()
+        for key in sorted(after):
+            if after[key] > before.get(key, 0):
+                self._warn(key, f"{key}: {after[key]} so far (detections skipped or pick aborted)")
+
+    def _warn(self, kind: str, text: str) -> None:
+        """Rate-limited warning, one rate limit per kind of problem."""
+        now_s = time.monotonic()
+        if now_s - self._logged.get(kind, -math.inf) >= self.config.node.log_throttle_s:
+            self._logged[kind] = now_s
+            self.get_logger().warning(text)
+
+    def sim_time_s(self) -> float:
+        """The node's clock (``/clock`` with ``use_sim_time``), seconds."""
+        return float(self.get_clock().now().nanoseconds) * 1e-9
+
+    def summary(self) -> dict[str, Any]:
+        """Counters and timing as a JSON-ready mapping (written on shutdown)."""
+        stats = asdict(self._controller.stats()) if self._controller is not None else None
+        if stats is not None:
+            stats = {k: dict(v) if isinstance(v, Mapping) else v for k, v in stats.items()}
+        return {
+            "mode": "lockstep" if self.lockstep else "realtime",
+            "pick": stats,
+            "rejected_detections": dict(self._tracker.rejected),
+            "skipped": dict(sorted(self.skipped.items())),
+            "received": dict(sorted(self._received.items())),
+            "published": {topic: self.published[topic] for topic in COMMAND_TOPICS},
+            "n_commands": self.n_commands,
+            "control_updates": self._updates,
+            "ticks_acked": self.ticks_acked,
+            "control_update_us": _timing(list(self.update_wall_s)),
+            "tick_to_ack_us": _timing(list(self.tick_to_ack_wall_s)),
+        }
+
+
+__all__ = [
+    "COMMAND_TOPICS",
+    "ControllerNode",
+    "JointSample",
+    "detections_of",
+    "joint_sample",
+    "priorities_of",
+    "stamp_to_s",
+    "to_time",
+]

@@ -1,0 +1,71 @@
+"""Parsed annotations: what a loader hands to the meshing pipeline, in pixels."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+SKIP_REASONS: dict[str, str] = {
+    "unreadable_file": "the file cannot be read or decoded",
+    "empty_file": "the file holds no annotations",
+    "bad_file": "the file is not in the expected layout",
+    "missing_image_size": "no image header, annotation size or --image-size for this image",
+    "duplicate_image": "another annotation file already gave this image stem",
+    "odd_coordinates": "a polygon has an odd number of coordinates",
+    "not_a_number": "a value is not a finite number",
+    "bad_class_id": "the class field is not a non-negative integer",
+    "unknown_class_id": "the class id is not in data.yaml / the COCO categories",
+    "unknown_class": "the class name is not in the class table (no density known)",
+    "too_few_points": "fewer than 3 points",
+    "not_a_polygon": "the shape is not a polygon",
+    "out_of_range": "coordinates lie far outside the image",
+    "border_truncated": "the object touches the image border and is cut off",
+    "degenerate": "nothing of positive area is left after repair",
+    "below_min_area": "the repaired footprint is smaller than --min-area-mm2",
+}
+"""Every skip reason the pipeline reports, with its meaning."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Skip:
+    """One skipped object or file: where (file and line/shape) and why."""
+
+    file: str
+    where: str
+    reason: str
+    detail: str
+
+    def message(self) -> str:
+        """Human-readable warning line naming file, line and reason."""
+        loc = f"{self.file}:{self.where}" if self.where else self.file
+        return f"{loc}: skipped ({self.reason}): {self.detail}"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RawPolygon:
+    """One annotated polygon as read from the source file.
+
+    ``points_px`` is ``(n, 2) float``: column ``u`` (right) and row ``v`` (down) in pixels.
+    ``index`` is the polygon's position in its source file, ``where`` names its line or shape.
+    """
+
+    index: int
+    where: str
+    class_name: str
+    points_px: FloatArray
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ImageAnnotation:
+    """All polygons of one image plus the image size in pixels and the skips found while parsing."""
+
+    stem: str
+    source: str
+    width_px: int
+    height_px: int
+    polygons: tuple[RawPolygon, ...]
+    skips: tuple[Skip, ...] = field(default=())

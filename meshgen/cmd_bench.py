@@ -1,0 +1,133 @@
+"""``cdw-twin bench meshgen [DATASET] --json``: pipeline speed against the trimesh baseline.
+
+Without DATASET a fresh built-in sample is generated in a temporary folder. Both the pipeline
+(one process, ``workers=1``) and the baseline (:mod:`meshgen.baseline`) run ``--repeats`` times,
+alternating, into fresh folders under one temporary folder; the headline figures are the best
+run of each (the machine is shared, so the minimum is the least disturbed run), and
+``spread_ms`` gives min/median/max of both. Outputs go to ``tempfile.mkdtemp()`` (the default
+temporary folder's file system, the same one users write to) unless ``--tmp-dir`` says
+otherwise. ``file_create_us`` calibrates that file system: microseconds to create and write one
+small file, measured before and after the runs; ``files_written`` counts the files each variant
+creates, so ``files_written * file_create_us`` is the part of the time that is file creation
+alone. Example::
+
+    cdw-twin bench meshgen /path/to/cdw_stacked_sample --json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the ``bench meshgen`` options."""
+    parser.add_argument("dataset", type=Path, nargs="?", default=None, help="dataset folder")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--repeats", type=int, default=5, help="runs per variant (best kept)")
+    parser.add_argument(
+        "--tmp-dir", type=Path, default=None, help="where outputs go (default: system temp)"
+    )
+
+
+def _file_create_us(target: Path, count: int = 200) -> float:
+    """Microseconds to create and write one small file in the new folder ``target``."""
+    import os
+    import time
+
+    target.mkdir()
+    start = time.perf_counter()
+    for i in range(count):
+        fd = os.open(target / f"f{i}.obj", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        os.write(fd, b"v 0 0 0\n" * 300)
+        os.close(fd)
+    return 1e6 * (time.perf_counter() - start) / count
+
+
+BASELINE = (
+    "per object: the same parsing, border check and seeded height as the pipeline; shapely "
+    "Polygon, make_valid when invalid, simplify(simplify_mm, preserve_topology=True), orient, "
+    "area/centroid/minimum_rotated_rectangle; trimesh.creation.extrude_polygon(engine='earcut'), "
+    "translation to the centre of mass, trimesh.exchange.obj.export_obj written to <id>.obj; "
+    "plus one scene.csv per image (same columns). No convex decomposition, scene.json, index, "
+    "summary or staging folder (work the pipeline does on top)."
+)
+"""What ``baseline`` means in the JSON (see :mod:`meshgen.baseline`)."""
+
+
+def _count_files(folder: Path) -> int:
+    return sum(1 for p in folder.rglob("*") if p.is_file())
+
+
+def _spread(times_s: list[float]) -> dict[str, float]:
+    ordered = sorted(times_s)
+    return {
+        "min": round(1e3 * ordered[0], 3),
+        "median": round(1e3 * ordered[len(ordered) // 2], 3),
+        "max": round(1e3 * ordered[-1], 3),
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmark and print the figures."""
+    import shutil
+    import tempfile
+
+    from meshgen.baseline import run_baseline
+    from meshgen.config import MeshgenConfig
+    from meshgen.errors import MeshgenError
+    from meshgen.pipeline import mesh_dataset
+    from meshgen.sample import write_sample
+
+    if args.repeats < 1:
+        msg = f"--repeats must be >= 1, got {args.repeats}"
+        raise MeshgenError(msg)
+    work = Path(tempfile.mkdtemp(prefix="cdw-bench-", dir=args.tmp_dir))
+    try:
+        dataset = args.dataset
+        if dataset is None:
+            dataset = work / "sample"
+            write_sample(dataset)
+        config = MeshgenConfig()
+        create_before = _file_create_us(work / "cal_before")
+        pipe_s: list[float] = []
+        base_s: list[float] = []
+        images = objects = base_objects = 0
+        for k in range(args.repeats):
+            summary = mesh_dataset(dataset, work / f"pipeline_{k}", config)
+            pipe_s.append(summary.elapsed_s)
+            images, objects = summary.images, summary.objects
+            _, base_objects, elapsed = run_baseline(dataset, work / f"baseline_{k}", config)
+            base_s.append(elapsed)
+        create_after = _file_create_us(work / "cal_after")
+        files = _count_files(work / "pipeline_0")
+        base_files = _count_files(work / "baseline_0")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    best, best_base = min(pipe_s), min(base_s)
+    result = {
+        "dataset": str(args.dataset) if args.dataset else "built-in sample",
+        "images": images,
+        "objects": objects,
+        "baseline_objects": base_objects,
+        "repeats": args.repeats,
+        "statistic": "best of repeats, wall clock, one process, parse to export incl. file writes",
+        "ms_per_image": round(1e3 * best / max(images, 1), 4),
+        "ms_per_object": round(1e3 * best / max(objects, 1), 4),
+        "baseline_ms_per_image": round(1e3 * best_base / max(images, 1), 4),
+        "baseline_ms_per_object": round(1e3 * best_base / max(base_objects, 1), 4),
+        "speedup": round(best_base / best, 3),
+        "spread_ms": {"pipeline": _spread(pipe_s), "baseline": _spread(base_s)},
+        "baseline": BASELINE,
+        "file_create_us": round(0.5 * (create_before + create_after), 1),
+        "file_create_us_before_after": [round(create_before, 1), round(create_after, 1)],
+        "files_written": {"pipeline": files, "baseline": base_files},
+        "tmp_dir": str(work.parent),
+    }
+    if args.json:
+        print(json.dumps(result, sort_keys=True))
+    else:
+        for key, value in result.items():
+            print(f"{key:24s} {value}")
+    return 0

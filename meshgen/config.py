@@ -1,0 +1,71 @@
+"""Configuration of one meshgen run."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from meshgen.classes import DEFAULT_CLASSES, ClassSpec
+from meshgen.errors import MeshgenError
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MeshgenConfig:
+    """Every knob of a run; the defaults are the CLI defaults.
+
+    ``classes`` is the class table in order; a class's ``class_id`` in the outputs is its
+    position here (concrete 0, brick 1, wood 2, rubber 3 by default), whatever the input format.
+    """
+
+    fmt: str = "auto"
+    belt_width_m: float = 0.6
+    image_size_px: tuple[int, int] | None = None
+    seed: int = 0
+    simplify_mm: float = 1.0
+    border_margin_px: float = 1.0
+    min_area_mm2: float = 25.0
+    up: str = "z"
+    classes: tuple[ClassSpec, ...] = field(default=tuple(DEFAULT_CLASSES.values()))
+
+    def __post_init__(self) -> None:
+        """Reject values that cannot work, naming the option."""
+        checks = (
+            (self.belt_width_m > 0.0, f"--belt-width must be > 0, got {self.belt_width_m}"),
+            (self.simplify_mm >= 0.0, f"--simplify-mm must be >= 0, got {self.simplify_mm}"),
+            (
+                self.border_margin_px >= 0.0,
+                f"--border-margin-px must be >= 0, got {self.border_margin_px}",
+            ),
+            (self.min_area_mm2 >= 0.0, f"--min-area-mm2 must be >= 0, got {self.min_area_mm2}"),
+            (self.up in {"z", "y"}, f"--up must be z or y, got {self.up!r}"),
+            (self.seed >= 0, f"--seed must be >= 0, got {self.seed}"),
+            (bool(self.classes), "the class table is empty"),
+        )
+        for ok, msg in checks:
+            if not ok:
+                raise MeshgenError(msg)
+        if self.image_size_px is not None and min(self.image_size_px) <= 0:
+            msg = f"--image-size must be positive, got {self.image_size_px}"
+            raise MeshgenError(msg)
+
+    def to_json(self) -> dict[str, Any]:
+        """The configuration as plain JSON data (for summary.json)."""
+        data = asdict(self)
+        data["classes"] = {
+            c.name: {k: v for k, v in asdict(c).items() if k != "name"} for c in self.classes
+        }
+        return data
+
+
+def parse_image_size(text: str) -> tuple[int, int]:
+    """Parse ``WxH`` (e.g. ``1024x960``) into ``(width_px, height_px)``."""
+    parts = text.lower().split("x")
+    try:
+        width, height = (int(p) for p in parts)
+    except ValueError as exc:
+        msg = f"--image-size: expected WxH such as 1024x960, got {text!r}"
+        raise MeshgenError(msg) from exc
+    if width <= 0 or height <= 0:
+        msg = f"--image-size: width and height must be positive, got {text!r}"
+        raise MeshgenError(msg)
+    return width, height

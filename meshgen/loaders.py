@@ -1,0 +1,554 @@
+"""Dataset discovery and parsing of YOLO-seg, COCO polygon and labelme annotations.
+
+Layouts understood (``DATASET`` is the folder given on the command line):
+
+- YOLO segmentation: ``DATASET/data.yaml`` (Ultralytics ``names`` as list or mapping) and label
+  files ``DATASET/labels/**/*.txt`` (or ``DATASET/*.txt``), one object per line
+  ``class x1 y1 x2 y2 ...`` normalised to [0, 1]. Image sizes come from an image with the same
+  stem under ``DATASET/images/**`` or next to the label (header only), else from a labelme JSON
+  with the same stem in the dataset, else from ``--image-size``.
+- COCO: one JSON with ``images``, ``annotations`` (polygon ``segmentation``) and ``categories``
+  at ``DATASET/*.json`` or ``DATASET/annotations/*.json``.
+- labelme: ``DATASET/labelme/**/*.json`` or ``DATASET/*.json`` with ``shapes``,
+  ``imageWidth`` and ``imageHeight``.
+
+``auto`` picks COCO, then YOLO with images, then labelme, then YOLO without images.
+Sizes are read per image from a real source, never assumed; an image file's header wins over an
+annotation's size fields.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from meshgen.annotations import ImageAnnotation, RawPolygon, Skip
+from meshgen.errors import DatasetError
+from meshgen.imagesize import IMAGE_SUFFIXES, read_image_size
+
+FORMATS: tuple[str, ...] = ("auto", "yolo", "coco", "labelme")
+OUT_OF_RANGE_FRACTION = 0.05
+"""Coordinates further than this fraction of the image size outside it are rejected."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ImageSource:
+    """One unit of work: an annotation file still to parse, or an image COCO already parsed."""
+
+    fmt: str
+    stem: str
+    path: Path
+    size_px: tuple[int, int] | None = None
+    class_names: tuple[tuple[int, str], ...] = ()
+    parsed: ImageAnnotation | None = None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DatasetListing:
+    """What discovery found: the resolved format, the images to process and file-level skips."""
+
+    fmt: str
+    sources: tuple[ImageSource, ...]
+    skips: tuple[Skip, ...]
+
+
+def _rel(path: Path, root: Path) -> str:
+    try:
+        return path.relative_to(root).as_posix()
+    except ValueError:
+        return path.as_posix()
+
+
+def _image_index(dataset: Path) -> dict[str, Path]:
+    images: dict[str, Path] = {}
+    for path in sorted(dataset.rglob("*")):
+        if path.suffix.lower() in IMAGE_SUFFIXES and path.is_file():
+            images.setdefault(path.stem, path)
+    return images
+
+
+def _yolo_label_files(dataset: Path) -> list[Path]:
+    labels = dataset / "labels"
+    files = sorted(labels.rglob("*.txt")) if labels.is_dir() else []
+    if not files:
+        files = sorted(p for p in dataset.glob("*.txt") if p.is_file())
+    return files
+
+
+def _json_files(folder: Path, recursive: bool) -> list[Path]:
+    if not folder.is_dir():
+        return []
+    found = folder.rglob("*.json") if recursive else folder.glob("*.json")
+    return sorted(p for p in found if p.is_file())
+
+
+def _peek_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+
+
+def _coco_files(dataset: Path) -> list[Path]:
+    candidates = _json_files(dataset, False) + _json_files(dataset / "annotations", False)
+    out = []
+    for path in candidates:
+        data = _peek_json(path)
+        if isinstance(data, dict) and "annotations" in data and "images" in data:
+            out.append(path)
+    return out
+
+
+def _labelme_files(dataset: Path) -> list[Path]:
+    files = _json_files(dataset / "labelme", True)
+    if files:
+        return files
+    out = []
+    for path in _json_files(dataset, False):
+        data = _peek_json(path)
+        if data is None or (isinstance(data, dict) and "shapes" in data):
+            out.append(path)  # unreadable JSON is kept so that parsing reports it
+    return out
+
+
+def load_yolo_names(dataset: Path) -> dict[int, str]:
+    """Class names of a YOLO dataset from ``data.yaml`` (``names`` as a list or a mapping)."""
+    import yaml
+
+    for name in ("data.yaml", "dataset.yaml", "data.yml"):
+        path = dataset / name
+        if path.is_file():
+            break
+    else:
+        msg = f"{dataset}: no data.yaml with class names found for the YOLO labels"
+        raise DatasetError(msg)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        msg = f"{path}: cannot read class names: {exc}"
+        raise DatasetError(msg) from exc
+    names = data.get("names") if isinstance(data, dict) else None
+    if isinstance(names, list):
+        return {i: str(n) for i, n in enumerate(names)}
+    if isinstance(names, dict):
+        out: dict[int, str] = {}
+        for key, value in names.items():
+            try:
+                out[int(key)] = str(value)
+            except (TypeError, ValueError) as exc:
+                msg = f"{path}: names: class id {key!r} is not an integer"
+                raise DatasetError(msg) from exc
+        return out
+    msg = f'{path}: field "names" must be a list or a mapping of class id to name'
+    raise DatasetError(msg)
+
+
+def _labelme_size(path: Path) -> tuple[int, int] | None:
+    data = _peek_json(path)
+    if not isinstance(data, dict):
+        return None
+    width, height = data.get("imageWidth"), data.get("imageHeight")
+    if isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0:
+        return width, height
+    return None
+
+
+def _detect(dataset: Path) -> str:
+    if _coco_files(dataset):
+        return "coco"
+    yolo = _yolo_label_files(dataset) if (dataset / "data.yaml").is_file() else []
+    if yolo and _image_index(dataset):
+        return "yolo"
+    if _labelme_files(dataset):
+        return "labelme"
+    if yolo:
+        return "yolo"
+    msg = (
+        f"{dataset}: no annotations found (looked for COCO JSON, data.yaml + labels/*.txt, "
+        "labelme/*.json)"
+    )
+    raise DatasetError(msg)
+
+
+def discover(
+    dataset: Path, fmt: str = "auto", image_size: tuple[int, int] | None = None
+) -> DatasetListing:
+    """List the images of ``dataset`` in ``fmt`` (``auto`` detects), sorted by stem."""
+    if not dataset.is_dir():
+        msg = f"{dataset}: dataset folder does not exist"
+        raise DatasetError(msg)
+    if fmt not in FORMATS:
+        msg = f"--format: unknown format {fmt!r}, expected one of {', '.join(FORMATS)}"
+        raise DatasetError(msg)
+    resolved = _detect(dataset) if fmt == "auto" else fmt
+    skips: list[Skip] = []
+    sources: list[ImageSource] = []
+    if resolved == "yolo":
+        names = tuple(sorted(load_yolo_names(dataset).items()))
+        images = _image_index(dataset)
+        labelme = {p.stem: p for p in _labelme_files(dataset)}
+        for path in _yolo_label_files(dataset):
+            size = read_image_size(images[path.stem]) if path.stem in images else None
+            if size is None and path.stem in labelme:
+                size = _labelme_size(labelme[path.stem])
+            sources.append(
+                ImageSource(
+                    fmt="yolo",
+                    stem=path.stem,
+                    path=path,
+                    size_px=size or image_size,
+                    class_names=names,
+                )
+            )
+    elif resolved == "labelme":
+        sources = [
+            ImageSource(fmt="labelme", stem=p.stem, path=p, size_px=image_size)
+            for p in _labelme_files(dataset)
+        ]
+    else:
+        files = _coco_files(dataset)
+        if not files:
+            msg = f'{dataset}: no COCO JSON (with "images" and "annotations") found'
+            raise DatasetError(msg)
+        images = _image_index(dataset)
+        for path in files:
+            parsed, file_skips = parse_coco(path, dataset, images, image_size)
+            skips.extend(file_skips)
+            sources.extend(
+                ImageSource(fmt="coco", stem=a.stem, path=path, parsed=a) for a in parsed
+            )
+    if not sources and not skips:
+        msg = f"{dataset}: no {resolved} annotation files found"
+        raise DatasetError(msg)
+    unique: dict[str, ImageSource] = {}
+    for source in sorted(sources, key=lambda s: (s.stem, s.path.as_posix())):
+        if source.stem in unique:
+            first = _rel(unique[source.stem].path, dataset)
+            skips.append(
+                Skip(
+                    file=_rel(source.path, dataset),
+                    where="",
+                    reason="duplicate_image",
+                    detail=f"image stem {source.stem!r} already given by {first}",
+                )
+            )
+            continue
+        unique[source.stem] = source
+    return DatasetListing(fmt=resolved, sources=tuple(unique.values()), skips=tuple(skips))
+
+
+def _check_range(points: np.ndarray, width: int, height: int) -> str | None:
+    if not np.isfinite(points).all():
+        return "not_a_number"
+    margin_u = OUT_OF_RANGE_FRACTION * width
+    margin_v = OUT_OF_RANGE_FRACTION * height
+    u, v = points[:, 0], points[:, 1]
+    if (
+        u.min() < -margin_u
+        or u.max() > width + margin_u
+        or v.min() < -margin_v
+        or v.max() > height + margin_v
+    ):
+        return "out_of_range"
+    return None
+
+
+def parse_yolo(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None, list[Skip]]:
+    """Parse one YOLO-seg label file; bad lines become skips, good lines polygons."""
+    name = _rel(source.path, root)
+    try:
+        text = source.path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        return None, [Skip(file=name, where="", reason="unreadable_file", detail=str(exc))]
+    if not text.strip():
+        return None, [Skip(file=name, where="", reason="empty_file", detail="no label lines")]
+    if source.size_px is None:
+        detail = "no image file, no labelme JSON with the same stem and no --image-size"
+        return None, [Skip(file=name, where="", reason="missing_image_size", detail=detail)]
+    width, height = source.size_px
+    names = dict(source.class_names)
+    polygons: list[RawPolygon] = []
+    skips: list[Skip] = []
+    index = -1
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        tokens = line.split()
+        if not tokens:
+            continue
+        index += 1
+        where = f"line {lineno}"
+
+        def bad(reason: str, detail: str, where: str = where) -> None:
+            skips.append(Skip(file=name, where=where, reason=reason, detail=detail))
+
+        try:
+            class_id = int(tokens[0])
+        except ValueError:
+            bad("bad_class_id", f"class field {tokens[0]!r} is not an integer")
+            continue
+        if class_id < 0:
+            bad("bad_class_id", f"class id {class_id} is negative")
+            continue
+        if class_id not in names:
+            bad("unknown_class_id", f"class id {class_id} not in data.yaml names")
+            continue
+        coords = tokens[1:]
+        if len(coords) % 2:
+            bad("odd_coordinates", f"{len(coords)} coordinates (must be x y pairs)")
+            continue
+        try:
+            values = np.array(coords, dtype=np.float64)
+        except ValueError:
+            bad_tok = next(t for t in coords if not _is_float(t))
+            bad("not_a_number", f"value {bad_tok!r} is not a number")
+            continue
+        if len(values) < 6:
+            bad("too_few_points", f"{len(values) // 2} point(s), need at least 3")
+            continue
+        points = values.reshape(-1, 2) * np.array([width, height], dtype=np.float64)
+        problem = _check_range(points, width, height)
+        if problem is not None:
+            detail = (
+                "non-finite value"
+                if problem == "not_a_number"
+                else f"normalised coordinates span [{values.min():.4g}, {values.max():.4g}]"
+            )
+            bad(problem, detail)
+            continue
+        polygons.append(
+            RawPolygon(index=index, where=where, class_name=names[class_id], points_px=points)
+        )
+    annotation = ImageAnnotation(
+        stem=source.stem,
+        source=name,
+        width_px=width,
+        height_px=height,
+        polygons=tuple(polygons),
+        skips=tuple(skips),
+    )
+    return annotation, []
+
+
+def _is_float(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def _points_from_json(raw: Any, fast: bool) -> tuple[np.ndarray | None, str, str]:
+    """Convert a JSON point list to ``(n, 2) float``; on failure return (None, reason, detail).
+
+    ``fast`` may be set when the file has no ``true``/``false`` literals: a numeric ``(n, 2)``
+    array then needs no per-value checks.
+    """
+    if fast and isinstance(raw, list):
+        try:
+            arr = np.array(raw)
+        except ValueError:
+            arr = None
+        if arr is not None and arr.ndim == 2 and arr.shape[1] == 2 and arr.dtype.kind in "if":
+            if len(arr) < 3:
+                return None, "too_few_points", f"{len(arr)} point(s), need at least 3"
+            if not np.isfinite(arr).all():
+                return None, "not_a_number", "a coordinate is not finite"
+            return arr.astype(np.float64), "", ""
+    if not isinstance(raw, list):
+        return None, "bad_file", "points is not a list"
+    flat: list[float] = []
+    for item in raw:
+        if not isinstance(item, list) or len(item) != 2:
+            return None, "odd_coordinates", f"point {item!r} is not an [x, y] pair"
+        for value in item:
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                return None, "not_a_number", f"value {value!r} is not a number"
+            if not math.isfinite(value):
+                return None, "not_a_number", f"value {value!r} is not finite"
+            flat.append(float(value))
+    if len(flat) < 6:
+        return None, "too_few_points", f"{len(flat) // 2} point(s), need at least 3"
+    return np.array(flat, dtype=np.float64).reshape(-1, 2), "", ""
+
+
+def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None, list[Skip]]:
+    """Parse one labelme JSON file; bad shapes become skips, good shapes polygons."""
+    name = _rel(source.path, root)
+    try:
+        text = source.path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        return None, [Skip(file=name, where="", reason="unreadable_file", detail=str(exc))]
+    if not text.strip():
+        return None, [Skip(file=name, where="", reason="empty_file", detail="file is empty")]
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        detail = f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
+        return None, [Skip(file=name, where="", reason="unreadable_file", detail=detail)]
+    if not isinstance(data, dict) or not isinstance(data.get("shapes"), list):
+        detail = 'no "shapes" list at the top level'
+        return None, [Skip(file=name, where="", reason="bad_file", detail=detail)]
+    if not data["shapes"]:
+        return None, [Skip(file=name, where="", reason="empty_file", detail='"shapes" is empty')]
+    size: tuple[int, int] | None = None
+    image_path = data.get("imagePath")
+    if isinstance(image_path, str) and image_path:
+        candidate = source.path.parent / image_path
+        if candidate.is_file():
+            size = read_image_size(candidate)
+    if size is None:
+        width, height = data.get("imageWidth"), data.get("imageHeight")
+        if isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0:
+            size = (width, height)
+    size = size or source.size_px
+    if size is None:
+        detail = "no image file, no imageWidth/imageHeight and no --image-size"
+        return None, [Skip(file=name, where="", reason="missing_image_size", detail=detail)]
+    width, height = size
+    polygons: list[RawPolygon] = []
+    skips: list[Skip] = []
+    fast = "true" not in text and "false" not in text
+    for index, shape in enumerate(data["shapes"]):
+        where = f"shape {index}"
+        if not isinstance(shape, dict):
+            skips.append(Skip(file=name, where=where, reason="bad_file", detail="not an object"))
+            continue
+        shape_type = shape.get("shape_type", "polygon")
+        if shape_type != "polygon":
+            detail = f"shape_type {shape_type!r}"
+            skips.append(Skip(file=name, where=where, reason="not_a_polygon", detail=detail))
+            continue
+        label = shape.get("label")
+        if not isinstance(label, str) or not label:
+            detail = f"label {label!r} is not a class name"
+            skips.append(Skip(file=name, where=where, reason="unknown_class", detail=detail))
+            continue
+        points, reason, detail = _points_from_json(shape.get("points"), fast)
+        if points is None:
+            skips.append(Skip(file=name, where=where, reason=reason, detail=detail))
+            continue
+        problem = _check_range(points, width, height)
+        if problem is not None:
+            detail = f"pixel coordinates outside the {width}x{height} image"
+            skips.append(Skip(file=name, where=where, reason=problem, detail=detail))
+            continue
+        polygons.append(RawPolygon(index=index, where=where, class_name=label, points_px=points))
+    annotation = ImageAnnotation(
+        stem=source.stem,
+        source=name,
+        width_px=width,
+        height_px=height,
+        polygons=tuple(polygons),
+        skips=tuple(skips),
+    )
+    return annotation, []
+
+
+def parse_coco(
+    path: Path, root: Path, images: dict[str, Path], image_size: tuple[int, int] | None
+) -> tuple[list[ImageAnnotation], list[Skip]]:
+    """Parse a COCO polygon JSON into one annotation per image listed in it."""
+    name = _rel(path, root)
+    data = _peek_json(path)
+    if not isinstance(data, dict):
+        return [], [Skip(file=name, where="", reason="unreadable_file", detail="invalid JSON")]
+    categories: dict[int, str] = {}
+    for cat in data.get("categories", []):
+        if isinstance(cat, dict) and isinstance(cat.get("id"), int):
+            categories[cat["id"]] = str(cat.get("name"))
+    skips: list[Skip] = []
+    per_image: dict[int, list[tuple[int, dict[str, Any]]]] = {}
+    for i, ann in enumerate(data.get("annotations", [])):
+        if not isinstance(ann, dict) or not isinstance(ann.get("image_id"), int):
+            detail = "annotation without an integer image_id"
+            skips.append(
+                Skip(file=name, where=f"annotations[{i}]", reason="bad_file", detail=detail)
+            )
+            continue
+        per_image.setdefault(ann["image_id"], []).append((i, ann))
+    out: list[ImageAnnotation] = []
+    for j, image in enumerate(data.get("images", [])):
+        if not isinstance(image, dict) or not isinstance(image.get("id"), int):
+            detail = "image entry without an integer id"
+            skips.append(Skip(file=name, where=f"images[{j}]", reason="bad_file", detail=detail))
+            continue
+        stem = Path(str(image.get("file_name", image["id"]))).stem
+        size = read_image_size(images[stem]) if stem in images else None
+        if size is None:
+            width, height = image.get("width"), image.get("height")
+            if isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0:
+                size = (width, height)
+        size = size or image_size
+        if size is None:
+            detail = f"image {stem!r}: no image file, no width/height and no --image-size"
+            skips.append(
+                Skip(file=name, where=f"images[{j}]", reason="missing_image_size", detail=detail)
+            )
+            continue
+        polygons: list[RawPolygon] = []
+        for k, (i, ann) in enumerate(per_image.get(image["id"], [])):
+            where = f"annotations[{i}]"
+
+            def bad(reason: str, detail: str, where: str = where) -> None:
+                skips.append(Skip(file=name, where=where, reason=reason, detail=detail))
+
+            category = ann.get("category_id")
+            if category not in categories:
+                bad("unknown_class_id", f"category_id {category!r} not in categories")
+                continue
+            seg = ann.get("segmentation")
+            if not isinstance(seg, list) or not seg:
+                bad("not_a_polygon", "segmentation is not a polygon list (RLE is not supported)")
+                continue
+            parts = seg if isinstance(seg[0], list) else [seg]
+            best: np.ndarray | None = None
+            problem = ""
+            for part in parts:
+                if not isinstance(part, list) or len(part) % 2:
+                    problem = "odd_coordinates"
+                    break
+                if not all(
+                    isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                    for v in part
+                ):
+                    problem = "not_a_number"
+                    break
+                pts = np.array(part, dtype=np.float64).reshape(-1, 2)
+                if len(pts) >= 3 and (best is None or len(pts) > len(best)):
+                    best = pts
+            if problem:
+                bad(problem, "segmentation polygon is malformed")
+                continue
+            if best is None:
+                bad("too_few_points", "no segmentation polygon with at least 3 points")
+                continue
+            range_problem = _check_range(best, size[0], size[1])
+            if range_problem is not None:
+                bad(range_problem, f"pixel coordinates outside the {size[0]}x{size[1]} image")
+                continue
+            polygons.append(
+                RawPolygon(index=k, where=where, class_name=categories[category], points_px=best)
+            )
+        out.append(
+            ImageAnnotation(
+                stem=stem,
+                source=name,
+                width_px=size[0],
+                height_px=size[1],
+                polygons=tuple(polygons),
+            )
+        )
+    return out, skips
+
+
+def load_source(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None, list[Skip]]:
+    """Parse one image source (COCO sources are already parsed)."""
+    if source.parsed is not None:
+        return source.parsed, []
+    if source.fmt == "yolo":
+        return parse_yolo(source, root)
+    return parse_labelme(source, root)

@@ -1,0 +1,240 @@
+"""Prism meshes from footprints: earcut triangulation, extrusion, convex decomposition, OBJ text.
+
+The triangulation engine is pinned: ``mapbox_earcut.triangulate_float64`` (ear clipping), called
+once per footprint; its triangles form both caps of the prism and seed the Hertel–Mehlhorn
+convex decomposition. A prism over an open counter-clockwise ring of ``n`` points has ``2n``
+vertices and ``4n - 4`` triangles, every edge shared by exactly two of them (watertight,
+consistently wound, normals outward).
+
+Mesh local frame: origin at the centre of mass (footprint centroid, half the height above the
+belt), axes parallel to the belt frame. ``up="z"`` writes ``(x, y, z)`` (ROS REP 103),
+``up="y"`` writes ``(x, z, -y)``.
+
+OBJ text is built from strings, not per line: the ring's vertex lines are formatted once with
+one ``%``-format and shared by the mesh and the convex pieces (a piece's vertices are ring
+vertices); face index text for the side quads of an ``n``-prism and for a convex ``k``-piece
+at a given vertex offset depends only on those integers and is cached for the run
+(:func:`clear_text_caches` empties the caches; the pipeline calls it at the start of each run).
+"""
+
+from __future__ import annotations
+
+from operator import itemgetter
+
+import mapbox_earcut
+import numpy as np
+import numpy.typing as npt
+
+from meshgen.annotations import FloatArray
+
+IntArray = npt.NDArray[np.int64]
+
+CONVEX_REL_TOL = 1e-9
+
+
+def triangulate(ring: FloatArray) -> IntArray:
+    """Ear-clip an open counter-clockwise ``(n, 2)`` ring into ``(n - 2, 3) int`` CCW triangles."""
+    tris = mapbox_earcut.triangulate_float64(ring, np.array([len(ring)], dtype=np.uint32))
+    faces = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+    corners = ring[faces]
+    d1 = corners[:, 1] - corners[:, 0]
+    d2 = corners[:, 2] - corners[:, 0]
+    flip = d1[:, 0] * d2[:, 1] < d1[:, 1] * d2[:, 0]
+    if flip.all():
+        return faces[:, ::-1].copy()
+    if flip.any():
+        faces[flip] = faces[flip][:, ::-1]
+    return faces
+
+
+def extrude(ring: FloatArray, tris: IntArray, height_m: float) -> tuple[FloatArray, IntArray]:
+    """Prism between ``z = -height/2`` and ``+height/2`` over a CCW ``(n, 2)`` ring.
+
+    ``tris`` is ``(m, 3) int`` CCW cap triangles. Returns ``(2n, 3) float`` vertices (bottom ring,
+    then top ring) and ``(2m + 2n, 3) int`` outward-wound triangles.
+    """
+    n = len(ring)
+    half = 0.5 * height_m
+    verts = np.empty((2 * n, 3), dtype=np.float64)
+    verts[:n, :2] = ring
+    verts[n:, :2] = ring
+    verts[:n, 2] = -half
+    verts[n:, 2] = half
+    i = np.arange(n, dtype=np.int64)
+    j = np.concatenate((i[1:], i[:1]))
+    sides = np.empty((2 * n, 3), dtype=np.int64)
+    sides[0::2] = np.stack((i, j, j + n), axis=1)
+    sides[1::2] = np.stack((i, j + n, i + n), axis=1)
+    faces = np.concatenate((tris[:, ::-1], tris + n, sides))
+    return verts, faces
+
+
+def is_convex(ring: FloatArray) -> bool:
+    """True when the open CCW ``(n, 2)`` ring turns left (or goes straight) at every vertex."""
+    prev = np.concatenate((ring[-1:], ring[:-1]))
+    a = ring - prev
+    b = np.concatenate((ring[1:], ring[:1])) - ring
+    cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    scale = float(np.ptp(ring, axis=0).max())
+    return bool((cross >= -CONVEX_REL_TOL * scale * scale).all())
+
+
+def hertel_mehlhorn(ring: FloatArray, tris: IntArray) -> list[list[int]]:
+    """Exact convex decomposition of a CCW ring from its triangulation (Hertel–Mehlhorn).
+
+    Removes every diagonal whose removal keeps both of its end points convex; the result has at
+    most four times the minimum number of pieces. Returns pieces as CCW lists of ring indices.
+    The triangles are held as half-edges (``e`` runs from ``org[e]`` to ``org[nxt[e]]``), so
+    removing a diagonal is four pointer updates and its test two cross products.
+    """
+    scale = float(np.ptp(ring, axis=0).max())
+    tol = -CONVEX_REL_TOL * scale * scale
+    xs: list[float] = ring[:, 0].tolist()
+    ys: list[float] = ring[:, 1].tolist()
+    org: list[int] = tris.ravel().tolist()
+    count = len(org)
+    nxt = [e + 1 if e % 3 != 2 else e - 2 for e in range(count)]
+    prv = [e - 1 if e % 3 != 0 else e + 2 for e in range(count)]
+    twin = {(org[e], org[nxt[e]]): e for e in range(count)}
+    alive = [True] * count
+    for e in range(count):
+        a = org[e]
+        b = org[nxt[e]]
+        if a > b:
+            continue
+        f = twin.get((b, a))
+        if f is None:
+            continue
+        x, w = org[prv[e]], org[nxt[nxt[f]]]
+        u, y = org[prv[f]], org[nxt[nxt[e]]]
+        if (xs[a] - xs[x]) * (ys[w] - ys[a]) - (ys[a] - ys[x]) * (xs[w] - xs[a]) < tol:
+            continue
+        if (xs[b] - xs[u]) * (ys[y] - ys[b]) - (ys[b] - ys[u]) * (xs[y] - xs[b]) < tol:
+            continue
+        pe, ne, pf, nf = prv[e], nxt[e], prv[f], nxt[f]
+        nxt[pe], prv[nf] = nf, pe
+        nxt[pf], prv[ne] = ne, pf
+        alive[e] = alive[f] = False
+    pieces: list[list[int]] = []
+    for start in range(count):
+        if not alive[start]:
+            continue
+        piece: list[int] = []
+        e = start
+        while alive[e]:
+            alive[e] = False
+            piece.append(org[e])
+            e = nxt[e]
+        pieces.append(piece)
+    return pieces
+
+
+def to_up_axis(verts: FloatArray, up: str) -> FloatArray:
+    """Return ``(n, 3)`` vertices in the output axis convention (``"z"`` or ``"y"`` up)."""
+    if up == "z":
+        return verts
+    out = np.empty_like(verts)
+    out[:, 0] = verts[:, 0]
+    out[:, 1] = verts[:, 2]
+    out[:, 2] = -verts[:, 1]
+    return out
+
+
+_SIDES_TEXT: dict[int, str] = {}
+_PIECE_TEXT: dict[tuple[int, int], str] = {}
+_PIECE_PATTERN: dict[int, IntArray] = {}
+_CACHE_LIMIT = 100_000
+
+
+def clear_text_caches() -> None:
+    """Empty the face-text caches (so every run starts cold and memory stays bounded)."""
+    _SIDES_TEXT.clear()
+    _PIECE_TEXT.clear()
+    _PIECE_PATTERN.clear()
+
+
+def _faces_text(faces_1based: IntArray) -> str:
+    flat = faces_1based.ravel().tolist()
+    return ("f %d %d %d\n" * (len(flat) // 3)) % tuple(flat)
+
+
+def vertex_blocks(ring: FloatArray, half_m: float, up: str) -> tuple[str, str]:
+    """OBJ ``v`` lines of the bottom (``z = -half_m``) and top ring of a prism, in order.
+
+    ``ring`` is ``(n, 2) float`` in the mesh frame; ``up`` as in :func:`to_up_axis`. Each block
+    is ``n`` lines ``v x y z`` with 6 decimals.
+    """
+    n = len(ring)
+    if up == "z":
+        text = ("v %.6f %.6f|\n" * n) % tuple(ring.ravel().tolist())
+        return text.replace("|", f" {-half_m:.6f}"), text.replace("|", f" {half_m:.6f}")
+    flipped = np.empty_like(ring)
+    flipped[:, 0] = ring[:, 0]
+    flipped[:, 1] = -ring[:, 1]
+    text = ("v %.6f|%.6f\n" * n) % tuple(flipped.ravel().tolist())
+    return text.replace("|", f" {-half_m:.6f} "), text.replace("|", f" {half_m:.6f} ")
+
+
+def prism_faces_text(tris: IntArray, n: int) -> str:
+    """OBJ ``f`` lines of the prism :func:`extrude` builds (same faces, same order, 1-based)."""
+    caps = np.empty((2 * len(tris), 3), dtype=np.int64)
+    caps[: len(tris)] = tris[:, ::-1]
+    caps[len(tris) :] = tris + n
+    caps += 1
+    sides = _SIDES_TEXT.get(n)
+    if sides is None:
+        i = np.arange(n, dtype=np.int64)
+        j = np.concatenate((i[1:], i[:1]))
+        quads = np.empty((2 * n, 3), dtype=np.int64)
+        quads[0::2] = np.stack((i, j, j + n), axis=1)
+        quads[1::2] = np.stack((i, j + n, i + n), axis=1)
+        sides = _faces_text(quads + 1)
+        if len(_SIDES_TEXT) < _CACHE_LIMIT:
+            _SIDES_TEXT[n] = sides
+    return _faces_text(caps) + sides
+
+
+def _piece_pattern(k: int) -> IntArray:
+    """``(4k - 4, 3) int`` local faces of a prism over a convex ``k``-gon (fans, then sides)."""
+    pattern = _PIECE_PATTERN.get(k)
+    if pattern is None:
+        i = np.arange(1, k - 1, dtype=np.int64)
+        fan_bottom = np.stack((np.zeros_like(i), i + 1, i), axis=1)
+        fan_top = np.stack((np.full_like(i, k), i + k, i + k + 1), axis=1)
+        local = np.arange(k, dtype=np.int64)
+        nxt = np.concatenate((local[1:], local[:1]))
+        sides = np.empty((2 * k, 3), dtype=np.int64)
+        sides[0::2] = np.stack((local, nxt, nxt + k), axis=1)
+        sides[1::2] = np.stack((local, nxt + k, local + k), axis=1)
+        pattern = np.concatenate((fan_bottom, fan_top, sides))
+        _PIECE_PATTERN[k] = pattern
+    return pattern
+
+
+def pieces_text(bottom: str, top: str, pieces: list[list[int]]) -> str:
+    """OBJ text with one ``o piece_k`` block per convex piece, each a closed prism.
+
+    ``bottom`` and ``top`` are the ring's vertex blocks from :func:`vertex_blocks`; ``pieces``
+    are CCW lists of ring indices (:func:`hertel_mehlhorn`). A piece of ``k`` vertices gets
+    ``2k`` vertices (bottom ring, top ring) and ``4k - 4`` triangles (bottom fan, top fan,
+    sides), indices global and 1-based.
+    """
+    rows_b = bottom.splitlines(keepends=True)
+    rows_t = top.splitlines(keepends=True)
+    parts: list[str] = []
+    offset = 0
+    for number, piece in enumerate(pieces):
+        size = len(piece)
+        pick = itemgetter(*piece)
+        parts.append(f"o piece_{number}\n")
+        parts.append("".join(pick(rows_b)))
+        parts.append("".join(pick(rows_t)))
+        key = (size, offset)
+        faces = _PIECE_TEXT.get(key)
+        if faces is None:
+            faces = _faces_text(_piece_pattern(size) + (offset + 1))
+            if len(_PIECE_TEXT) < _CACHE_LIMIT:
+                _PIECE_TEXT[key] = faces
+        parts.append(faces)
+        offset += 2 * size
+    return "".join(parts)

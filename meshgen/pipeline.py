@@ -1,0 +1,571 @@
+"""The meshing pipeline: dataset folder in, metric proxy meshes, scene CSVs and an index out.
+
+Output layout (the twin reads it)::
+
+    OUT/index.csv                      one row per image (see ``export.INDEX_COLUMNS``)
+    OUT/summary.json                   counts, skips by reason, timings, config
+    OUT/materials.mtl                  one material per class
+    OUT/<stem>/scene.csv               one row per object (see ``export.SCENE_COLUMNS``)
+    OUT/<stem>/scene.json              full per-object metadata
+    OUT/<stem>/<object_id>.obj         the prism mesh, centre of mass at the origin
+    OUT/<stem>/<object_id>_convex.obj  concave footprints only: one ``o piece_k`` per convex piece
+
+``object_id`` is ``<stem>_<k:03d>`` with ``k`` the polygon's index in its source file. Frames
+are documented in :mod:`meshgen.footprint` (belt frame) and :mod:`meshgen.mesh` (mesh frame).
+Heights come from ``numpy.random.default_rng([seed, crc32(stem), k])``, so they do not depend on
+workers or on other objects, and equal seeds give byte-identical mesh, CSV and scene files.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+import zlib
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from meshgen.annotations import SKIP_REASONS, FloatArray, ImageAnnotation, RawPolygon, Skip
+from meshgen.classes import ClassSpec
+from meshgen.config import MeshgenConfig
+from meshgen.export import (
+    INDEX_COLUMNS,
+    SCENE_COLUMNS,
+    FileSink,
+    ThreadedFileSink,
+    check_replaceable,
+    csv_field,
+    csv_text,
+    mtl_text,
+    staging_dir,
+    swap_in,
+    write_json,
+    write_text,
+)
+from meshgen.footprint import (
+    Footprint,
+    FootprintRejected,
+    build_footprints,
+)
+from meshgen.loaders import ImageSource, discover, load_source
+from meshgen.mesh import (
+    clear_text_caches,
+    hertel_mehlhorn,
+    pieces_text,
+    prism_faces_text,
+    triangulate,
+    vertex_blocks,
+)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ObjectRecord:
+    """One meshed object: the scene.csv row (belt-frame pose, size, mass, file paths)."""
+
+    object_id: str
+    source_image: str
+    class_id: int
+    class_name: str
+    centroid_x_m: float
+    centroid_y_m: float
+    yaw_rad: float
+    length_m: float
+    width_m: float
+    area_m2: float
+    height_m: float
+    volume_m3: float
+    mass_kg: float
+    mesh_path: str
+    convex_path: str
+    n_convex_pieces: int
+    area_change_ratio: float
+    repairs: tuple[str, ...]
+
+    def row(self) -> tuple[object, ...]:
+        """Values in ``SCENE_COLUMNS`` order (repairs joined with ``;``)."""
+        return tuple(
+            ";".join(self.repairs) if name == "repairs" else getattr(self, name)
+            for name in SCENE_COLUMNS
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ImageResult:
+    """What meshing one image produced: its index row, records and skips."""
+
+    stem: str
+    width_px: int
+    height_px: int
+    m_per_px: float
+    records: tuple[ObjectRecord, ...]
+    skips: tuple[Skip, ...]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DatasetSummary:
+    """Result of :func:`mesh_dataset`; ``to_json`` is what ``--json`` prints."""
+
+    out: Path
+    fmt: str
+    images: int
+    objects: int
+    skips: tuple[Skip, ...]
+    elapsed_s: float
+    workers: int
+    config: MeshgenConfig
+
+    @property
+    def skipped(self) -> dict[str, int]:
+        """Number of skips by reason (reasons that occurred only, sorted)."""
+        return dict(sorted(Counter(s.reason for s in self.skips).items()))
+
+    @property
+    def ms_per_image(self) -> float:
+        """Wall-clock milliseconds per processed image (whole run, everything included)."""
+        return 1e3 * self.elapsed_s / self.images if self.images else 0.0
+
+    @property
+    def ms_per_object(self) -> float:
+        """Wall-clock milliseconds per meshed object (whole run, everything included)."""
+        return 1e3 * self.elapsed_s / self.objects if self.objects else 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary as plain JSON data."""
+        return {
+            "out": str(self.out),
+            "format": self.fmt,
+            "images": self.images,
+            "objects": self.objects,
+            "skipped": self.skipped,
+            "skipped_total": len(self.skips),
+            "skips": [
+                {"file": s.file, "where": s.where, "reason": s.reason, "detail": s.detail}
+                for s in self.skips
+            ],
+            "skip_reasons": {r: SKIP_REASONS[r] for r in self.skipped},
+            "elapsed_s": round(self.elapsed_s, 6),
+            "ms_per_image": round(self.ms_per_image, 4),
+            "ms_per_object": round(self.ms_per_object, 4),
+            "workers": self.workers,
+            "config": self.config.to_json(),
+        }
+
+
+_PCG_MULT = 0x2360ED051FC65DA44385DF649FCCF645
+_MASK64 = (1 << 64) - 1
+_MASK128 = (1 << 128) - 1
+
+
+def _pcg64_first_double(seed_key: list[int]) -> float:
+    """First ``random()`` double of ``numpy.random.default_rng(seed_key)``, computed directly.
+
+    Same seeding as numpy's PCG64 (XSL-RR 128/64): ``SeedSequence(seed_key)`` gives four
+    64-bit words, the first two the initial state and the last two the increment; one step,
+    add the state, one step, then one step per output. Constructing a ``Generator`` costs
+    about four times as much, and this runs once per object.
+    """
+    words: list[int] = np.random.SeedSequence(seed_key).generate_state(4, np.uint64).tolist()
+    init = (words[0] << 64) | words[1]
+    inc = (((words[2] << 64) | words[3]) << 1 | 1) & _MASK128
+    state = (inc + init) & _MASK128
+    state = (state * _PCG_MULT + inc) & _MASK128
+    state = (state * _PCG_MULT + inc) & _MASK128
+    rot = state >> 122
+    xored = ((state >> 64) ^ state) & _MASK64
+    value = ((xored >> rot) | (xored << ((64 - rot) & 63))) & _MASK64
+    return (value >> 11) * (1.0 / 9007199254740992.0)
+
+
+def object_height_m(seed: int, stem: str, index: int, spec: ClassSpec) -> float:
+    """Height of object ``index`` of image ``stem``: uniform in the class range, seeded.
+
+    Equal to ``numpy.random.default_rng([seed, crc32(stem), index]).uniform(lo, hi)``
+    (tests check this against numpy).
+    """
+    key = [seed, zlib.crc32(stem.encode()), index]
+    low, high = spec.height_min_m, spec.height_max_m
+    return low + (high - low) * _pcg64_first_double(key)
+
+
+def _skip(ann: ImageAnnotation, poly: RawPolygon, reason: str, detail: str) -> Skip:
+    return Skip(file=ann.source, where=poly.where, reason=reason, detail=detail)
+
+
+def _points_json(points: FloatArray, fmt: str) -> str:
+    """``[[a,b],...]`` JSON text of ``(n, 2)`` points, each number with the %-format ``fmt``."""
+    pair = f"[{fmt},{fmt}],"
+    return "[" + (pair * len(points))[:-1] % tuple(points.ravel().tolist()) + "]"
+
+
+def _csv_row(record: ObjectRecord) -> str:
+    """One scene.csv line (same formatting as :func:`meshgen.export.csv_text`)."""
+    return _ROW_FORMAT % (
+        csv_field(record.object_id),
+        csv_field(record.source_image),
+        record.class_id,
+        csv_field(record.class_name),
+        record.centroid_x_m,
+        record.centroid_y_m,
+        record.yaw_rad,
+        record.length_m,
+        record.width_m,
+        record.area_m2,
+        record.height_m,
+        record.volume_m3,
+        record.mass_kg,
+        csv_field(record.mesh_path),
+        csv_field(record.convex_path),
+        record.n_convex_pieces,
+        record.area_change_ratio,
+        csv_field(";".join(record.repairs)),
+    )
+
+
+_ROW_FORMAT = "%s,%s,%d,%s," + "%.9g," * 9 + "%s,%s,%d,%.9g,%s\n"
+
+
+def _mesh_object(
+    ann: ImageAnnotation,
+    poly: RawPolygon,
+    *,
+    fp: Footprint,
+    spec: ClassSpec,
+    class_id: int,
+    config: MeshgenConfig,
+    folder: str,
+    sink: FileSink,
+) -> tuple[ObjectRecord, str]:
+    """Write the mesh (and convex pieces) of one footprint; return its record and JSON text."""
+    object_id = f"{ann.stem}_{poly.index:03d}"
+    height = object_height_m(config.seed, ann.stem, poly.index, spec)
+    cx, cy = fp.centroid_m
+    ring = fp.ring_m - np.array([cx, cy])
+    tris = triangulate(ring)
+    n = len(ring)
+    if len(tris) != n - 2:
+        msg = f"earcut gave {len(tris)} triangles for {n} points"
+        raise FootprintRejected("degenerate", msg)
+    bottom, top = vertex_blocks(ring, 0.5 * height, config.up)
+    header = f"# cdw-twin meshgen {object_id}\nmtllib ../materials.mtl\nusemtl {spec.name}\n"
+    sink.write(
+        f"{folder}/{object_id}.obj",
+        f"{header}o {object_id}\n{bottom}{top}{prism_faces_text(tris, n)}",
+    )
+    convex_path = ""
+    n_pieces = 1
+    if not fp.convex:
+        pieces = hertel_mehlhorn(ring, tris)
+        n_pieces = len(pieces)
+        convex_path = f"{object_id}_convex.obj"
+        sink.write(f"{folder}/{convex_path}", header + pieces_text(bottom, top, pieces))
+    volume = fp.area_m2 * height
+    record = ObjectRecord(
+        object_id=object_id,
+        source_image=ann.source,
+        class_id=class_id,
+        class_name=spec.name,
+        centroid_x_m=cx,
+        centroid_y_m=cy,
+        yaw_rad=fp.yaw_rad,
+        length_m=fp.length_m,
+        width_m=fp.width_m,
+        area_m2=fp.area_m2,
+        height_m=height,
+        volume_m3=volume,
+        mass_kg=volume * spec.density_kg_m3,
+        mesh_path=f"{object_id}.obj",
+        convex_path=convex_path,
+        n_convex_pieces=n_pieces,
+        area_change_ratio=fp.area_change_ratio,
+        repairs=fp.repairs,
+    )
+    meta: dict[str, Any] = dict(zip(SCENE_COLUMNS, record.row(), strict=True))
+    meta["repairs"] = list(fp.repairs)
+    meta["source_where"] = poly.where
+    meta["density_kg_m3"] = spec.density_kg_m3
+    meta["seed"] = config.seed
+    meta["rng_key"] = [config.seed, zlib.crc32(ann.stem.encode()), poly.index]
+    text = json.dumps(meta, sort_keys=True, separators=(",", ":"))
+    arrays = (
+        f',"footprint_m":{_points_json(fp.ring_m, "%.9f")}'
+        f',"polygon_px":{_points_json(poly.points_px, "%.3f")}}}'
+    )
+    return record, text[:-1] + arrays
+
+
+def _select(
+    anns: list[ImageAnnotation], config: MeshgenConfig
+) -> tuple[
+    list[list[tuple[int, Skip]]],
+    list[tuple[int, int, RawPolygon, int, ClassSpec]],
+    list[FloatArray],
+]:
+    """Class and border checks of every polygon of ``anns``; metric rings of the ones kept.
+
+    Returns per image its early skips (with the polygon position), the kept polygons as
+    ``(image, position, polygon, class_id, spec)`` and their ``(n, 2)`` belt-frame rings.
+    """
+    table = {spec.name: (i, spec) for i, spec in enumerate(config.classes)}
+    margin = config.border_margin_px
+    skips: list[list[tuple[int, Skip]]] = [[] for _ in anns]
+    todo: list[tuple[int, int, RawPolygon, int, ClassSpec]] = []
+    for img, ann in enumerate(anns):
+        for pos, poly in enumerate(ann.polygons):
+            entry = table.get(poly.class_name)
+            if entry is None:
+                detail = f"class {poly.class_name!r} is not in the class table ({', '.join(table)})"
+                skips[img].append((pos, _skip(ann, poly, "unknown_class", detail)))
+                continue
+            todo.append((img, pos, poly, entry[0], entry[1]))
+    if not todo:
+        return skips, [], []
+    sizes = np.fromiter((len(t[2].points_px) for t in todo), dtype=np.int64, count=len(todo))
+    starts = np.cumsum(sizes) - sizes
+    pts = np.concatenate([t[2].points_px for t in todo])
+    dims = np.array([(anns[t[0]].width_px, anns[t[0]].height_px) for t in todo], dtype=np.float64)
+    lo = np.minimum.reduceat(pts, starts)
+    hi = np.maximum.reduceat(pts, starts)
+    near = (lo <= margin) | (hi >= dims - 1.0 - margin)
+    border = np.logical_or(near[:, 0], near[:, 1])
+    scale = config.belt_width_m / dims[:, 0]
+    per_point = np.repeat(np.concatenate((dims, scale[:, None]), axis=1), sizes, axis=0)
+    metric = np.empty_like(pts)
+    metric[:, 0] = (pts[:, 1] - 0.5 * per_point[:, 1]) * per_point[:, 2]
+    metric[:, 1] = (pts[:, 0] - 0.5 * per_point[:, 0]) * per_point[:, 2]
+    rings = np.split(metric, np.cumsum(sizes)[:-1])
+    kept: list[tuple[int, int, RawPolygon, int, ClassSpec]] = []
+    kept_rings: list[FloatArray] = []
+    cuts = [bool(c) for c in border.tolist()]
+    for item, ring, cut in zip(todo, rings, cuts, strict=True):
+        if cut:
+            img, pos, poly = item[0], item[1], item[2]
+            detail = f"a vertex lies within {margin:g} px of the image border"
+            skips[img].append((pos, _skip(anns[img], poly, "border_truncated", detail)))
+            continue
+        kept.append(item)
+        kept_rings.append(ring)
+    return skips, kept, kept_rings
+
+
+def _scene_json(
+    ann: ImageAnnotation, config: MeshgenConfig, skips: list[Skip], metas: list[str]
+) -> str:
+    head = json.dumps(
+        {
+            "image": ann.stem,
+            "source": ann.source,
+            "width_px": ann.width_px,
+            "height_px": ann.height_px,
+            "m_per_px": config.belt_width_m / ann.width_px,
+            "belt_width_m": config.belt_width_m,
+            "seed": config.seed,
+            "up": config.up,
+            "frame": "belt: origin image centre, +x image down (travel), +y image right, +z up",
+            "skipped": [{"where": s.where, "reason": s.reason, "detail": s.detail} for s in skips],
+        },
+        sort_keys=True,
+        separators=(",", ":"),
+    )
+    return f'{head[:-1]},"objects":[{",".join(metas)}]}}\n'
+
+
+def mesh_images(
+    anns: list[ImageAnnotation],
+    config: MeshgenConfig,
+    out: Path,
+    sink: FileSink | None = None,
+) -> list[ImageResult]:
+    """Mesh every polygon of several images into ``out / ann.stem`` each.
+
+    Bad polygons become skips. Border checks, metric conversion and footprints
+    (:func:`build_footprints`) are computed for all polygons of all the images together; then
+    each object's mesh and convex pieces are written, and one scene.csv and scene.json per image.
+    Files go through ``sink`` (default: written right away; the caller closes its own sink).
+    """
+    if sink is None:
+        sink = FileSink()
+    early, kept, rings = _select(anns, config)
+    footprints = (
+        build_footprints(
+            rings, simplify_m=1e-3 * config.simplify_mm, min_area_m2=1e-6 * config.min_area_mm2
+        )
+        if rings
+        else []
+    )
+    folders = [os.path.join(out, ann.stem) for ann in anns]
+    for folder in folders:
+        sink.mkdir(folder)
+    records: list[list[ObjectRecord]] = [[] for _ in anns]
+    metas: list[list[str]] = [[] for _ in anns]
+    for (img, pos, poly, class_id, spec), fp in zip(kept, footprints, strict=True):
+        ann = anns[img]
+        try:
+            if isinstance(fp, FootprintRejected):
+                raise fp
+            record, meta = _mesh_object(
+                ann,
+                poly,
+                fp=fp,
+                spec=spec,
+                class_id=class_id,
+                config=config,
+                folder=folders[img],
+                sink=sink,
+            )
+        except FootprintRejected as exc:
+            early[img].append((pos, _skip(ann, poly, exc.reason, exc.detail)))
+            continue
+        records[img].append(record)
+        metas[img].append(meta)
+    results: list[ImageResult] = []
+    header = ",".join(SCENE_COLUMNS) + "\n"
+    for img, ann in enumerate(anns):
+        early[img].sort(key=lambda item: item[0])
+        skips = list(ann.skips) + [s for _, s in early[img]]
+        sink.write(f"{folders[img]}/scene.csv", header + "".join(map(_csv_row, records[img])))
+        sink.write(f"{folders[img]}/scene.json", _scene_json(ann, config, skips, metas[img]))
+        results.append(
+            ImageResult(
+                stem=ann.stem,
+                width_px=ann.width_px,
+                height_px=ann.height_px,
+                m_per_px=config.belt_width_m / ann.width_px,
+                records=tuple(records[img]),
+                skips=tuple(skips),
+            )
+        )
+    return results
+
+
+def mesh_image(ann: ImageAnnotation, config: MeshgenConfig, out: Path) -> ImageResult:
+    """Mesh every polygon of one image into ``out / ann.stem``; bad polygons become skips."""
+    return mesh_images([ann], config, out)[0]
+
+
+CHUNK_IMAGES = 16
+"""Images meshed together (one batch of vectorised footprint work) per job."""
+
+
+def _process(
+    job: tuple[tuple[ImageSource, ...], Path, MeshgenConfig, Path],
+    sink: FileSink | None = None,
+) -> list[tuple[ImageResult | None, list[Skip]]]:
+    sources, root, config, staging = job
+    loaded = [load_source(source, root) for source in sources]
+    anns = [ann for ann, _ in loaded if ann is not None]
+    meshed = iter(mesh_images(anns, config, staging, sink)) if anns else iter(())
+    return [(next(meshed) if ann is not None else None, skips) for ann, skips in loaded]
+
+
+def mesh_dataset(
+    dataset: Path,
+    out: Path,
+    config: MeshgenConfig,
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> DatasetSummary:
+    """Mesh every image of ``dataset`` into ``out`` (replaced atomically when done).
+
+    ``progress(done, total)`` is called after each image when given.
+    """
+    start = time.perf_counter()
+    clear_text_caches()
+    out = Path(out).resolve()
+    check_replaceable(out)
+    listing = discover(Path(dataset), config.fmt, config.image_size_px)
+    staging = staging_dir(out)
+    try:
+        write_text(staging / "materials.mtl", mtl_text(config.classes))
+        sources = listing.sources
+        total = len(sources)
+        size = CHUNK_IMAGES if workers <= 1 else max(1, min(CHUNK_IMAGES, total // (4 * workers)))
+        jobs = [
+            (sources[i : i + size], Path(dataset), config, staging) for i in range(0, total, size)
+        ]
+        results: list[tuple[ImageResult | None, list[Skip]]] = []
+        if workers > 1 and len(jobs) > 1:
+            from concurrent.futures import ProcessPoolExecutor
+
+            with ProcessPoolExecutor(max_workers=workers) as pool:
+                for chunk in pool.map(_process, jobs):
+                    results.extend(chunk)
+                    if progress is not None:
+                        progress(len(results), total)
+        else:
+            sink = ThreadedFileSink()
+            try:
+                for job in jobs:
+                    results.extend(_process(job, sink))
+                    if progress is not None:
+                        progress(len(results), total)
+            finally:
+                sink.close()
+        skips: list[Skip] = list(listing.skips)
+        rows: list[tuple[object, ...]] = []
+        objects = 0
+        for result, file_skips in results:
+            skips.extend(file_skips)
+            if result is None:
+                continue
+            skips.extend(result.skips)
+            objects += len(result.records)
+            rows.append(
+                (
+                    result.stem,
+                    result.width_px,
+                    result.height_px,
+                    result.m_per_px,
+                    len(result.records),
+                    len(result.skips),
+                    f"{result.stem}/scene.csv",
+                )
+            )
+        write_text(staging / "index.csv", csv_text(INDEX_COLUMNS, rows))
+        summary = DatasetSummary(
+            out=out,
+            fmt=listing.fmt,
+            images=len(rows),
+            objects=objects,
+            skips=tuple(skips),
+            elapsed_s=time.perf_counter() - start,
+            workers=workers,
+            config=config,
+        )
+        write_json(staging / "summary.json", summary.to_json())
+        swap_in(staging, out)
+    except BaseException:
+        import shutil
+
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return summary
+
+
+def tty_progress(done: int, total: int) -> None:
+    """Draw a one-line progress bar on stderr (call only when stderr is a terminal)."""
+    width = 30
+    filled = width * done // max(total, 1)
+    end = "\n" if done == total else ""
+    print(
+        f"\rmeshgen [{'#' * filled}{'.' * (width - filled)}] {done}/{total}",
+        end=end,
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+__all__ = [
+    "DatasetSummary",
+    "ImageResult",
+    "ObjectRecord",
+    "mesh_dataset",
+    "mesh_image",
+    "mesh_images",
+    "object_height_m",
+]

@@ -1,0 +1,239 @@
+"""The controller node against a tiny fake cell in another process (real rclpy, real DDS).
+
+The fake cell is an ideal arm: every joint command becomes the measured joint state of the next
+step. It publishes joint states, belt state and detections (with NaN and unknown-class
+detections and one out-of-order frame mixed in) and runs the lockstep handshake.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy")
+pytest.importorskip("cdw_interfaces")
+
+from control.config import ControllerConfig
+from control.ik import Kinematics
+from twin.ros_isolation import ros_domain
+
+N_TICKS = 720
+SPEED_MPS = 0.3
+X0_M = -0.6
+OBJECT_Y_M = 0.5
+HEIGHT_M = 0.04
+
+FAKE_CELL = r"""
+import json, math, sys, time
+import rclpy
+from rclpy.experimental.events_executor import EventsExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from builtin_interfaces.msg import Time
+from cdw_interfaces.msg import (BeltState, Detection, DetectionArray, LockstepTick, PickTarget,
+                                SortingPriorities, StepAck)
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+from trajectory_msgs.msg import JointTrajectory
+
+out, n_ticks, speed, x0, y0, height = sys.argv[1], int(sys.argv[2]), *map(float, sys.argv[3:7])
+arm = [f"panda_joint{i}" for i in range(1, 8)]
+q = [math.pi / 2, -0.3, 0.0, -2.2, 0.0, 1.9, math.pi / 4]
+dt = 1.0 / 240.0
+
+def qos(depth, latched=False):
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
+                      else DurabilityPolicy.VOLATILE)
+
+def stamp(t):
+    sec = int(t)
+    return Time(sec=sec, nanosec=round((t - sec) * 1e9) % 1_000_000_000)
+
+def seconds(s):
+    return s.sec + 1e-9 * s.nanosec
+
+rclpy.init()
+node = Node("fake_cell")
+rec = {"traj": [], "gripper": [], "target": [], "acks": [], "timeouts": 0}
+state = {"ack": -1, "n_cmd": 0, "received": 0}
+
+def on_traj(msg):
+    state["received"] += 1
+    p = msg.points[0]
+    rec["traj"].append({"t": seconds(msg.header.stamp), "names": list(msg.joint_names),
+                        "q": list(p.positions), "dq": list(p.velocities)})
+    q[:] = [p.positions[list(msg.joint_names).index(n)] for n in arm]
+
+def on_gripper(msg):
+    state["received"] += 1
+    rec["gripper"].append(msg.data)
+
+def on_target(msg):
+    state["received"] += 1
+    g = msg.grasp_point
+    rec["target"].append({"t": seconds(msg.header.stamp), "id": msg.track_id,
+                          "cls": msg.class_name, "phase": msg.phase, "p": [g.x, g.y, g.z]})
+
+def on_ack(msg):
+    state["ack"] = max(state["ack"], msg.tick)
+    state["n_cmd"] = max(state["n_cmd"], msg.n_commands)
+    rec["acks"].append([msg.tick, msg.n_commands])
+
+node.create_subscription(JointTrajectory, "/arm_controller/joint_trajectory", on_traj, qos(10))
+node.create_subscription(Float64, "/gripper/command", on_gripper, qos(10))
+node.create_subscription(PickTarget, "/controller/target", on_target, qos(10))
+node.create_subscription(StepAck, "/lockstep/ack", on_ack, qos(100))
+pubs = {
+    "/joint_states": node.create_publisher(JointState, "/joint_states", qos(10)),
+    "/conveyor/state": node.create_publisher(BeltState, "/conveyor/state", qos(10)),
+    "/objects/detections": node.create_publisher(DetectionArray, "/objects/detections", qos(10)),
+    "/lockstep/tick": node.create_publisher(LockstepTick, "/lockstep/tick", qos(100)),
+}
+clock = node.create_publisher(Clock, "/clock", qos(1))
+prio = node.create_publisher(SortingPriorities, "/sorting/priorities", qos(1, latched=True))
+prio.publish(SortingPriorities(classes=["brick", "wood", "concrete", "rubber", "gypsum"]))
+count = dict.fromkeys(pubs, 0)
+executor = EventsExecutor()
+executor.add_node(node)
+
+def det(cls, x, y):
+    d = Detection(class_name=cls, confidence=0.9, yaw_rad=0.3, length_m=0.12, width_m=0.05,
+                  height_m=height)
+    d.position.x, d.position.y = x, y
+    return d
+
+def publish(k):
+    t = k * dt
+    clock.publish(Clock(clock=stamp(t)))
+    js = JointState(name=arm + ["panda_finger_joint1", "panda_finger_joint2"],
+                    position=list(q) + [0.04, 0.04], velocity=[0.0] * 9)
+    js.header.stamp = stamp(t)
+    pubs["/joint_states"].publish(js)
+    count["/joint_states"] += 1
+    if k % 4 == 0:
+        belt = BeltState(setpoint_mps=speed, speed_mps=speed, position_m=speed * t)
+        belt.header.stamp = stamp(t)
+        pubs["/conveyor/state"].publish(belt)
+        count["/conveyor/state"] += 1
+    if k > 0 and k % 8 == 0:
+        capture = t - 0.03 if k != 240 else 0.05  # the frame at k = 240 is out of order
+        frame = DetectionArray()
+        frame.header.stamp = stamp(capture)
+        frame.detections = [det("brick", x0 + speed * capture, y0),
+                            det("brick", float("nan"), 0.4),
+                            det("gypsum", x0 + speed * capture - 0.2, 0.6)]
+        pubs["/objects/detections"].publish(frame)
+        count["/objects/detections"] += 1
+    pubs["/lockstep/tick"].publish(LockstepTick(
+        tick=k, stamp=stamp(t), n_joint_states=count["/joint_states"],
+        n_belt_states=count["/conveyor/state"], n_detections=count["/objects/detections"]))
+
+deadline = time.monotonic() + 20.0
+while (any(p.get_subscription_count() == 0 for p in pubs.values())
+       and time.monotonic() < deadline):
+    executor.spin_once(timeout_sec=0.05)
+while state["ack"] < 0 and time.monotonic() < deadline:
+    publish(0)
+    end = time.monotonic() + 0.1
+    while state["ack"] < 0 and time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.02)
+for k in range(1, n_ticks):
+    publish(k)
+    end = time.monotonic() + 5.0
+    while not (state["ack"] >= k and state["received"] >= state["n_cmd"]):
+        if time.monotonic() > end:
+            rec["timeouts"] += 1
+            break
+        executor.spin_once(timeout_sec=0.05)
+rec["published"] = count
+rec["received_commands"] = state["received"]
+with open(out, "w") as f:
+    json.dump(rec, f)
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+def test_lockstep_node_against_fake_cell(tmp_path: Path) -> None:
+    """Acks every tick with exact counts, commands stay in limits, bad detections are counted."""
+    cell_py = tmp_path / "fake_cell.py"
+    cell_py.write_text(FAKE_CELL, encoding="utf-8")
+    record_path = tmp_path / "cell.json"
+    stats_path = tmp_path / "stats.json"
+    with ros_domain() as domain:
+        controller = subprocess.Popen(
+            [sys.executable, "-m", "control", "--lockstep", "--stats-out", str(stats_path)],
+            env=domain.env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        try:
+            cell = subprocess.run(
+                [
+                    sys.executable,
+                    str(cell_py),
+                    str(record_path),
+                    *map(str, (N_TICKS, SPEED_MPS, X0_M, OBJECT_Y_M, HEIGHT_M)),
+                ],
+                env=domain.env,
+                capture_output=True,
+                text=True,
+                timeout=60,
+                check=False,
+            )
+            assert cell.returncode == 0, cell.stderr
+        finally:
+            controller.send_signal(signal.SIGINT)
+            log, _ = controller.communicate(timeout=20)
+    assert controller.returncode == 0, log
+    record = json.loads(record_path.read_text(encoding="utf-8"))
+    stats = json.loads(stats_path.read_text(encoding="utf-8"))
+
+    assert record["timeouts"] == 0
+    assert {tick for tick, _ in record["acks"]} >= set(range(N_TICKS))
+    counts = [n for _, n in record["acks"]]
+    assert counts == sorted(counts)
+    assert counts[-1] == record["received_commands"] == stats["n_commands"]
+    assert stats["ticks_acked"] == len(record["acks"])
+
+    config = ControllerConfig()
+    kin = Kinematics(config.robot, config.ik)
+    assert record["traj"]
+    for point in record["traj"]:
+        assert point["names"] == list(config.robot.arm_joint_names)
+        assert kin.within_limits(np.array(point["q"]))
+        assert np.all(np.abs(point["dq"]) <= kin.velocity_limit_rps + 1e-9)
+    assert all(0.0 <= w <= config.robot.gripper_max_opening_m for w in record["gripper"])
+
+    frames = record["published"]["/objects/detections"]
+    assert stats["received"]["/objects/detections"] == frames
+    rejected = stats["rejected_detections"]
+    assert rejected["non_finite"] == frames
+    assert rejected["unknown_class"] == frames
+    assert rejected["out_of_order"] == 1
+    assert stats["skipped"]["unknown_priority_class"] == 1
+
+    phases = [t["phase"] for t in record["target"]]
+    assert "approach" in phases
+    assert all(t["cls"] == "brick" for t in record["target"] if t["phase"] == "approach")
+    closes = [t for t in record["target"] if t["phase"] == "close"]
+    assert closes, phases
+    close = closes[0]
+    grasp_z = HEIGHT_M - config.pick.grasp_below_top_m
+    truth = (X0_M + SPEED_MPS * close["t"], OBJECT_Y_M, grasp_z)
+    assert math.dist(close["p"], truth) < 0.01
+    command = next(p for p in record["traj"] if abs(p["t"] - close["t"]) < 1e-6)
+    tcp = kin.fk(np.array(command["q"])).translation
+    ahead = (truth[0] + SPEED_MPS * config.motion.command_latency_s, truth[1], truth[2])
+    assert math.dist(tuple(float(v) for v in tcp), ahead) < 0.004

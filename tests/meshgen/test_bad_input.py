@@ -1,0 +1,121 @@
+"""Malformed annotations: each bad object or file is skipped with file, line and reason."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from meshgen.annotations import SKIP_REASONS
+from meshgen.config import MeshgenConfig
+from meshgen.pipeline import mesh_dataset
+from meshgen.sample import png_bytes
+from twin.cli import main
+
+GOOD = "0 0.40 0.40 0.60 0.40 0.60 0.60 0.40 0.60"
+
+
+def _yolo(root: Path, labels: dict[str, str], images: tuple[str, ...] = ()) -> Path:
+    (root / "labels").mkdir(parents=True)
+    (root / "images").mkdir()
+    (root / "data.yaml").write_text("names: [concrete, brick, wood, rubber, plaster]\n")
+    for stem, text in labels.items():
+        (root / "labels" / f"{stem}.txt").write_bytes(text.encode("latin-1"))
+    for stem in images:
+        (root / "images" / f"{stem}.png").write_bytes(png_bytes(200, 100))
+    return root
+
+
+BAD_LINES = {
+    "odd_coordinates": "0 0.4 0.4 0.6 0.4 0.6",
+    "not_a_number": "0 0.4 0.4 0.6 zero 0.6 0.6",
+    "bad_class_id": "x 0.4 0.4 0.6 0.4 0.6 0.6",
+    "unknown_class_id": "9 0.4 0.4 0.6 0.4 0.6 0.6",
+    "unknown_class": "4 0.4 0.4 0.6 0.4 0.6 0.6",
+    "too_few_points": "0 0.4 0.4 0.6 0.4",
+    "out_of_range": "0 0.4 0.4 3.6 0.4 0.6 0.6",
+    "border_truncated": "0 0.0 0.4 0.6 0.4 0.6 0.6",
+    "degenerate": "0 0.4 0.4 0.5 0.5 0.6 0.6",
+    "below_min_area": "0 0.50 0.50 0.501 0.50 0.501 0.501",
+}
+
+
+def test_each_bad_line_is_skipped_and_good_lines_kept(tmp_path: Path) -> None:
+    text = "\n".join([GOOD, *BAD_LINES.values(), GOOD]) + "\n"
+    data = _yolo(tmp_path / "data", {"img": text}, images=("img",))
+    summary = mesh_dataset(data, tmp_path / "out", MeshgenConfig())
+    assert summary.objects == 2
+    assert summary.skipped == dict(sorted(dict.fromkeys(BAD_LINES, 1).items()))
+    by_reason = {s.reason: s for s in summary.skips}
+    for lineno, reason in enumerate(BAD_LINES, start=2):
+        skip = by_reason[reason]
+        assert skip.file == "labels/img.txt"
+        assert skip.where == f"line {lineno}"
+        assert reason in SKIP_REASONS
+        assert "labels/img.txt:line" in skip.message()
+    ids = (tmp_path / "out" / "img" / "scene.csv").read_text()
+    assert "img_000" in ids
+    assert f"img_{len(BAD_LINES) + 1:03d}" in ids
+
+
+def test_bad_files_are_reported_and_others_go_on(tmp_path: Path) -> None:
+    labels = {"empty": "", "binary": "\xff\xfe\x00garbage", "nosize": GOOD, "ok": GOOD}
+    data = _yolo(tmp_path / "data", labels, images=("empty", "binary", "ok"))
+    summary = mesh_dataset(data, tmp_path / "out", MeshgenConfig())
+    assert summary.images == 1
+    assert summary.objects == 1
+    assert summary.skipped == {"empty_file": 1, "missing_image_size": 1, "unreadable_file": 1}
+    # --image-size supplies the missing size
+    sized = mesh_dataset(data, tmp_path / "out2", MeshgenConfig(image_size_px=(200, 100)))
+    assert sized.objects == 2
+
+
+def test_labelme_bad_shapes(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    data.mkdir()
+    shapes = [
+        {
+            "label": "brick",
+            "points": [[80, 40], [120, 40], [120, 60], [80, 60]],
+            "shape_type": "polygon",
+        },
+        {"label": "brick", "points": [[80, 40], [120, "a"], [120, 60]], "shape_type": "polygon"},
+        {"label": "brick", "points": [[80, 40], [120]], "shape_type": "polygon"},
+        {"label": "brick", "points": [[1, 1], [5, 5]], "shape_type": "rectangle"},
+        {"label": "plaster", "points": [[80, 40], [120, 40], [120, 60]], "shape_type": "polygon"},
+    ]
+    doc = {"shapes": shapes, "imageWidth": 200, "imageHeight": 100, "imagePath": "x.png"}
+    (data / "a.json").write_text(json.dumps(doc))
+    (data / "b.json").write_text('{"shapes": [')
+    del doc["imageWidth"]
+    (data / "c.json").write_text(json.dumps(doc))
+    summary = mesh_dataset(data, tmp_path / "out", MeshgenConfig(fmt="labelme"))
+    assert summary.objects == 1
+    assert summary.skipped == {
+        "missing_image_size": 1,
+        "not_a_number": 1,
+        "not_a_polygon": 1,
+        "odd_coordinates": 1,
+        "unknown_class": 1,
+        "unreadable_file": 1,
+    }
+    unknown = next(s for s in summary.skips if s.reason == "unknown_class")
+    assert "plaster" in unknown.detail
+    assert unknown.where == "shape 4"
+
+
+def test_exit_status(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    good = _yolo(tmp_path / "good", {"img": GOOD + "\n"}, images=("img",))
+    mixed = _yolo(tmp_path / "mixed", {"img": GOOD + "\n9 0 0\n"}, images=("img",))
+    bad = _yolo(tmp_path / "bad", {"img": "9 0 0\n"}, images=("img",))
+    assert main(["meshgen", str(good), "--out", str(tmp_path / "o1")]) == 0
+    assert main(["meshgen", str(mixed), "--out", str(tmp_path / "o2")]) == 0
+    assert main(["meshgen", str(mixed), "--out", str(tmp_path / "o3"), "--strict"]) == 1
+    assert main(["meshgen", str(bad), "--out", str(tmp_path / "o4"), "--json"]) == 1
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out.strip().splitlines()[-1])
+    assert summary["objects"] == 0
+    assert summary["skipped"] == {"unknown_class_id": 1}
+    assert "labels/img.txt:line 1: skipped (unknown_class_id)" in captured.err
+    assert main(["meshgen", str(tmp_path / "missing"), "--out", str(tmp_path / "o5")]) == 2

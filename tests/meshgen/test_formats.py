@@ -1,0 +1,110 @@
+"""The same polygons as YOLO, COCO and labelme give the same meshes; auto-detection works."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from meshgen.config import MeshgenConfig
+from meshgen.errors import DatasetError
+from meshgen.imagesize import read_image_size
+from meshgen.loaders import discover
+from meshgen.pipeline import mesh_dataset
+
+NAMES = ("concrete", "brick", "wood", "rubber")
+
+
+def _read_yolo(sample: Path) -> dict[str, tuple[tuple[int, int], list[tuple[int, list[float]]]]]:
+    images = {}
+    for label in sorted((sample / "labels").glob("*.txt")):
+        size = read_image_size(sample / "images" / f"{label.stem}.png")
+        assert size is not None
+        polys = []
+        for line in label.read_text().splitlines():
+            cls, *coords = line.split()
+            pts = [float(v) * size[i % 2] for i, v in enumerate(coords)]
+            polys.append((int(cls), pts))
+        images[label.stem] = (size, polys)
+    return images
+
+
+def _write_labelme(images: dict, root: Path) -> None:  # type: ignore[type-arg]
+    (root / "labelme").mkdir(parents=True)
+    for stem, ((w, h), polys) in images.items():
+        shapes = [
+            {
+                "label": NAMES[c],
+                "points": [pts[i : i + 2] for i in range(0, len(pts), 2)],
+                "shape_type": "polygon",
+                "group_id": None,
+                "flags": {},
+            }
+            for c, pts in polys
+        ]
+        doc = {
+            "version": "5.0",
+            "shapes": shapes,
+            "imagePath": f"{stem}.png",
+            "imageData": None,
+            "imageWidth": w,
+            "imageHeight": h,
+        }
+        (root / "labelme" / f"{stem}.json").write_text(json.dumps(doc))
+
+
+def _write_coco(images: dict, root: Path) -> None:  # type: ignore[type-arg]
+    root.mkdir(parents=True)
+    doc: dict[str, list[dict[str, object]]] = {
+        "images": [],
+        "annotations": [],
+        "categories": [{"id": i + 1, "name": n} for i, n in enumerate(NAMES)],
+    }
+    for image_id, (stem, ((w, h), polys)) in enumerate(images.items(), start=1):
+        doc["images"].append({"id": image_id, "file_name": f"{stem}.png", "width": w, "height": h})
+        for c, pts in polys:
+            doc["annotations"].append(
+                {
+                    "id": len(doc["annotations"]) + 1,
+                    "image_id": image_id,
+                    "category_id": c + 1,
+                    "segmentation": [pts],
+                    "iscrowd": 0,
+                }
+            )
+    (root / "instances.json").write_text(json.dumps(doc))
+
+
+def _objs(out: Path) -> dict[str, bytes]:
+    return {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*.obj"))}
+
+
+def test_yolo_coco_labelme_give_same_meshes(sample_dir: Path, tmp_path: Path) -> None:
+    images = _read_yolo(sample_dir)
+    _write_labelme(images, tmp_path / "lm")
+    _write_coco(images, tmp_path / "coco")
+    results = {}
+    for fmt, data in (
+        ("yolo", sample_dir),
+        ("labelme", tmp_path / "lm"),
+        ("coco", tmp_path / "coco"),
+    ):
+        assert discover(data).fmt == fmt
+        summary = mesh_dataset(data, tmp_path / f"out_{fmt}", MeshgenConfig())
+        assert summary.fmt == fmt
+        results[fmt] = _objs(summary.out)
+    assert results["yolo"]
+    assert results["yolo"] == results["labelme"] == results["coco"]
+
+
+def test_sizes_are_read_per_image(sample_dir: Path) -> None:
+    sizes = {s.size_px for s in discover(sample_dir).sources}
+    assert sizes == {(1024, 960), (990, 990)}
+
+
+def test_unknown_format_and_empty_dataset(tmp_path: Path) -> None:
+    with pytest.raises(DatasetError, match="no annotations found"):
+        discover(tmp_path)
+    with pytest.raises(DatasetError, match="unknown format 'voc'"):
+        discover(tmp_path, "voc")

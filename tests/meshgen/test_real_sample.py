@@ -1,0 +1,38 @@
+"""The real annotated sample meshes without a crash and every skip is explained."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+
+from meshgen.annotations import SKIP_REASONS
+from meshgen.config import MeshgenConfig
+from meshgen.pipeline import mesh_dataset
+
+
+def test_real_sample_meshes_and_explains_skips(tmp_path: Path, real_sample: Path) -> None:
+    summary = mesh_dataset(real_sample, tmp_path / "out", MeshgenConfig())
+    assert summary.fmt == "labelme"
+    assert summary.images == 60
+    assert summary.objects + len(summary.skips) == 327
+    assert summary.objects > 250
+    for skip in summary.skips:
+        assert skip.reason in SKIP_REASONS
+        assert skip.file.startswith("labelme/")
+        assert skip.where.startswith("shape ")
+        assert skip.detail
+    with (summary.out / "index.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    sizes = {(int(r["width_px"]), int(r["height_px"])) for r in rows}
+    assert sizes == {(1024, 960), (990, 990)}
+    for row in rows:
+        assert float(row["m_per_px"]) == pytest.approx(0.6 / int(row["width_px"]))
+
+
+def test_real_sample_spikes_are_repaired(tmp_path: Path, real_sample: Path) -> None:
+    summary = mesh_dataset(real_sample, tmp_path / "out", MeshgenConfig(simplify_mm=0.0))
+    scene = (summary.out / "Bcp_20220524_17595420" / "scene.csv").read_text()
+    assert "Bcp_20220524_17595420_000" in scene
+    assert "removed_collinear" in scene

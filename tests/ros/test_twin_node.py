@@ -1,0 +1,287 @@
+"""The twin node across real processes: lockstep determinism, crashes, isolation, bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+PEER = Path(__file__).with_name("twin_peer.py")
+HOME = (0.0, -0.35, 0.0, -2.3, 0.0, 1.95, 0.785)
+
+
+def _twin(env: dict[str, str], dataset: Path, out: Path, *args: str) -> subprocess.Popen[bytes]:
+    cmd = [
+        sys.executable,
+        "-m",
+        "twin.cli",
+        "twin-node",
+        "--dataset",
+        str(dataset),
+        "--out",
+        str(out),
+        *args,
+    ]
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+
+def _peer(env: dict[str, str], *args: str) -> subprocess.Popen[bytes]:
+    return subprocess.Popen(
+        [sys.executable, str(PEER), *args],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+
+
+def _finish(proc: subprocess.Popen[bytes], timeout_s: float = 90.0) -> int:
+    try:
+        proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        raise
+    return proc.returncode
+
+
+def _summary(out: Path) -> dict[str, Any]:
+    return json.loads((out / "summary.json").read_text(encoding="utf-8"))
+
+
+LOCKSTEP = (
+    "--mode",
+    "lockstep",
+    "--duration",
+    "2.0",
+    "--speed",
+    "0.4",
+    "--prefill",
+    "1.2",
+    "--objects",
+    "20",
+    "--seed",
+    "3",
+    "--ack-timeout",
+    "1.0",
+)
+
+
+@pytest.mark.usefixtures("require_interfaces")
+def test_lockstep_is_deterministic_with_an_external_controller(
+    ros_env_factory: Any,
+    builtin_meshes: Path,
+    tmp_path: Path,
+) -> None:
+    runs = []
+    for i in range(2):
+        env = ros_env_factory()
+        out = tmp_path / f"run{i}"
+        twin = _twin(env, builtin_meshes, out, *LOCKSTEP)
+        peer = _peer(env, "lockstep", str(tmp_path / f"peer{i}.json"))
+        assert _finish(twin) == 0, twin.stderr.read().decode()[-3000:] if twin.stderr else ""
+        _finish(peer)
+        runs.append((out, json.loads((tmp_path / f"peer{i}.json").read_text())))
+    (a, peer_a), (b, peer_b) = runs
+    sa, sb = _summary(a), _summary(b)
+    assert sa["lockstep_timeouts"] == sb["lockstep_timeouts"] == 0
+    # every 24th tick of 0..479 (tick 480 is the last published; the episode ends there)
+    assert sa["received_commands"] == sb["received_commands"] == 20
+    assert peer_a["handled"] == peer_b["handled"] == 481
+    assert sa["final_state"] == sb["final_state"]
+    assert sa["final_state"]["joint_positions"] != list(HOME)
+    assert (a / "events.jsonl").read_bytes() == (b / "events.jsonl").read_bytes()
+
+
+@pytest.mark.usefixtures("require_interfaces")
+def test_controller_crash_is_recorded_and_the_episode_completes(
+    ros_env: dict[str, str],
+    builtin_meshes: Path,
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "run"
+    twin = _twin(ros_env, builtin_meshes, out, *LOCKSTEP)
+    peer = _peer(ros_env, "lockstep", str(tmp_path / "peer.json"), "--die-after", "100")
+    assert _finish(peer) == 3
+    assert _finish(twin) == 0
+    summary = _summary(out)
+    assert summary["complete"] is True
+    assert summary["sim_seconds"] == pytest.approx(2.0)
+    assert summary["lockstep_timeouts"] == 1
+    faults = [
+        json.loads(line)
+        for line in (out / "events.jsonl").read_text().splitlines()
+        if json.loads(line)["type"] == "fault"
+    ]
+    assert [f["data"]["kind"] for f in faults] == ["controller_timeout"]
+    assert faults[0]["step"] == 100
+
+
+@pytest.mark.usefixtures("require_interfaces")
+def test_parallel_runs_on_separate_domains_do_not_cross_talk(
+    ros_env_factory: Any,
+    builtin_meshes: Path,
+    tmp_path: Path,
+) -> None:
+    procs = []
+    for i, speed in enumerate(("0.2", "0.5")):
+        env = ros_env_factory()
+        procs.append(
+            _twin(
+                env,
+                builtin_meshes,
+                tmp_path / f"run{i}",
+                "--speed",
+                speed,
+                "--duration",
+                "6",
+                "--objects",
+                "5",
+            )
+        )
+        procs.append(_peer(env, "listen", str(tmp_path / f"listen{i}.json"), "5"))
+    for proc in procs:
+        assert _finish(proc) == 0
+    seen = [json.loads((tmp_path / f"listen{i}.json").read_text()) for i in range(2)]
+    assert seen[0]["setpoints"] == [0.2]
+    assert seen[1]["setpoints"] == [0.5]
+    assert all(s["counts"]["/conveyor/state"] > 20 for s in seen)
+
+
+@pytest.mark.usefixtures("require_interfaces")
+def test_every_topic_flows_and_bad_commands_are_rejected_and_counted(
+    ros_env: dict[str, str],
+    builtin_meshes: Path,
+    tmp_path: Path,
+) -> None:
+    import rclpy
+    from cdw_interfaces.msg import (
+        BeltState,
+        DetectionArray,
+        ObjectStateArray,
+        Ping,
+        SortingEvent,
+        SortingPriorities,
+    )
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.experimental.events_executor import EventsExecutor
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64, String
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from twin.ros_node import CLOCK_QOS, EVENT_QOS, GT_QOS, LATCHED_QOS, STATE_QOS, STREAM_QOS
+
+    out = tmp_path / "run"
+    twin = _twin(
+        ros_env,
+        builtin_meshes,
+        out,
+        "--duration",
+        "8",
+        "--speed",
+        "0.4",
+        "--prefill",
+        "1.5",
+        "--objects",
+        "20",
+        "--perception",
+        "zero",
+    )
+    saved = dict(os.environ)
+    os.environ.update(ros_env)
+    rclpy.init()
+    try:
+        node = rclpy.create_node("test_client")
+        executor = EventsExecutor()
+        executor.add_node(node)
+        got: dict[str, list[Any]] = {}
+
+        def keep(topic: str) -> Any:
+            return lambda msg: got.setdefault(topic, []).append(msg)
+
+        for topic, kind, qos in (
+            ("/clock", Clock, CLOCK_QOS),
+            ("/joint_states", JointState, STATE_QOS),
+            ("/tcp_pose", PoseStamped, STATE_QOS),
+            ("/conveyor/state", BeltState, STATE_QOS),
+            ("/objects/detections", DetectionArray, STATE_QOS),
+            ("/objects/ground_truth", ObjectStateArray, GT_QOS),
+            ("/events", SortingEvent, EVENT_QOS),
+            ("/ping/echo", Ping, STREAM_QOS),
+            ("/twin/faults", String, STREAM_QOS),
+        ):
+            node.create_subscription(kind, topic, keep(topic), qos)
+        arm = node.create_publisher(JointTrajectory, "/arm_controller/joint_trajectory", STATE_QOS)
+        gripper = node.create_publisher(Float64, "/gripper/command", STATE_QOS)
+        setpoint = node.create_publisher(Float64, "/conveyor/speed_setpoint", STATE_QOS)
+        priorities = node.create_publisher(SortingPriorities, "/sorting/priorities", LATCHED_QOS)
+        ping = node.create_publisher(Ping, "/ping", STREAM_QOS)
+
+        def spin(seconds: float) -> None:
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.02)
+
+        deadline = time.monotonic() + 60
+        while "/clock" not in got or arm.get_subscription_count() == 0:
+            spin(0.1)
+            assert time.monotonic() < deadline, "the twin node did not come up"
+        arm_names = [f"panda_joint{i}" for i in range(1, 8)]
+
+        def point(q: list[float]) -> JointTrajectory:
+            return JointTrajectory(
+                joint_names=arm_names, points=[JointTrajectoryPoint(positions=q)]
+            )
+
+        arm.publish(
+            JointTrajectory(
+                joint_names=arm_names[:6], points=[JointTrajectoryPoint(positions=list(HOME[:6]))]
+            )
+        )
+        arm.publish(point([math.nan, *HOME[1:]]))
+        arm.publish(point([0.0, 3.5, *HOME[2:]]))
+        gripper.publish(Float64(data=0.5))
+        setpoint.publish(Float64(data=-0.3))
+        setpoint.publish(Float64(data=50.0))
+        priorities.publish(SortingPriorities(classes=["wood", "plastic"]))
+        for seq in range(20):
+            ping.publish(Ping(seq=seq, client_send_ns=time.monotonic_ns()))
+            spin(0.02)
+        spin(1.0)
+    finally:
+        rclpy.shutdown()
+        os.environ.clear()
+        os.environ.update(saved)
+    assert _finish(twin) == 0
+    for topic in (
+        "/clock",
+        "/joint_states",
+        "/tcp_pose",
+        "/conveyor/state",
+        "/objects/detections",
+        "/objects/ground_truth",
+        "/events",
+        "/ping/echo",
+        "/twin/faults",
+    ):
+        assert got.get(topic), f"nothing on {topic}"
+    assert len(got["/ping/echo"]) == 20
+    assert any(d.detections for d in got["/objects/detections"])
+    assert {msg.type for msg in got["/events"]} >= {"spawned"}
+    summary = _summary(out)
+    assert summary["rejected_commands"] == {
+        "wrong_joint_count": 1,
+        "not_finite": 1,
+        "beyond_limits": 2,
+        "bad_setpoint": 2,
+        "unknown_class": 1,
+    }
+    assert summary["final_state"]["joint_positions"] == pytest.approx(HOME, abs=2e-3)
+    assert got["/conveyor/state"][-1].setpoint_mps == pytest.approx(0.4)
+    assert len(got["/twin/faults"]) == 7
