@@ -11,7 +11,7 @@ When the control update runs:
   fresh state is there, so no timer phase adds latency, and no wall clock is involved.
 - lockstep: on ``/lockstep/tick`` k, once the messages the tick counts have all arrived; every
   ``steps_per_update``-th tick at the tick's sim time. Every tick is acknowledged with the
-  cumulative number of command messages published so far.
+  number of command messages published for that tick (per-tick counts survive restarts).
 
 Incoming messages are queued with their arrival index and applied in a fixed order (belt,
 detections, joint states) up to the counts of the tick, so the same inputs give the same
@@ -187,7 +187,8 @@ class ControllerNode(Node):
         self._belt_inbox: deque[tuple[int, BeltState]] = deque()
         self._det_inbox: deque[tuple[int, DetectionArray]] = deque()
         self._ticks: deque[tuple[LockstepTick, float]] = deque()
-        self._offsets: tuple[int, int, int] | None = None
+        self._consumed: tuple[int, int, int] | None = None
+        self._acked_commands = 0
         self._last_control_tick = -1
         self._last_update_s = -math.inf
         self._last_q_cmd: FloatArray | None = None
@@ -286,32 +287,35 @@ class ControllerNode(Node):
                 self._received["/conveyor/state"],
                 self._received["/objects/detections"],
             )
-            if self._offsets is None:
-                # Started after the cell (or discovery missed the first messages): whatever was
-                # published before the first tick seen is not coming.
-                self._offsets = (
-                    max(counted[0] - received[0], 0),
-                    max(counted[1] - received[1], 0),
-                    max(counted[2] - received[2], 0),
+            if self._consumed is None:
+                # Started after the cell (a restart, or discovery missed messages): whatever
+                # arrived before this tick's own messages belongs to earlier ticks.
+                self._consumed = (
+                    max(received[0] - counted[0], 0),
+                    max(received[1] - counted[1], 0),
+                    max(received[2] - counted[2], 0),
                 )
-            off = self._offsets
-            need = (counted[0] - off[0], counted[1] - off[1], counted[2] - off[2])
+            done = self._consumed
+            need = (done[0] + counted[0], done[1] + counted[1], done[2] + counted[2])
             if any(r < n for r, n in zip(received, need, strict=True)):
                 return
             self._ticks.popleft()
             self._consume(need)
+            self._consumed = need
             k = int(tick.tick)
             if k > self._last_control_tick and k % self._steps_per_update == 0:
                 self._last_control_tick = k
                 self._control(stamp_to_s(tick.stamp))
-            self.pub_ack.publish(StepAck(tick=k, n_commands=self.n_commands))
+            sent = self.n_commands - self._acked_commands
+            self._acked_commands = self.n_commands
+            self.pub_ack.publish(StepAck(tick=k, n_commands=sent))
             self.ticks_acked += 1
             self.tick_to_ack_wall_s.append(time.perf_counter() - arrived_wall_s)
 
     # -- control ----------------------------------------------------------------------------
     @property
     def n_commands(self) -> int:
-        """Cumulative command messages published (the lockstep acknowledgement's count)."""
+        """Cumulative command messages published (acks carry the per-tick difference)."""
         return sum(self.published[topic] for topic in COMMAND_TOPICS)
 
     def _ensure_controller(self, q: FloatArray) -> PickController:

@@ -43,6 +43,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("bench", "rtt"), "twin.bench_rtt", "round-trip latency to the twin node over ROS 2"),
     (("twin-node",), "twin.cmd_node", "run the twin as a ROS 2 node"),
     (("controller",), "control.cmd_controller", "run the controller as a ROS 2 node"),
+    (("run",), "experiments.run", "closed-loop episodes: twin node + controller processes"),
     (("demo",), "twin.cmd_demo", "the main job: sample, mesh, simulate, summarise"),
 )
 

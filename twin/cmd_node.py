@@ -127,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
             "scenario": scenario.name,
             "seed": scenario.seed,
             "mode": args.mode,
+            "belt_speed_mps": scenario.system.belt_speed_mps,
             "complete": not interrupted,
             "sim_seconds": twin.time_s,
             "wall_seconds": wall,

@@ -16,6 +16,8 @@ import pybullet as pb
 from twin.config import RobotConfig
 from twin.errors import SceneError
 
+HOLD_S = 0.05
+
 
 @dataclass(frozen=True)
 class JointLimits:
@@ -82,7 +84,9 @@ class Robot:
         self._finger_effort = [max(float(infos[j][10]), 20.0) for j in self.finger_joints]
         self.robot_links = frozenset(links.values()) | {-1}
         self._q_target = np.array(config.home_joint_positions, dtype=float)
+        self._q_command = self._q_target.copy()
         self._qd_target = np.zeros(len(self.arm_joints))
+        self._since_command_s = 0.0
         self._gripper_width_m = config.max_opening_m
         self.reset()
 
@@ -101,18 +105,35 @@ class Robot:
         for j, q in zip(self.finger_joints, self.config.finger_open, strict=True):
             pb.resetJointState(self.body, j, q, 0.0, physicsClientId=self.client)
         self._q_target = np.array(self.config.home_joint_positions, dtype=float)
+        self._q_command = self._q_target.copy()
         self._qd_target = np.zeros(len(self.arm_joints))
+        self._since_command_s = 0.0
         self._gripper_width_m = self.config.max_opening_m
         self.apply_commands()
 
     def command(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
-        """Set arm joint position targets (and feed-forward velocities); clipped to the limits."""
-        self._q_target = np.clip(np.asarray(q, dtype=float), self.limits.lower, self.limits.upper)
+        """Set arm joint position targets (and feed-forward velocities); clipped to the limits.
+
+        With velocities, the position target moves on with them between commands (as a
+        trajectory controller interpolates a point with velocity), for up to ``HOLD_S``.
+        """
+        self._q_command = np.clip(np.asarray(q, dtype=float), self.limits.lower, self.limits.upper)
+        self._q_target = self._q_command.copy()
         self._qd_target = (
             np.zeros(len(self.arm_joints))
             if qd is None
             else np.clip(np.asarray(qd, dtype=float), -self.limits.velocity, self.limits.velocity)
         )
+        self._since_command_s = 0.0
+
+    def extrapolate(self, dt_s: float) -> None:
+        """Advance the position target along the commanded velocity by one step."""
+        if not self._qd_target.any() or self._since_command_s >= HOLD_S:
+            return
+        self._since_command_s += dt_s
+        q = self._q_command + self._qd_target * min(self._since_command_s, HOLD_S)
+        self._q_target = np.clip(q, self.limits.lower, self.limits.upper)
+        self.apply_commands()
 
     def command_gripper(self, width_m: float) -> None:
         """Set the gripper opening in metres (0 = closed, ``max_opening_m`` = open)."""

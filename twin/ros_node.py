@@ -387,6 +387,9 @@ def run_loop(
             next_wall = time.perf_counter()
 
 
+RESYNC_WAIT_S = 10.0
+
+
 def _lockstep(
     node: TwinNode,
     spin_once: Callable[..., None],
@@ -403,10 +406,16 @@ def _lockstep(
         twin.record_fault("controller_timeout", "no controller subscribed before the start")
     first_wait = start_timeout_s
     node.publish_step([])
+    acks_at_loss = -1
     while twin.time_s < duration - 1e-9:
         tick = twin.step_count
-        if controller_alive or node.last_ack_tick >= tick:
-            wait_until = time.monotonic() + (first_wait if tick == 0 else ack_timeout_s)
+        resync = not controller_alive and node.last_ack_tick > acks_at_loss
+        if resync:
+            # a (restarted) controller acknowledges ticks again: wait for it to catch up
+            controller_alive = True
+        if controller_alive:
+            wait_s = first_wait if tick == 0 else (RESYNC_WAIT_S if resync else ack_timeout_s)
+            wait_until = time.monotonic() + wait_s
             while not node.tick_ready(tick):
                 remaining = wait_until - time.monotonic()
                 if remaining <= 0:
@@ -420,6 +429,8 @@ def _lockstep(
                     f"no acknowledgement of tick {tick} within {ack_timeout_s} s",
                 )
             controller_alive = ok
+            if not ok:
+                acks_at_loss = node.last_ack_tick
             node.consume_tick(tick)
         else:
             spin_once(timeout_sec=0.0)

@@ -244,6 +244,8 @@ class Twin:
         world, robot, monitor, drive = self._started()
         if action is not None:
             self.command(action)
+        if action is None:
+            robot.extrapolate(self.dt_s)
         self._apply_schedule()
         if self.step_count % self._fmu_every == 0:
             self._belt_state = drive.step(
