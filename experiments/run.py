@@ -38,9 +38,20 @@ from pathlib import Path
 from typing import Any
 
 METRIC_KEYS = (
-    "speed_mps", "seed", "mode", "picks", "placed_correct", "targeted", "untargeted_total",
-    "success_rate", "miss_rate", "throughput_per_min", "tracking_time_4mm_mean_s",
-    "tracking_time_4mm_p95_s", "real_time_factor", "faults",
+    "speed_mps",
+    "seed",
+    "mode",
+    "picks",
+    "placed_correct",
+    "targeted",
+    "untargeted_total",
+    "success_rate",
+    "miss_rate",
+    "throughput_per_min",
+    "tracking_time_4mm_mean_s",
+    "tracking_time_4mm_p95_s",
+    "real_time_factor",
+    "faults",
 )
 
 
@@ -71,8 +82,16 @@ def _cli() -> list[str]:
 
 
 def _twin_args(args: argparse.Namespace, episode: EpisodeSpec) -> list[str]:
-    cmd = [*_cli(), "twin-node", "--mode", args.mode, "--seed", str(episode.seed),
-           "--out", str(episode.folder / "twin")]
+    cmd = [
+        *_cli(),
+        "twin-node",
+        "--mode",
+        args.mode,
+        "--seed",
+        str(episode.seed),
+        "--out",
+        str(episode.folder / "twin"),
+    ]
     if args.scenario is not None:
         cmd += ["--scenario", str(args.scenario)]
     if args.speed is not None:
@@ -98,14 +117,18 @@ def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
     ctl = json.loads(ctl_path.read_text(encoding="utf-8")) if ctl_path.is_file() else {}
     pick = ctl.get("pick") or {}
     scores = twin["scores"]
-    targeted = int(pick.get("completed", 0)) + sum(int(v) for v in
-                                                  (pick.get("aborted") or {}).values())
+    targeted = int(pick.get("completed", 0)) + sum(
+        int(v) for v in (pick.get("aborted") or {}).values()
+    )
     untargeted = {str(k): int(v) for k, v in (pick.get("untargeted") or {}).items()}
     placed_correct = int(scores["placed_correct"])
     minutes = float(twin["sim_seconds"]) / 60.0
     tracking = twin["tracking"]
-    faults = sum(1 for line in (folder / "twin" / "events.jsonl").read_text().splitlines()
-                 if '"type": "fault"' in line)
+    faults = sum(
+        1
+        for line in (folder / "twin" / "events.jsonl").read_text().splitlines()
+        if '"type": "fault"' in line
+    )
     return {
         "speed_mps": twin.get("belt_speed_mps"),
         "seed": twin["seed"],
@@ -134,14 +157,18 @@ def run_episode(args: argparse.Namespace, episode: EpisodeSpec) -> dict[str, Any
 
     episode.folder.mkdir(parents=True, exist_ok=True)
     clean_stale_fastdds_shm()
-    with ros_domain() as domain, \
-            (episode.folder / "twin.log").open("wb") as twin_log, \
-            (episode.folder / "controller.log").open("wb") as ctl_log:
+    with (
+        ros_domain() as domain,
+        (episode.folder / "twin.log").open("wb") as twin_log,
+        (episode.folder / "controller.log").open("wb") as ctl_log,
+    ):
         env = {**os.environ, **domain.env}
-        twin = subprocess.Popen(_twin_args(args, episode), env=env, stdout=twin_log,
-                                stderr=subprocess.STDOUT)
-        controller = subprocess.Popen(_controller_args(args, episode), env=env, stdout=ctl_log,
-                                      stderr=subprocess.STDOUT)
+        twin = subprocess.Popen(
+            _twin_args(args, episode), env=env, stdout=twin_log, stderr=subprocess.STDOUT
+        )
+        controller = subprocess.Popen(
+            _controller_args(args, episode), env=env, stdout=ctl_log, stderr=subprocess.STDOUT
+        )
         try:
             code = twin.wait()
         finally:
@@ -177,8 +204,9 @@ def _write(path: Path, text: str) -> None:
     write_atomic(path, text)
 
 
-def write_tables(out: Path, rows: list[dict[str, Any]], complete: bool,
-                 extra: dict[str, Any]) -> dict[str, Any]:
+def write_tables(
+    out: Path, rows: list[dict[str, Any]], complete: bool, extra: dict[str, Any]
+) -> dict[str, Any]:
     """``episodes.json``, ``episodes.csv`` and ``run.json`` (atomically)."""
     _write(out / "episodes.json", json.dumps(rows, indent=2) + "\n")
     buffer = io.StringIO()
@@ -195,9 +223,15 @@ def run(args: argparse.Namespace) -> int:
     """Run the episodes and summarise them."""
     from twin.cmd_node import build_scenario
 
-    node_args = argparse.Namespace(scenario=args.scenario, dataset=args.dataset, speed=args.speed,
-                                   duration=args.duration, seed=args.seed, objects=None,
-                                   prefill=None)
+    node_args = argparse.Namespace(
+        scenario=args.scenario,
+        dataset=args.dataset,
+        speed=args.speed,
+        duration=args.duration,
+        seed=args.seed,
+        objects=None,
+        prefill=None,
+    )
     scenario, dataset = build_scenario(node_args)
     if args.dataset is None:
         args.dataset = dataset
@@ -205,8 +239,11 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.out or Path("runs") / f"{scenario.name}-{stamp}"
     out.mkdir(parents=True, exist_ok=True)
     _write(out / "scenario.yaml", scenario.to_yaml())
-    extra = {"scenario": scenario.name, "mode": args.mode,
-             "speed_mps": scenario.system.belt_speed_mps}
+    extra = {
+        "scenario": scenario.name,
+        "mode": args.mode,
+        "speed_mps": scenario.system.belt_speed_mps,
+    }
     rows: list[dict[str, Any]] = []
     write_tables(out, rows, complete=False, extra=extra)
     for i in range(args.episodes):
@@ -218,9 +255,14 @@ def run(args: argparse.Namespace) -> int:
         rows.append(metrics)
         write_tables(out, rows, complete=False, extra=extra)
     summary = write_tables(out, rows, complete=True, extra=extra)
-    result = {**summary["mean"], "speed_mps": scenario.system.belt_speed_mps, "mode": args.mode,
-              "episodes": len(rows), "out": str(out),
-              "untargeted": rows[-1]["untargeted"] if rows else {}}
+    result = {
+        **summary["mean"],
+        "speed_mps": scenario.system.belt_speed_mps,
+        "mode": args.mode,
+        "episodes": len(rows),
+        "out": str(out),
+        "untargeted": rows[-1]["untargeted"] if rows else {},
+    }
     if args.json:
         print(json.dumps(result))
     else:
