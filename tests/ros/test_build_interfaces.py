@@ -30,11 +30,13 @@ def test_every_message_of_the_contract_is_defined(build_script: ModuleType) -> N
         "BeltState",
         "Detection",
         "DetectionArray",
+        "LockstepTick",
         "ObjectState",
         "ObjectStateArray",
         "PickTarget",
         "Ping",
         "SortingEvent",
+        "SortingPriorities",
         "StepAck",
     ]
 
