@@ -84,10 +84,19 @@ def _outline(rng: np.random.Generator, cls: str) -> np.ndarray:
     return np.stack((r * np.cos(theta), aspect * r * np.sin(theta)), axis=1)
 
 
-def write_sample(out: Path, images: int = 24, seed: int = 0) -> SampleSummary:
-    """Write the procedural YOLO-seg sample to ``out`` (created; files replaced atomically)."""
+def write_sample(
+    out: Path, images: int = 24, seed: int = 0, objects_per_image: tuple[int, int] = (3, 7)
+) -> SampleSummary:
+    """Write the procedural YOLO-seg sample to ``out`` (created; files replaced atomically).
+
+    Each image holds between ``objects_per_image[0]`` and ``objects_per_image[1]`` objects.
+    """
     if images < 1:
         msg = f"--images must be >= 1, got {images}"
+        raise OutputError(msg)
+    lo, hi = objects_per_image
+    if not 1 <= lo <= hi:
+        msg = f"objects per image must satisfy 1 <= min <= max, got {objects_per_image}"
         raise OutputError(msg)
     out = Path(out)
     (out / "images").mkdir(parents=True, exist_ok=True)
@@ -101,7 +110,7 @@ def write_sample(out: Path, images: int = 24, seed: int = 0) -> SampleSummary:
         m_per_px = BELT_WIDTH_M / width
         stem = f"sample_{i:03d}"
         lines = []
-        n_obj = int(rng.integers(3, 8))
+        n_obj = int(rng.integers(lo, hi + 1))
         for k in range(n_obj):
             cls_id = int(rng.integers(0, len(CLASS_NAMES)))
             pts_m = _outline(rng, CLASS_NAMES[cls_id])

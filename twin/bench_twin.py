@@ -1,7 +1,8 @@
 """``cdw-twin bench twin``: the twin's real-time factor, and its step rate when paced.
 
 Headless (default): the arm (moving through a scripted joint-space sweep) and ``--objects``
-objects on the belt at 240 Hz, FMU co-simulation and event detection included; prints
+objects on the belt at 240 Hz, FMU co-simulation and event detection included (simulated
+perception, which only the ROS node publishes, is off); prints
 ``real_time_factor`` = simulated seconds / wall seconds. The belt starts full (prefilled) so the
 object count holds for the whole measurement.
 
@@ -51,15 +52,15 @@ def run(args: argparse.Namespace) -> int:
     from twin.scenario import ObjectLevel, Scenario, SystemLevel
     from twin.sim import ArmCommand, Twin
 
-    dataset = args.dataset or builtin_dataset()
+    dataset = args.dataset or builtin_dataset(dense=True)
     seconds = args.seconds if args.seconds is not None else (60.0 if args.realtime else 4.0)
     scenario = Scenario(
         name="bench-twin",
         duration_s=seconds,
         objects=ObjectLevel(max_objects=args.objects),
-        system=SystemLevel(belt_speed_mps=args.speed, image_gap_m=0.0, prefill_m=2.2),
+        system=SystemLevel(belt_speed_mps=args.speed, image_gap_m=0.0, prefill_m=1.75),
     )
-    with Twin(scenario, dataset_dir=dataset) as twin:
+    with Twin(scenario, dataset_dir=dataset, perception_enabled=False) as twin:
         twin.reset(seed=0)
         assert twin.robot is not None
         home = np.array(twin.cell.robot.home_joint_positions)

@@ -25,19 +25,28 @@ def cache_root() -> Path:
 
 
 def builtin_dataset(
-    root: Path | None = None, *, images: int = SAMPLE_IMAGES, seed: int = SAMPLE_SEED
+    root: Path | None = None,
+    *,
+    images: int = SAMPLE_IMAGES,
+    seed: int = SAMPLE_SEED,
+    dense: bool = False,
 ) -> Path:
-    """Path of the meshed built-in sample, generating and meshing it on first use."""
+    """Path of the meshed built-in sample, generating and meshing it on first use.
+
+    ``dense`` packs 9 to 12 objects into each image (clutter; the 40-object benchmark).
+    """
     from meshgen.config import MeshgenConfig
     from meshgen.pipeline import mesh_dataset
     from meshgen.sample import write_sample
 
-    base = (root or cache_root()) / f"builtin-i{images}-s{seed}"
+    per_image = (9, 12) if dense else (3, 7)
+    name = f"builtin-i{images}-s{seed}" + ("-dense" if dense else "")
+    base = (root or cache_root()) / name
     meshes = base / "meshes"
     if (meshes / "index.csv").is_file():
         return meshes
     sample = base / "sample"
     if not (sample / "data.yaml").is_file():
-        write_sample(sample, images=images, seed=seed)
+        write_sample(sample, images=images, seed=seed, objects_per_image=per_image)
     mesh_dataset(sample, meshes, MeshgenConfig(seed=seed))
     return meshes

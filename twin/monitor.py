@@ -23,6 +23,7 @@ Fates and events:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import pybullet as pb
@@ -204,12 +205,41 @@ class Monitor:
                 )
             )
 
+        surface_z = belt.surface_z_m
+        start_x, end_x = belt.start_x_m, belt.end_x_m
+        centre_y, half_w = belt.centre_y_m, 0.5 * belt.width_m
+        ws_lo, ws_hi = ws.min_x_m, ws.max_x_m
+        tcp_x, tcp_y = tcp_pos[0], tcp_pos[1]
+        near2 = _NEAR_TCP_M**2
         for record in self._records:
             if not record.active:
                 continue
             pos, orn = pb.getBasePositionAndOrientation(record.body, physicsClientId=c)
             record.position, record.orientation = pos, orn
             x, y, z = pos
+            # fast path: riding the belt, away from the robot, nothing to detect but the window
+            if (
+                not record.held
+                and z > surface_z
+                and start_x <= x <= end_x
+                and abs(y - centre_y) <= half_w
+                and (x - tcp_x) ** 2 + (y - tcp_y) ** 2 >= near2
+                and record.overlap_since is None
+                and not record.fingers
+                and not record.arm_links
+                and record.id not in fingers
+                and record.id not in arm
+            ):
+                record.on_belt = True
+                load += record.mass_kg
+                in_ws = ws_lo <= x <= ws_hi
+                if in_ws != record.in_workspace:
+                    if in_ws:
+                        emit(EventType.ENTERED_WORKSPACE, record, x_m=x)
+                    else:
+                        self._left_workspace(record, x, emit)
+                    record.in_workspace = in_ws
+                continue
             # -- release of a held object
             if record.held and gripper_open:
                 self._release(record)
@@ -250,19 +280,7 @@ class Monitor:
             if in_ws and not record.in_workspace:
                 emit(EventType.ENTERED_WORKSPACE, record, x_m=x)
             elif record.in_workspace and not in_ws:
-                direction = (
-                    "lifted"
-                    if record.held
-                    else "downstream"
-                    if x > ws.max_x_m
-                    else "upstream"
-                    if x < ws.min_x_m
-                    else "off_belt"
-                )
-                emit(EventType.LEFT_WORKSPACE, record, direction=direction, x_m=x)
-                if direction == "downstream" and not record.picked and not record.missed:
-                    record.missed = True
-                    emit(EventType.MISSED, record)
+                self._left_workspace(record, x, emit)
             record.in_workspace = in_ws
             # -- TCP overlap
             overlap = False
@@ -323,6 +341,21 @@ class Monitor:
                 )
         self.load_mass_kg = load
         return events
+
+    def _left_workspace(self, record: _Record, x: float, emit: Callable[..., None]) -> None:
+        ws = self.cell.workspace
+        if record.held:
+            direction = "lifted"
+        elif x > ws.max_x_m:
+            direction = "downstream"
+        elif x < ws.min_x_m:
+            direction = "upstream"
+        else:
+            direction = "off_belt"
+        emit(EventType.LEFT_WORKSPACE, record, direction=direction, x_m=x)
+        if direction == "downstream" and not record.picked and not record.missed:
+            record.missed = True
+            emit(EventType.MISSED, record)
 
     def _opposite(self, touching: dict[int, tuple[float, float, float]]) -> bool:
         if len(self.robot.finger_links) < 2 or len(touching) < len(self.robot.finger_links):

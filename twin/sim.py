@@ -90,6 +90,7 @@ class Twin:
         fmu_path: Path | None = None,
         fmu_parameters: dict[str, float] | None = None,
         perception: PerceptionConfig | None = None,
+        perception_enabled: bool = True,
         realtime: bool = False,
         gui: bool = False,
     ) -> None:
@@ -106,6 +107,7 @@ class Twin:
         self._fmu_parameters = dict(fmu_parameters or {})
         self.realtime = realtime
         self.perception_config = perception or PerceptionConfig()
+        self.perception_enabled = perception_enabled
         self.perception: Perception | None = None
         self.targets = TargetTracker()
         self._released: list[DetectionFrame] = []
@@ -263,7 +265,7 @@ class Twin:
                     self.targets.finish(self.time_s)
             tcp, _ = robot.tcp_pose()
             self.targets.update(self.time_s, tcp, monitor.pose_of)
-        if self.perception is not None:
+        if self.perception is not None and self.perception_enabled:
             if self.perception.capture_due(self.step_count):
                 self.perception.capture(self.time_s, monitor.ground_truth())
             self._released.extend(self.perception.released(self.time_s))
