@@ -29,21 +29,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _twin_command(objects: int, seconds: float) -> list[str]:
+    from twin.builtin import builtin_dataset
+
+    dataset = builtin_dataset(dense=True)
     return [
-        sys.executable,
-        "-m",
-        "twin.cli",
-        "twin-node",
-        "--mode",
-        "realtime",
-        "--objects",
-        str(objects),
-        "--prefill",
-        "2.2",
-        "--speed",
-        "0.2",
-        "--duration",
-        f"{seconds:.1f}",
+        *(sys.executable, "-m", "twin.cli", "twin-node", "--mode", "realtime"),
+        *("--dataset", str(dataset), "--objects", str(objects), "--prefill", "1.75"),
+        *("--speed", "0.2", "--duration", f"{seconds:.1f}"),
     ]
 
 

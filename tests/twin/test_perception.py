@@ -1,0 +1,105 @@
+"""Simulated perception: field of view, latency, and noise statistics against the configuration."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from twin.monitor import GroundTruth
+from twin.perception import Perception, PerceptionConfig, wrap_half_pi
+
+CLASSES = ("concrete", "brick", "wood", "rubber")
+
+
+def _object(i: int, x: float, *, on_belt: bool = True, yaw: float = 0.3) -> GroundTruth:
+    return GroundTruth(
+        id=i,
+        source_id=f"o{i}",
+        class_name=CLASSES[i % 4],
+        position_m=(x, 0.5, 0.03),
+        orientation_xyzw=(0.0, 0.0, 0.0, 1.0),
+        linear_velocity_mps=(0.4, 0.0, 0.0),
+        angular_velocity_radps=(0.0, 0.0, 0.0),
+        footprint_yaw_rad=yaw,
+        length_m=0.1,
+        width_m=0.05,
+        area_m2=0.005,
+        volume_m3=0.0002,
+        height_m=0.04,
+        mass_kg=0.4,
+        on_belt=on_belt,
+        in_workspace=False,
+        held=False,
+        in_bin=False,
+    )
+
+
+def test_zero_noise_is_exact_and_immediate_and_respects_the_field_of_view() -> None:
+    cfg = PerceptionConfig.zero_noise()
+    perception = Perception(cfg, CLASSES, 0.0, 1 / 240, np.random.default_rng(0))
+    objects = [_object(1, 0.0), _object(2, cfg.fov_max_x_m + 0.01), _object(3, -0.5, on_belt=False)]
+    frame = perception.capture(1.0, objects)
+    assert [(d.x_m, d.y_m, d.yaw_rad, d.class_name) for d in frame.detections] == [
+        (0.0, 0.5, 0.3, "brick")
+    ]
+    assert perception.released(1.0) == [frame]
+
+
+def test_latency_and_rate() -> None:
+    cfg = PerceptionConfig(latency_s=0.05, rate_hz=30.0)
+    perception = Perception(cfg, CLASSES, 0.0, 1 / 240, np.random.default_rng(0))
+    assert perception.every_n_steps == 8
+    assert [s for s in range(40) if perception.capture_due(s)] == [0, 8, 16, 24, 32]
+    perception.capture(2.0, [_object(1, 0.0)])
+    assert perception.released(2.049) == []
+    assert len(perception.released(2.05)) == 1
+
+
+def test_noise_drop_and_confusion_statistics_match_the_configuration() -> None:
+    cfg = PerceptionConfig(
+        position_noise_m=0.003,
+        yaw_noise_rad=0.05,
+        drop_rate=0.1,
+        misclassification_rate=0.2,
+        latency_s=0.0,
+    )
+    perception = Perception(cfg, CLASSES, 0.0, 1 / 240, np.random.default_rng(42))
+    objects = [_object(i, -1.0 + 0.02 * i) for i in range(1, 51)]
+    dx, dy, dyaw, kept, confused, total = [], [], [], 0, 0, 0
+    for frame_index in range(400):
+        frame = perception.capture(frame_index / 30.0, objects)
+        total += len(objects)
+        for det in frame.detections:
+            # nearest true object (noise is far smaller than the 2 cm spacing)
+            obj = min(objects, key=lambda o: abs(o.position_m[0] - det.x_m))
+            dx.append(det.x_m - obj.position_m[0])
+            dy.append(det.y_m - obj.position_m[1])
+            dyaw.append(wrap_half_pi(det.yaw_rad - obj.footprint_yaw_rad))
+            kept += 1
+            confused += det.class_name != obj.class_name
+    n = kept
+    assert np.std(dx) == pytest.approx(0.003, rel=0.03)
+    assert np.std(dy) == pytest.approx(0.003, rel=0.03)
+    assert abs(np.mean(dx)) < 4 * 0.003 / math.sqrt(n)
+    assert np.std(dyaw) == pytest.approx(0.05, rel=0.03)
+    drop = 1 - kept / total
+    assert abs(drop - 0.1) < 4 * math.sqrt(0.1 * 0.9 / total)
+    assert abs(confused / n - 0.2) < 4 * math.sqrt(0.2 * 0.8 / n)
+
+
+def test_same_seed_same_detections() -> None:
+    def frames(seed: int) -> list[tuple[float, ...]]:
+        perception = Perception(
+            PerceptionConfig(), CLASSES, 0.0, 1 / 240, np.random.default_rng(seed)
+        )
+        objs = [_object(i, -1.0 + 0.1 * i) for i in range(1, 10)]
+        return [
+            (d.x_m, d.y_m, d.yaw_rad)
+            for t in range(20)
+            for d in perception.capture(t / 30, objs).detections
+        ]
+
+    assert frames(1) == frames(1)
+    assert frames(1) != frames(2)
