@@ -37,6 +37,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from twin.fileio import write_atomic
+
 METRIC_KEYS = (
     "speed_mps",
     "seed",
@@ -198,24 +200,18 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return {k: _mean([r.get(k) for r in rows]) for k in keys}
 
 
-def _write(path: Path, text: str) -> None:
-    from twin.episode_log import write_atomic
-
-    write_atomic(path, text)
-
-
 def write_tables(
     out: Path, rows: list[dict[str, Any]], complete: bool, extra: dict[str, Any]
 ) -> dict[str, Any]:
     """``episodes.json``, ``episodes.csv`` and ``run.json`` (atomically)."""
-    _write(out / "episodes.json", json.dumps(rows, indent=2) + "\n")
+    write_atomic(out / "episodes.json", json.dumps(rows, indent=2) + "\n")
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=list(METRIC_KEYS), extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
-    _write(out / "episodes.csv", buffer.getvalue())
+    write_atomic(out / "episodes.csv", buffer.getvalue())
     summary = {"complete": complete, "episodes": len(rows), **extra, "mean": aggregate(rows)}
-    _write(out / "run.json", json.dumps(summary, indent=2) + "\n")
+    write_atomic(out / "run.json", json.dumps(summary, indent=2) + "\n")
     return summary
 
 
@@ -238,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out: Path = args.out or Path("runs") / f"{scenario.name}-{stamp}"
     out.mkdir(parents=True, exist_ok=True)
-    _write(out / "scenario.yaml", scenario.to_yaml())
+    write_atomic(out / "scenario.yaml", scenario.to_yaml())
     extra = {
         "scenario": scenario.name,
         "mode": args.mode,

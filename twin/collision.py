@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from twin.errors import SceneError
+from twin.fileio import write_atomic
 
 
 def read_pieces(path: Path) -> list[np.ndarray]:
@@ -140,8 +141,5 @@ def merged_collision_file(
     target = cache_dir / f"{source.stem}-{key}.obj"
     pieces = merge_pieces(read_pieces(source), tolerance, max_pieces)
     if not target.is_file():
-        cache_dir.mkdir(parents=True, exist_ok=True)
-        tmp = target.with_suffix(".tmp")
-        tmp.write_text(pieces_obj_text(pieces, source.name), encoding="utf-8")
-        tmp.replace(target)
+        write_atomic(target, pieces_obj_text(pieces, source.name))
     return target, len(pieces)

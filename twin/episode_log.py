@@ -7,8 +7,6 @@ Files (each written atomically, so a file that exists is complete):
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -16,20 +14,8 @@ from typing import Any
 import numpy as np
 
 from twin.events import Event
+from twin.fileio import write_atomic
 from twin.target_metric import TrackingResult
-
-
-def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        Path(tmp).replace(path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def tracking_summary(results: Iterable[TrackingResult]) -> dict[str, Any]:

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import pybullet as pb
 
@@ -86,7 +86,6 @@ class _Record:
     fingers: frozenset[int] = frozenset()
     arm_links: frozenset[int] = frozenset()
     constraint: int | None = None
-    extra: dict[str, float] = field(default_factory=dict)
 
 
 class Monitor:
@@ -106,6 +105,7 @@ class Monitor:
         self.load_mass_kg = 0.0
         self._held: _Record | None = None
         self._pending: list[Event] = []
+        self.tcp_pose = robot.tcp_pose()
 
     def add(self, placement: Placement, spawned: SpawnedBody, step: int, time_s: float) -> Event:
         """Register a freshly spawned object; returns its ``spawned`` event."""
@@ -189,7 +189,8 @@ class Monitor:
                 fingers.setdefault(record.id, {})[finger] = cp[7]
             else:
                 arm.setdefault(record.id, set()).add(cp[3])
-        tcp_pos, tcp_orn = self.robot.tcp_pose()
+        self.tcp_pose = self.robot.tcp_pose()
+        tcp_pos, tcp_orn = self.tcp_pose
         gripper_open = self.robot.gripper_width_target_m >= 0.5 * self.robot.config.max_opening_m
         load = 0.0
 

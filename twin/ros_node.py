@@ -246,7 +246,7 @@ class TwinNode(Node):
         joints.velocity = [float(v) for v in qd] + [0.0] * len(fingers)
         self.pub_joints.publish(joints)
         self._count("/joint_states")
-        pos, orn = robot.tcp_pose()
+        pos, orn = twin.tcp_pose
         pose = PoseStamped()
         pose.header.stamp = stamp
         pose.header.frame_id = "world"

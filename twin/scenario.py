@@ -17,8 +17,6 @@ Example ``experiments/scenarios/default.yaml``::
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, NamedTuple
@@ -28,6 +26,7 @@ import yaml
 
 from twin.dataclass_io import from_data, to_data
 from twin.errors import ConfigError
+from twin.fileio import write_atomic
 
 CLASS_NAMES: tuple[str, ...] = ("concrete", "brick", "wood", "rubber")
 
@@ -220,11 +219,7 @@ class Scenario:
 
     def save(self, path: Path) -> None:
         """Write the scenario atomically."""
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(self.to_yaml())
-        Path(tmp).replace(path)
+        write_atomic(path, self.to_yaml())
 
 
 class SeedTree(NamedTuple):

@@ -246,7 +246,7 @@ class Twin:
         world, robot, monitor, drive = self._started()
         if action is not None:
             self.command(action)
-        if action is None:
+        else:
             robot.extrapolate(self.dt_s)
         self._apply_schedule()
         if self.step_count % self._fmu_every == 0:
@@ -263,8 +263,7 @@ class Twin:
             for event in new:
                 if event.type is EventType.PICK_SUCCESS:
                     self.targets.finish(self.time_s)
-            tcp, _ = robot.tcp_pose()
-            self.targets.update(self.time_s, tcp, monitor.pose_of)
+            self.targets.update(self.time_s, monitor.tcp_pose[0], monitor.pose_of)
         if self.perception is not None and self.perception_enabled:
             if self.perception.capture_due(self.step_count):
                 self.perception.capture(self.time_s, monitor.ground_truth())
@@ -360,6 +359,12 @@ class Twin:
         """Ground truth of every object on the belt, held or in a bin."""
         _, _, monitor, _ = self._started()
         return monitor.ground_truth()
+
+    @property
+    def tcp_pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+        """TCP position and xyzw orientation after the last step (no new FK)."""
+        _, _, monitor, _ = self._started()
+        return monitor.tcp_pose
 
     @property
     def load_mass_kg(self) -> float:
