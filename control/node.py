@@ -12,6 +12,10 @@ When the control update runs:
 - lockstep: on ``/lockstep/tick`` k, once the messages the tick counts have all arrived; every
   ``steps_per_update``-th tick at the tick's sim time. Every tick is acknowledged with the
   number of command messages published for that tick (per-tick counts survive restarts).
+  No tick is handled before every command publisher and the ack publisher has matched a
+  subscriber: a volatile message sent before DDS discovery completes on the writer side is
+  lost, and the cell would then wait for a command that never comes. Ticks that arrive earlier
+  wait in the queue; a steady-clock timer re-checks the match every 5 ms.
 
 Incoming messages are queued with their arrival index and applied in a fixed order (belt,
 detections, joint states) up to the counts of the tick, so the same inputs give the same
@@ -38,6 +42,8 @@ from cdw_interfaces.msg import (
     StepAck,
 )
 from numpy.typing import NDArray
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -216,8 +222,25 @@ class ControllerNode(Node):
         self.create_subscription(
             SortingPriorities, "/sorting/priorities", self._on_priorities, LATCHED_QOS
         )
+        self._outputs_matched = False
         if lockstep:
             self.create_subscription(LockstepTick, "/lockstep/tick", self._on_tick, STREAM_QOS)
+            self._match_timer = self.create_timer(
+                0.005, self._on_match_timer, clock=Clock(clock_type=ClockType.STEADY_TIME)
+            )
+
+    def _on_match_timer(self) -> None:
+        if self._ticks:
+            self._drain_ticks()
+        if self._outputs_matched:
+            self._match_timer.cancel()
+
+    def outputs_matched(self) -> bool:
+        """Whether every command topic and the ack topic has a matched subscriber (sticky)."""
+        if not self._outputs_matched:
+            pubs = (self.pub_traj, self.pub_gripper, self.pub_target, self.pub_ack)
+            self._outputs_matched = all(p.get_subscription_count() > 0 for p in pubs)
+        return self._outputs_matched
 
     # -- inputs -----------------------------------------------------------------------------
     def _on_joint_state(self, msg: JointState) -> None:
@@ -279,6 +302,8 @@ class ControllerNode(Node):
 
     def _drain_ticks(self) -> None:
         """Handle every queued tick whose counted messages have all arrived, in order."""
+        if not self.outputs_matched():
+            return
         while self._ticks:
             tick, arrived_wall_s = self._ticks[0]
             counted = (int(tick.n_joint_states), int(tick.n_belt_states), int(tick.n_detections))

@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     from twin.sim import Twin
 
     scenario, dataset = build_scenario(args)
-    perception = PerceptionConfig.zero_noise() if args.perception == "zero" else PerceptionConfig()
+    perception = PerceptionConfig.zero_noise() if args.perception == "zero" else None
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     clean_stale_fastdds_shm()
     stop = {"requested": False}

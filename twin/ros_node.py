@@ -65,7 +65,7 @@ def _qos(depth: int, *, reliable: bool = True, latched: bool = False) -> QoSProf
 
 
 STATE_QOS = _qos(10)
-EVENT_QOS = _qos(1000)
+EVENT_QOS = _qos(1000, latched=True)
 STREAM_QOS = _qos(100)
 CLOCK_QOS = _qos(1, reliable=False)
 GT_QOS = _qos(1, reliable=False)
@@ -217,11 +217,13 @@ class TwinNode(Node):
             del self.acks[old]
 
     def peers_matched(self) -> bool:
-        """Whether a controller subscribes to the tick and state topics and acks us."""
-        return (
-            self.pub_tick.get_subscription_count() > 0
-            and self.pub_joints.get_subscription_count() > 0
-        )
+        """Whether a controller subscribes to the tick and every topic a tick counts.
+
+        A volatile message sent before the writer has matched its reader is lost, and the
+        controller would then wait for a counted message that never comes.
+        """
+        pubs = (self.pub_tick, self.pub_joints, self.pub_belt, self.pub_det)
+        return all(p.get_subscription_count() > 0 for p in pubs)
 
     # -- publishing -------------------------------------------------------------------------
     def _count(self, topic: str) -> None:
