@@ -75,7 +75,7 @@ class RobotConfig:
     )
     gripper_max_opening_m: float = field(default=0.08, metadata=_meta("float"))
     ready_tcp_position_m: tuple[float, float, float] = field(
-        default=(0.0, 0.45, 0.30), metadata=_meta("vec")
+        default=(-0.15, 0.5, 0.2), metadata=_meta("vec")
     )
     ready_yaw_rad: float = field(default=math.pi / 2, metadata=_meta("float"))
     ready_joint_positions_rad: tuple[float, ...] = field(
@@ -191,9 +191,14 @@ class TrackingConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class IkConfig:
-    """Damped-least-squares IK: ``log6`` error tolerance, damping, step and iteration limit."""
+    """Damped-least-squares IK: ``log6`` error tolerance, damping, step and iteration limit.
+
+    Iterations stop below ``tolerance``; a solution is accepted below ``accept_tolerance``
+    (1e-4 of the ``log6`` norm: 0.1 mm, 0.1 mrad) when the iteration limit comes first.
+    """
 
     tolerance: float = field(default=1e-9, metadata=_meta("float"))
+    accept_tolerance: float = field(default=1e-4, metadata=_meta("float"))
     damping: float = field(default=1e-8, metadata=_meta("float"))
     step: float = field(default=1.0, metadata=_meta("float"))
     max_iterations: int = field(default=100, metadata=_meta("int"))
@@ -201,7 +206,7 @@ class IkConfig:
 
     def __post_init__(self) -> None:
         """Validate every field."""
-        for name in ("tolerance", "step", "max_joint_step_rad"):
+        for name in ("tolerance", "accept_tolerance", "step", "max_joint_step_rad"):
             value = cast(float, getattr(self, name))
             _require(value > 0.0, f"ik.{name}", value, "must be > 0")
         _require(self.damping >= 0.0, "ik.damping", self.damping, "must be >= 0")
@@ -219,13 +224,14 @@ class MotionConfig:
     ``command_latency_s`` is the time between computing a command and the measured TCP
     reflecting it; targets are predicted that far ahead and the feedback compares the measured
     TCP with the setpoint of that long ago.
-    ``joint_velocity_margin`` scales the URDF joint velocity limits for the per-tick step check.
+    ``joint_velocity_margin`` scales the URDF joint velocity limits that bound every per-tick
+    joint step of the Cartesian moves (a faster IK solution is approached at that speed).
     """
 
     control_period_s: float = field(default=1.0 / 120.0, metadata=_meta("float"))
     command_latency_s: float = field(default=0.01, metadata=_meta("float"))
     max_velocity: tuple[float, float, float, float] = field(
-        default=(0.8, 0.8, 0.8, 1.2), metadata=_meta("vec")
+        default=(0.8, 0.8, 0.8, 2.4), metadata=_meta("vec")
     )
     max_acceleration: tuple[float, float, float, float] = field(
         default=(12.0, 12.0, 12.0, 20.0), metadata=_meta("vec")
@@ -239,7 +245,7 @@ class MotionConfig:
     transfer_speed_scale: float = field(default=0.9, metadata=_meta("float"))
     joint_max_acceleration_rps2: float = field(default=10.0, metadata=_meta("float"))
     joint_max_jerk_rps3: float = field(default=100.0, metadata=_meta("float"))
-    joint_velocity_margin: float = field(default=1.5, metadata=_meta("float"))
+    joint_velocity_margin: float = field(default=1.0, metadata=_meta("float"))
 
     def __post_init__(self) -> None:
         """Validate every field."""
@@ -293,14 +299,20 @@ class PickConfig:
     ``surface_z + max(height - grasp_below_top_m, height * grasp_height_fraction,
     min_grasp_height_m)``. The approach ends ``approach_height_m`` above it.
     ``arrive_tolerance_m`` and ``arrive_speed_tolerance_mps`` decide when a Ruckig segment has
-    caught its moving target; the gripper closes only once the yaw is within
-    ``yaw_tolerance_rad`` of the grasp yaw.
+    caught its moving target; the descent starts, and the gripper closes, only once the yaw is
+    within ``yaw_tolerance_rad`` of the grasp yaw.
+    The next target is chosen at the ready pose, or ``schedule_before_ready_s`` before the return
+    move reaches it (a pursuit starts near the belt, not from the bin).
+    ``ik_failures_to_abort`` consecutive IK failures (the last command held meanwhile) abort a
+    pick.
     ``lost_timeout_s`` aborts an approach whose target track vanished for that long (later
     phases extrapolate it with the belt velocity). ``grip_squeeze_m`` is how much narrower than
     the object the gripper is commanded to close.
     """
 
     approach_height_m: float = field(default=0.03, metadata=_meta("float"))
+    ik_failures_to_abort: int = field(default=3, metadata=_meta("int"))
+    schedule_before_ready_s: float = field(default=0.2, metadata=_meta("float"))
     grasp_below_top_m: float = field(default=0.02, metadata=_meta("float"))
     grasp_height_fraction: float = field(default=0.5, metadata=_meta("float"))
     min_grasp_height_m: float = field(default=0.01, metadata=_meta("float"))
@@ -334,18 +346,27 @@ class SchedulerConfig:
     ``max_reach_m`` bounds the distance from the robot base to a grasp point;
     ``grasp_width_margin_m`` is subtracted from the gripper opening before comparing it with the
     object's narrow side; ``time_margin_s`` is added to every intercept estimate.
+    An object is blocked when another lies in the rectangle its open fingers come down on:
+    across its narrow side the opening plus two ``finger_depth_m`` and ``clearance_m``, along
+    its long side ``finger_width_m`` plus ``clearance_m`` (Panda fingers: 2 cm by 1.2 cm).
     """
 
     class_priorities: dict[str, float] = field(
         default_factory=lambda: dict.fromkeys(CLASS_NAMES, 1.0), metadata=_meta("float_map")
     )
     max_reach_m: float = field(default=0.8, metadata=_meta("float"))
-    grasp_width_margin_m: float = field(default=0.005, metadata=_meta("float"))
+    grasp_width_margin_m: float = field(default=0.015, metadata=_meta("float"))
     time_margin_s: float = field(default=0.05, metadata=_meta("float"))
     min_confidence: float = field(default=0.3, metadata=_meta("float"))
+    finger_width_m: float = field(default=0.02, metadata=_meta("float"))
+    finger_depth_m: float = field(default=0.012, metadata=_meta("float"))
+    clearance_m: float = field(default=0.008, metadata=_meta("float"))
 
     def __post_init__(self) -> None:
         """Validate every field."""
+        for name in ("finger_width_m", "finger_depth_m", "clearance_m"):
+            value = cast(float, getattr(self, name))
+            _require(value >= 0.0, f"scheduler.{name}", value, "must be >= 0")
         for name, value in self.class_priorities.items():
             _require(
                 math.isfinite(value), f"scheduler.class_priorities.{name}", value, "must be finite"

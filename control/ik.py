@@ -158,7 +158,8 @@ class Kinematics:
         """Damped least squares on the ``log6`` error from the warm start ``q_init``.
 
         Every iterate is clipped to the joint limits and each step to ``max_joint_step_rad``;
-        the result is the last iterate (``success`` False when the tolerance was not met).
+        iterations stop at ``tolerance``; the result is the last iterate, a ``success`` when its
+        error is below ``accept_tolerance`` (near joint limits the last digits converge slowly).
         """
         cfg = self._ik
         model, data = self._model, self._data
@@ -193,7 +194,10 @@ class Kinematics:
                 dq *= cfg.max_joint_step_rad / largest
             q = np.clip(pin.integrate(model, q, dq), self.lower_rad, self.upper_rad)
         return IkResult(
-            q=_frozen(q), success=False, iterations=cfg.max_iterations, error_norm=error_norm
+            q=_frozen(q),
+            success=error_norm < cfg.accept_tolerance,
+            iterations=cfg.max_iterations,
+            error_norm=error_norm,
         )
 
     def _jacobian_xyz_yaw(self, q: FloatArray) -> FloatArray:

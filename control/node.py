@@ -454,7 +454,8 @@ class ControllerNode(Node):
         after = self._error_counts()
         for key in sorted(after):
             if after[key] > before.get(key, 0):
-                self._warn(key, f"{key}: {after[key]} so far (detections skipped or pick aborted)")
+                detail = self._controller.last_error if self._controller is not None else ""
+                self._warn(key, f"{key}: {after[key]} so far; latest: {detail}")
 
     def _warn(self, kind: str, text: str) -> None:
         """Rate-limited warning, one rate limit per kind of problem."""

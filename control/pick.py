@@ -52,6 +52,9 @@ class Phase(StrEnum):
     RETURN = "return"
 
 
+WRIST_MARGIN_RAD = 0.15
+"""Least room on the tool-turning joint at the intercept for the nearest grasp yaw."""
+
 FOLLOWING_PHASES = frozenset({Phase.DESCEND, Phase.DWELL, Phase.CLOSE})
 """Phases in which the TCP moves with the object and the feedback term is active."""
 
@@ -89,7 +92,8 @@ class PickStats:
 
     ``untargeted`` counts objects that were never targeted, by the last reason the scheduler gave;
     ``aborted`` counts aborted picks by reason (``target_lost``, ``too_late``, ``ruckig_error``,
-    ``ik_failure``); ``errors`` counts every Ruckig/IK error, also outside a pick.
+    ``ik_failure``); ``errors`` counts every Ruckig/IK error, also outside a pick;
+    ``rate_limited`` counts joint commands slowed to the joint velocity limits.
     """
 
     targeted: int
@@ -98,6 +102,7 @@ class PickStats:
     aborted: Mapping[str, int]
     untargeted: Mapping[str, int]
     errors: Mapping[str, int]
+    rate_limited: int = 0
 
 
 def nearest_half_turn(yaw_rad: float, reference_rad: float) -> float:
@@ -173,6 +178,8 @@ class PickController:
         self._completed_by_class: Counter[str] = Counter()
         self._aborted: Counter[str] = Counter()
         self._errors: Counter[str] = Counter()
+        self.last_error = ""
+        """The message of the latest Ruckig/IK error (empty before the first)."""
 
     @property
     def phase(self) -> Phase:
@@ -208,11 +215,14 @@ class PickController:
             aborted=dict(self._aborted),
             untargeted=dict(Counter(self._untargeted.values())),
             errors=dict(self._errors),
+            rate_limited=self._commander.rate_limited,
         )
 
     def _set_phase(self, phase: Phase, t_s: float) -> None:
         self._phase = phase
         self._phase_start_s = t_s
+        if phase in (Phase.CARRY, Phase.RETURN):
+            self._joint_remaining_s = math.inf  # until the new joint move's first step
 
     def _abort(self, reason: str, t_s: float) -> None:
         self._aborted[reason] += 1
@@ -247,8 +257,35 @@ class PickController:
         self._intercept_estimate_s = intercept_s
         self._feedback.reset()
         self._joint_mode = False
-        self._grasp_yaw_rad = nearest_half_turn(track.yaw_rad, self._planner.state.position[3])
+        self._grasp_yaw_rad = self._best_grasp_yaw(track, intercept_s)
         self._set_phase(Phase.APPROACH, t_s)
+
+    def _best_grasp_yaw(self, track: Track, intercept_s: float) -> float:
+        """The grasp yaw, of the two a parallel gripper allows, that the wrist can reach.
+
+        The one nearest the current yaw, unless the last joint (the one that turns the tool,
+        +-2.9 rad on the Panda) would end within ``WRIST_MARGIN_RAD`` of a limit at the
+        predicted intercept point; then the one with more room there.
+        """
+        current = self._planner.state.position[3]
+        near = nearest_half_turn(track.yaw_rad, current)
+        dt_s = intercept_s if math.isfinite(intercept_s) else 0.0
+        x = track.position_m[0] + track.velocity_mps[0] * dt_s
+        y = track.position_m[1] + track.velocity_mps[1] * dt_s
+        z = grasp_height_m(track, self._cfg) + self._cfg.pick.approach_height_m
+        other = near - math.pi if near > current else near + math.pi
+        best, best_room = near, -math.inf
+        for yaw in (near, other):
+            result = self._kin.solve(tool_pose((x, y, z), yaw), self._commander.q)
+            if not result.success:
+                continue
+            q = np.asarray(result.q)
+            room = float(min(q[-1] - self._kin.lower_rad[-1], self._kin.upper_rad[-1] - q[-1]))
+            if room >= WRIST_MARGIN_RAD:
+                return yaw
+            if room > best_room:
+                best, best_room = yaw, room
+        return best
 
     def _schedule(self, t_s: float, tracks: Sequence[Track]) -> None:
         result = schedule(
@@ -333,9 +370,10 @@ class PickController:
         pick = self._cfg.pick
         period_s = self._cfg.motion.control_period_s
         phase = self._phase
-        belt_edge_y_m = self._cfg.belt.centreline_y_m - self._cfg.belt.width_m / 2
-        over_belt_side = self._planner.state.position[1] >= belt_edge_y_m
-        if phase == Phase.IDLE or (phase == Phase.RETURN and over_belt_side):
+        almost_ready = phase == Phase.RETURN and (
+            self._joint_mode and self._joint_remaining_s <= pick.schedule_before_ready_s
+        )
+        if phase == Phase.IDLE or almost_ready:
             self._schedule(t_s, tracks)
             phase = self._phase
         if phase in (Phase.APPROACH, *FOLLOWING_PHASES):
@@ -351,7 +389,8 @@ class PickController:
                 return self._plan(t_s, (), belt_velocity_mps)
         if phase == Phase.APPROACH:
             target, aim = self._following_target(t_s, belt_velocity_mps, pick.approach_height_m)
-            if self._arrived(target, pick.approach_height_m):
+            yaw_error = abs(self._planner.state.position[3] - target.position[3])
+            if self._arrived(target, pick.approach_height_m) and yaw_error < pick.yaw_tolerance_rad:
                 self._set_phase(Phase.DESCEND, t_s)
                 phase = Phase.DESCEND
             else:
@@ -434,6 +473,7 @@ class PickController:
         else:
             self._errors["ik_failure"] += 1
             self._aborted["drop_unreachable"] += 1
+            self.last_error = f"{self._phase}: no IK solution for the drop point {drop}"
             self._drop_q = self._commander.q
         self._set_phase(Phase.CARRY, t_s)
 
@@ -466,8 +506,9 @@ class PickController:
             self._joint_mode = True
         try:
             step = self._joint_planner.step(goal.q)
-        except PlanningError:
+        except PlanningError as exc:
             self._errors["ruckig_error"] += 1
+            self.last_error = f"{self._phase}: {exc}"
             return
         self._joint_remaining_s = step.remaining_s
         self._commander.reset(step.q)
@@ -478,8 +519,9 @@ class PickController:
     ) -> None:
         try:
             self._planner.step(target)
-        except PlanningError:
+        except PlanningError as exc:
             self._errors["ruckig_error"] += 1
+            self.last_error = f"{self._phase}: {exc}"
             if self._target is not None and not self._carrying:
                 self._abort("ruckig_error", t_s)
                 goal, _ = self._plan(t_s, (), belt)
@@ -540,9 +582,15 @@ class PickController:
         try:
             self._commander.command(position, setpoint.position[3], ticks=self._ticks_since_command)
             self._ticks_since_command = 1
-        except IkError:
+        except IkError as exc:
             self._errors["ik_failure"] += 1
+            self.last_error = f"{self._phase}: {exc}"
             self._ticks_since_command += 1
-            if self._target is not None and not self._carrying:
+            limit = self._cfg.pick.ik_failures_to_abort
+            if (
+                self._target is not None
+                and not self._carrying
+                and self._ticks_since_command > limit
+            ):
                 self._abort("ik_failure", t_s)
         return position

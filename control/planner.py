@@ -283,6 +283,8 @@ class JointCommander:
         self._q = np.clip(
             np.asarray(q_init, dtype=np.float64), kinematics.lower_rad, kinematics.upper_rad
         )
+        self.rate_limited = 0
+        """Commands that were slowed to the joint velocity limits."""
 
     @property
     def q(self) -> FloatArray:
@@ -296,12 +298,14 @@ class JointCommander:
     def command(
         self, position_m: tuple[float, float, float], yaw_rad: float, *, ticks: int = 1
     ) -> IkResult:
-        """Solve the IK for the setpoint and accept it as the new command.
+        """Solve the IK for the setpoint and move the command towards it.
 
-        ``ticks`` is the number of control periods since the last accepted command (it scales the
-        per-joint step check). Raises ``IkError`` when the IK does not converge, the solution is
-        outside the joint limits or a joint would move faster than its limit allows; the last
-        accepted command is then kept.
+        ``ticks`` is the number of control periods since the last accepted command. A solution
+        that would move some joint faster than its velocity limit (times
+        ``joint_velocity_margin``) allows is approached at that limit: the whole joint step is
+        scaled down uniformly, so the tool keeps its direction and lags; ``rate_limited`` counts
+        those ticks. Raises ``IkError`` when the setpoint is not finite, the IK does not
+        converge or the solution is outside the joint limits; the last command is then kept.
         """
         if not all(math.isfinite(v) for v in (*position_m, yaw_rad)):
             msg = f"non-finite Cartesian setpoint {position_m}, yaw {yaw_rad}"
@@ -316,16 +320,14 @@ class JointCommander:
         if not self._kin.within_limits(result.q):
             msg = f"IK solution {result.q} is outside the joint limits"
             raise IkError(msg)
-        step = np.abs(result.q - self._q)
+        step = result.q - self._q
         allowed = self._max_step_rad * max(ticks, 1)
-        if np.any(step > allowed):
-            joint = int(np.argmax(step - allowed))
-            msg = (
-                f"joint {self._kin.joint_names[joint]} would move {step[joint]:.3f} rad in "
-                f"{max(ticks, 1)} tick(s), allowed {allowed[joint]:.3f} rad"
-            )
-            raise IkError(msg)
-        self._q = np.array(result.q)
+        largest = float(np.max(np.abs(step) / allowed))
+        if largest > 1.0:
+            self.rate_limited += 1
+            step = step / largest
+        # a convex combination of two configurations inside the box limits stays inside
+        self._q = self._q + step
         return result
 
 
@@ -336,6 +338,10 @@ class JointStep:
     q: FloatArray
     dq: FloatArray
     remaining_s: float
+
+
+SNAP_RAD = 2e-3
+"""A joint move this close to its target (every joint) that Ruckig cannot finish ends there."""
 
 
 class JointPlanner:
@@ -385,6 +391,15 @@ class JointPlanner:
         try:
             result = self._otg.calculate(inp, self._trajectory)
         except RuckigError as exc:
+            # Ruckig's time synchronisation can fail numerically a hair from the target while
+            # still moving; there the move is over: hold the target at rest.
+            if float(np.max(np.abs(q_target - self._q))) < SNAP_RAD:
+                self._q, self._dq, self._ddq = (
+                    q_target.copy(),
+                    np.zeros_like(q_target),
+                    0 * q_target,
+                )
+                return JointStep(q=self._q.copy(), dq=self._dq.copy(), remaining_s=0.0)
             msg = f"Ruckig rejected joint target {q_target}: {str(exc).strip()}"
             raise PlanningError(msg) from exc
         if result not in (Result.Working, Result.Finished):

@@ -2,9 +2,10 @@
 
 An object is a candidate when its class has a bin, its footprint's narrow side fits the gripper,
 the arm can intercept it inside the pick window and finish the dwell before it leaves the window,
-and its grasp point stays within reach until the gripper has closed. Among candidates the
-highest class priority wins, then the least time left in the window, then the shortest time to
-intercept.
+its grasp point stays within reach until the gripper has closed, and no other object lies where
+the open fingers come down (the gripper's keep-out rectangle across the narrow side). Among
+candidates the highest class priority wins, then the least time left in the window, then the
+shortest time to intercept.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ UNTARGETED_REASONS: tuple[str, ...] = (
     "too_late",
     "upstream",
     "out_of_reach",
+    "blocked",
     "lower_priority",
 )
 """Every reason an object can be left untargeted, in the order they are checked."""
@@ -115,12 +117,64 @@ def intercept_time_s(
     return t_s + descend_s + config.scheduler.time_margin_s
 
 
+def _corners(
+    centre: tuple[float, float], yaw_rad: float, half_long_m: float, half_across_m: float
+) -> list[tuple[float, float]]:
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    return [
+        (
+            centre[0] + a * half_long_m * c - b * half_across_m * s,
+            centre[1] + a * half_long_m * s + b * half_across_m * c,
+        )
+        for a, b in ((1, 1), (-1, 1), (-1, -1), (1, -1))
+    ]
+
+
+def _overlap(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> bool:
+    """Separating-axis test of two convex quadrilaterals (corner lists in order)."""
+    for poly in (a, b):
+        for i in range(4):
+            (x0, y0), (x1, y1) = poly[i], poly[(i + 1) % 4]
+            nx, ny = y0 - y1, x1 - x0
+            pa = [nx * x + ny * y for x, y in a]
+            pb = [nx * x + ny * y for x, y in b]
+            if max(pa) < min(pb) or max(pb) < min(pa):
+                return False
+    return True
+
+
+def keep_out_corners(track: Track, config: ControllerConfig) -> list[tuple[float, float]]:
+    """The ``(4, 2)`` corners of the footprint the open fingers need around ``track``.
+
+    Centred on the track, across its narrow side as wide as the open gripper plus two fingers
+    and the clearance, along its long side as wide as a finger plus the clearance.
+    """
+    sched = config.scheduler
+    half_across = config.robot.gripper_max_opening_m / 2 + sched.finger_depth_m + sched.clearance_m
+    half_long = sched.finger_width_m / 2 + sched.clearance_m
+    return _corners(track.position_m, track.yaw_rad, half_long, half_across)
+
+
+def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) -> int | None:
+    """The id of a track whose footprint lies in ``track``'s keep-out rectangle, or None."""
+    keep_out = keep_out_corners(track, config)
+    for other in others:
+        if other.track_id == track.track_id:
+            continue
+        footprint = _corners(other.position_m, other.yaw_rad, other.length_m / 2, other.width_m / 2)
+        if _overlap(keep_out, footprint):
+            return other.track_id
+    return None
+
+
 def _reason(
     track: Track,
     now_s: float,
     intercept_s: float,
     config: ControllerConfig,
     excluded_ids: Collection[int],
+    *,
+    others: Sequence[Track] = (),
 ) -> str | None:
     belt, sched = config.belt, config.scheduler
     if track.class_confidence < sched.min_confidence:
@@ -149,6 +203,8 @@ def _reason(
     off_belt = abs(track.position_m[1] - belt.centreline_y_m) > belt.width_m / 2
     if off_belt or reach > sched.max_reach_m:
         return "out_of_reach"
+    if blocked_by(track, others, config) is not None:
+        return "blocked"
     return None
 
 
@@ -171,7 +227,7 @@ def schedule(
         if not track.confirmed:
             continue
         intercept_s = intercept_time_s(track, now_s, tcp_position_m, config)
-        reason = _reason(track, now_s, intercept_s, config, excluded_ids)
+        reason = _reason(track, now_s, intercept_s, config, excluded_ids, others=tracks)
         if reason is not None:
             untargeted.append(Untargeted(track_id=track.track_id, reason=reason))
             continue

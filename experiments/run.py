@@ -5,12 +5,30 @@ Example::
     cdw-twin run --speed 0.4 --seed 1 --json
     cdw-twin run experiments/scenarios/default.yaml --episodes 3 --mode realtime --out runs/a
 
-Each episode gets its own ROS domain (claimed with a lock, LOCALHOST discovery). The run folder
-holds the resolved scenario, one folder per episode (the twin's ``events.jsonl`` and
-``summary.json``, the controller's stats, both processes' logs), ``episodes.json`` and
-``episodes.csv`` with the per-episode metrics, and ``run.json`` with their means. ``run.json``
-says ``"complete": false`` until every episode has finished, so an interrupted run is recognisable
-and its finished episodes stay readable.
+The scenario (with the command-line overrides applied) is validated before anything starts and
+written to the run folder as ``scenario.yaml``; every process of the run reads that file. Each
+episode gets its own ROS domain (claimed with a lock, LOCALHOST discovery). The run folder holds
+one folder per episode (the twin's ``twin/events.jsonl`` and ``twin/summary.json``, the
+controller's stats ``controller.json``, every process's log), ``episodes.json`` and
+``episodes.csv`` with the per-episode metrics, and ``run.json`` with their means, the dataset
+and the scenario path.
+
+``run.json`` says ``"complete": false`` until every episode has finished. A run stopped early
+(Ctrl-C, SIGTERM, a twin that crashed or left no summary) keeps the episodes finished so far in
+``episodes.json``/``episodes.csv`` (each written atomically), stays ``"complete": false`` and
+gains ``"stopped": "<reason>"``; the command then exits non-zero (130 when interrupted, 1 when an
+episode failed). The unfinished episode's folder keeps whatever its processes wrote.
+
+Controller restarts (the scenario's ``faults.controller_restart_at_s``): the runner watches the
+twin's ``/clock`` with a tiny best-effort subscriber of its own, in the episode's domain, and
+when sim time passes a restart time it stops the controller (SIGTERM, so its counters are
+saved as ``controller.json``, ``controller_1.json``, ...) and starts a new one. The lockstep twin
+waits ``--ack-timeout`` (2 s) for the lost controller, logs a ``controller_timeout`` fault, steps
+on without it and resynchronises when the new controller acknowledges ticks. The restart happens
+at the first ``/clock`` sample at or after the restart time that the runner sees (it polls every
+0.1 s wall), so its exact sim time is not reproducible; the twin's events record when the
+controller was lost and when it came back. The watcher also feeds the progress line when the
+output is a terminal.
 
 Metrics per episode:
 
@@ -19,7 +37,9 @@ Metrics per episode:
 - ``success_rate`` = placed_correct / targeted; ``untargeted``: objects never targeted, by reason;
 - ``miss_rate``: the twin's missed / processed (objects that left the window unpicked);
 - ``throughput_per_min`` = placed_correct per simulated minute;
-- ``tracking_time_4mm_mean_s`` / ``_p95_s``: the twin's ground-truth tracking time.
+- ``tracking_time_4mm_mean_s`` / ``_p95_s``: the twin's ground-truth tracking time;
+- ``faults``: fault events other than injected ones (rejected commands, controller timeouts);
+  ``injected_faults``: the scenario's injected-fault window edges.
 """
 
 from __future__ import annotations
@@ -32,11 +52,16 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
+from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from types import FrameType
+from typing import IO, Any, Literal
 
+from twin.errors import CdwTwinError
 from twin.fileio import write_atomic
 
 METRIC_KEYS = (
@@ -47,6 +72,8 @@ METRIC_KEYS = (
     "placed_correct",
     "targeted",
     "untargeted_total",
+    "processed",
+    "missed",
     "success_rate",
     "miss_rate",
     "throughput_per_min",
@@ -54,7 +81,21 @@ METRIC_KEYS = (
     "tracking_time_4mm_p95_s",
     "real_time_factor",
     "faults",
+    "injected_faults",
+    "controller_restarts",
 )
+"""The columns of ``episodes.csv``, in order."""
+
+STOP_GRACE_S = 15.0
+POLL_S = 0.1
+
+
+class EpisodeFailedError(CdwTwinError):
+    """An episode ended without a complete twin summary (crash, bad exit, lost output)."""
+
+
+class EpisodeCancelledError(CdwTwinError):
+    """An episode was stopped from outside (Ctrl-C, SIGTERM, a sweep being cancelled)."""
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -70,6 +111,22 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the run's metrics as JSON")
 
 
+@dataclass(frozen=True, kw_only=True)
+class RunOptions:
+    """How to run the episodes of one scenario.
+
+    ``scenario_path`` is the resolved scenario file (overrides applied, validated); ``dataset``
+    the meshgen output folder; ``restart_at_s`` the controller restart times (sim seconds).
+    """
+
+    scenario_path: Path
+    dataset: Path
+    mode: Literal["lockstep", "realtime"] = "lockstep"
+    duration_s: float = 60.0
+    restart_at_s: tuple[float, ...] = ()
+    ack_timeout_s: float = 2.0
+
+
 @dataclass(frozen=True)
 class EpisodeSpec:
     """One episode to run."""
@@ -79,58 +136,86 @@ class EpisodeSpec:
     folder: Path
 
 
+Progress = Callable[[float, float], None]
+"""Called with (sim seconds, wall seconds) while an episode runs."""
+
+
 def _cli() -> list[str]:
     return [sys.executable, "-m", "twin.cli"]
 
 
-def _twin_args(args: argparse.Namespace, episode: EpisodeSpec) -> list[str]:
-    cmd = [
+def twin_command(options: RunOptions, episode: EpisodeSpec) -> list[str]:
+    """The twin node's command line for one episode."""
+    return [
         *_cli(),
         "twin-node",
+        "--scenario",
+        str(options.scenario_path),
+        "--dataset",
+        str(options.dataset),
         "--mode",
-        args.mode,
+        options.mode,
         "--seed",
         str(episode.seed),
+        "--ack-timeout",
+        str(options.ack_timeout_s),
         "--out",
         str(episode.folder / "twin"),
     ]
-    if args.scenario is not None:
-        cmd += ["--scenario", str(args.scenario)]
-    if args.speed is not None:
-        cmd += ["--speed", str(args.speed)]
-    if args.duration is not None:
-        cmd += ["--duration", str(args.duration)]
-    if args.dataset is not None:
-        cmd += ["--dataset", str(args.dataset)]
-    return cmd
 
 
-def _controller_args(args: argparse.Namespace, episode: EpisodeSpec) -> list[str]:
-    cmd = [*_cli(), "controller", "--stats-out", str(episode.folder / "controller.json")]
-    if args.mode == "lockstep":
+def controller_command(options: RunOptions, episode: EpisodeSpec, instance: int = 0) -> list[str]:
+    """The controller's command line; ``instance`` > 0 for a restarted controller."""
+    name = "controller.json" if instance == 0 else f"controller_{instance}.json"
+    cmd = [*_cli(), "controller", "--stats-out", str(episode.folder / name)]
+    if options.mode == "lockstep":
         cmd.append("--lockstep")
     return cmd
+
+
+def side_processes(options: RunOptions, episode: EpisodeSpec) -> dict[str, list[str]]:
+    """Extra processes of an episode besides the twin and the controller, by log name.
+
+    They start after the twin and the controller and are stopped (SIGTERM) when the twin ends.
+    This is the one place to add a recorder.
+    """
+    del options, episode
+    return {}
+
+
+def _controller_stats(folder: Path) -> list[dict[str, Any]]:
+    paths = sorted(folder.glob("controller*.json"), key=lambda p: (len(p.name), p.name))
+    return [json.loads(p.read_text(encoding="utf-8")) for p in paths]
+
+
+def _pick_counts(stats: list[dict[str, Any]]) -> tuple[int, dict[str, int]]:
+    """Targeted objects and untargeted ones by reason, summed over controller instances."""
+    targeted = 0
+    untargeted: dict[str, int] = {}
+    for ctl in stats:
+        pick = ctl.get("pick") or {}
+        targeted += int(pick.get("completed", 0))
+        targeted += sum(int(v) for v in (pick.get("aborted") or {}).values())
+        for key, value in (pick.get("untargeted") or {}).items():
+            untargeted[str(key)] = untargeted.get(str(key), 0) + int(value)
+    return targeted, untargeted
 
 
 def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
     """The metrics of one finished episode folder."""
     twin = json.loads((folder / "twin" / "summary.json").read_text(encoding="utf-8"))
-    ctl_path = folder / "controller.json"
-    ctl = json.loads(ctl_path.read_text(encoding="utf-8")) if ctl_path.is_file() else {}
-    pick = ctl.get("pick") or {}
+    stats = _controller_stats(folder)
+    targeted, untargeted = _pick_counts(stats)
     scores = twin["scores"]
-    targeted = int(pick.get("completed", 0)) + sum(
-        int(v) for v in (pick.get("aborted") or {}).values()
-    )
-    untargeted = {str(k): int(v) for k, v in (pick.get("untargeted") or {}).items()}
     placed_correct = int(scores["placed_correct"])
     minutes = float(twin["sim_seconds"]) / 60.0
     tracking = twin["tracking"]
-    faults = sum(
-        1
-        for line in (folder / "twin" / "events.jsonl").read_text().splitlines()
-        if '"type": "fault"' in line
-    )
+    kinds = [
+        str(event.get("data", {}).get("kind", ""))
+        for event in map(json.loads, (folder / "twin" / "events.jsonl").read_text().splitlines())
+        if event.get("type") == "fault"
+    ]
+    injected = sum(1 for k in kinds if k.startswith("injected_"))
     return {
         "speed_mps": twin.get("belt_speed_mps"),
         "seed": twin["seed"],
@@ -140,6 +225,8 @@ def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
         "targeted": targeted,
         "untargeted": untargeted,
         "untargeted_total": sum(untargeted.values()),
+        "processed": int(scores["processed"]),
+        "missed": int(scores["missed"]),
         "success_rate": placed_correct / targeted if targeted else 0.0,
         "miss_rate": float(scores["miss_rate"]),
         "throughput_per_min": placed_correct / minutes if minutes > 0 else 0.0,
@@ -148,45 +235,130 @@ def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
         "tracking_pursuits": tracking["pursuits"],
         "tracking_unsettled": tracking["unsettled"],
         "real_time_factor": twin["real_time_factor"],
-        "faults": faults,
+        "faults": len(kinds) - injected,
+        "injected_faults": injected,
+        "controller_restarts": max(0, len(stats) - 1),
         "complete": bool(twin["complete"]),
     }
 
 
-def run_episode(args: argparse.Namespace, episode: EpisodeSpec) -> dict[str, Any]:
-    """Run one closed-loop episode in its own ROS domain; returns its metrics."""
+class ClockWatch:
+    """The latest ``/clock`` of one ROS domain, read by polling (no thread of its own)."""
+
+    def __init__(self, domain_id: int) -> None:
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from rclpy.signals import SignalHandlerOptions
+        from rosgraph_msgs.msg import Clock
+
+        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        self.time_s = 0.0
+        self._context = Context()
+        rclpy.init(
+            context=self._context,
+            domain_id=domain_id,
+            signal_handler_options=SignalHandlerOptions.NO,
+        )
+        self._node = rclpy.create_node("cdw_run_clock", context=self._context)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT
+        )
+        self._node.create_subscription(Clock, "/clock", self._on_clock, qos)
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(self._node)
+
+    def _on_clock(self, msg: Any) -> None:
+        self.time_s = msg.clock.sec + 1e-9 * msg.clock.nanosec
+
+    def poll(self) -> float:
+        """Take the newest ``/clock`` sample, if any; returns sim seconds."""
+        self._executor.spin_once(timeout_sec=0.0)
+        return self.time_s
+
+    def close(self) -> None:
+        """Leave the domain."""
+        self._executor.shutdown()
+        self._node.destroy_node()
+        self._context.try_shutdown()
+
+
+def _stop(procs: list[subprocess.Popen[bytes]]) -> None:
+    for proc in procs:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+    for proc in procs:
+        try:
+            proc.wait(timeout=STOP_GRACE_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def run_episode(
+    options: RunOptions,
+    episode: EpisodeSpec,
+    *,
+    cancel: threading.Event | None = None,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """Run one closed-loop episode in its own ROS domain; returns its metrics.
+
+    Raises :class:`EpisodeFailedError` when the twin ends without a complete summary and
+    :class:`EpisodeCancelledError` when ``cancel`` is set; every process is stopped either way.
+    """
     from twin.ros_isolation import clean_stale_fastdds_shm, ros_domain
 
     episode.folder.mkdir(parents=True, exist_ok=True)
     clean_stale_fastdds_shm()
-    with (
-        ros_domain() as domain,
-        (episode.folder / "twin.log").open("wb") as twin_log,
-        (episode.folder / "controller.log").open("wb") as ctl_log,
-    ):
+    restarts = sorted(options.restart_at_s)
+    with ros_domain() as domain, ExitStack() as stack:
         env = {**os.environ, **domain.env}
-        twin = subprocess.Popen(
-            _twin_args(args, episode), env=env, stdout=twin_log, stderr=subprocess.STDOUT
-        )
-        controller = subprocess.Popen(
-            _controller_args(args, episode), env=env, stdout=ctl_log, stderr=subprocess.STDOUT
-        )
+
+        def start(name: str, cmd: list[str]) -> subprocess.Popen[bytes]:
+            log: IO[bytes] = stack.enter_context((episode.folder / f"{name}.log").open("ab"))
+            return subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
+
+        twin = start("twin", twin_command(options, episode))
+        controller = start("controller", controller_command(options, episode))
+        others = [start(n, c) for n, c in side_processes(options, episode).items()]
+        watch = ClockWatch(domain.domain_id) if restarts or progress else None
+        wall0 = time.monotonic()
         try:
-            code = twin.wait()
+            while (code := twin.poll()) is None:
+                if cancel is not None and cancel.wait(POLL_S):
+                    msg = f"episode {episode.index} (seed {episode.seed}) cancelled"
+                    raise EpisodeCancelledError(msg)
+                if cancel is None:
+                    time.sleep(POLL_S)
+                if watch is None:
+                    continue
+                sim_s = watch.poll()
+                if progress is not None:
+                    progress(sim_s, time.monotonic() - wall0)
+                if restarts and sim_s >= restarts[0]:
+                    restarts.pop(0)
+                    _stop([controller])
+                    instance = len(options.restart_at_s) - len(restarts)
+                    controller = start("controller", controller_command(options, episode, instance))
         finally:
-            for proc in (controller, twin):
-                if proc.poll() is None:
-                    proc.send_signal(signal.SIGTERM)
-            for proc in (controller, twin):
-                try:
-                    proc.wait(timeout=15)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-    if code != 0 or not (episode.folder / "twin" / "summary.json").is_file():
+            if watch is not None:
+                watch.close()
+            _stop([controller, *others, twin])
+    summary = episode.folder / "twin" / "summary.json"
+    if code != 0 or not summary.is_file():
         log = (episode.folder / "twin.log").read_text(errors="replace")[-2000:]
-        msg = f"episode {episode.index} failed (exit {code}); twin log tail:\n{log}"
-        raise RuntimeError(msg)
-    return episode_metrics(episode.folder, args.mode)
+        msg = (
+            f"episode {episode.index} (seed {episode.seed}) failed: twin exit {code}"
+            f"{'' if summary.is_file() else ', no summary.json'}; twin log tail:\n{log}"
+        )
+        raise EpisodeFailedError(msg)
+    metrics = episode_metrics(episode.folder, options.mode)
+    if not metrics["complete"]:
+        msg = f"episode {episode.index} (seed {episode.seed}): the twin stopped before the end"
+        raise EpisodeFailedError(msg)
+    return metrics
 
 
 def _mean(values: list[Any]) -> float | None:
@@ -215,10 +387,34 @@ def write_tables(
     return summary
 
 
+def _raise_interrupt(signum: int, frame: FrameType | None) -> None:
+    del frame
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _terminal_progress(index: int, total: int, duration_s: float) -> Progress:
+    last = [0.0]
+
+    def show(sim_s: float, wall_s: float) -> None:
+        if wall_s - last[0] >= 0.5:
+            last[0] = wall_s
+            print(
+                f"\r  episode {index}/{total}: sim {sim_s:6.1f}/{duration_s:.1f} s, "
+                f"wall {wall_s:6.1f} s",
+                end="",
+                flush=True,
+            )
+
+    return show
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the episodes and summarise them."""
     from twin.cmd_node import build_scenario
 
+    if args.episodes < 1:
+        msg = f"--episodes = {args.episodes}: must be >= 1"
+        raise CdwTwinError(msg)
     node_args = argparse.Namespace(
         scenario=args.scenario,
         dataset=args.dataset,
@@ -229,27 +425,64 @@ def run(args: argparse.Namespace) -> int:
         prefill=None,
     )
     scenario, dataset = build_scenario(node_args)
-    if args.dataset is None:
-        args.dataset = dataset
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out: Path = args.out or Path("runs") / f"{scenario.name}-{stamp}"
     out.mkdir(parents=True, exist_ok=True)
-    write_atomic(out / "scenario.yaml", scenario.to_yaml())
-    extra = {
+    scenario_path = out / "scenario.yaml"
+    write_atomic(scenario_path, scenario.to_yaml())
+    options = RunOptions(
+        scenario_path=scenario_path.resolve(),
+        dataset=Path(dataset).resolve(),
+        mode=args.mode,
+        duration_s=scenario.duration_s,
+        restart_at_s=scenario.faults.controller_restart_at_s,
+    )
+    extra: dict[str, Any] = {
         "scenario": scenario.name,
+        "scenario_path": str(args.scenario) if args.scenario is not None else None,
+        "dataset": str(options.dataset),
         "mode": args.mode,
         "speed_mps": scenario.system.belt_speed_mps,
+        "episodes_planned": args.episodes,
     }
     rows: list[dict[str, Any]] = []
     write_tables(out, rows, complete=False, extra=extra)
-    for i in range(args.episodes):
-        episode = EpisodeSpec(index=i, seed=scenario.seed + i, folder=out / f"ep{i:03d}")
-        if not args.json:
-            print(f"episode {i + 1}/{args.episodes} (seed {episode.seed}) ...", flush=True)
-        metrics = run_episode(args, episode)
-        metrics["speed_mps"] = scenario.system.belt_speed_mps
-        rows.append(metrics)
-        write_tables(out, rows, complete=False, extra=extra)
+    stopped: str | None = None
+    code = 0
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    tty = sys.stdout.isatty() and not args.json
+    try:
+        for i in range(args.episodes):
+            episode = EpisodeSpec(index=i, seed=scenario.seed + i, folder=out / f"ep{i:03d}")
+            if not args.json:
+                print(f"episode {i + 1}/{args.episodes} (seed {episode.seed}) ...", flush=True)
+            progress = (
+                _terminal_progress(i + 1, args.episodes, scenario.duration_s) if tty else None
+            )
+            try:
+                metrics = run_episode(options, episode, progress=progress)
+            except EpisodeFailedError as exc:
+                stopped, code = str(exc), 1
+                break
+            finally:
+                if tty:
+                    print()
+            metrics["speed_mps"] = scenario.system.belt_speed_mps
+            rows.append(metrics)
+            write_tables(out, rows, complete=False, extra=extra)
+    except KeyboardInterrupt as exc:
+        stopped, code = f"interrupted ({exc.args[0] if exc.args else 'SIGINT'})", 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    if stopped is not None:
+        write_tables(out, rows, complete=False, extra={**extra, "stopped": stopped})
+        print(
+            f"cdw-twin run: stopped after {len(rows)}/{args.episodes} episodes: {stopped}\n"
+            f"cdw-twin run: the finished episodes are in {out / 'episodes.json'} "
+            "(run.json says complete: false)",
+            file=sys.stderr,
+        )
+        return code
     summary = write_tables(out, rows, complete=True, extra=extra)
     result = {
         **summary["mean"],

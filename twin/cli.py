@@ -44,6 +44,10 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("twin-node",), "twin.cmd_node", "run the twin as a ROS 2 node"),
     (("controller",), "control.cmd_controller", "run the controller as a ROS 2 node"),
     (("run",), "experiments.run", "closed-loop episodes: twin node + controller processes"),
+    (("sweep",), "experiments.sweep", "a grid of scenarios x seeds in parallel, aggregated"),
+    (("bench", "sweep"), "experiments.bench_sweep", "sweep speed-up with 2 workers against 1"),
+    (("report",), "experiments.report", "HTML report with figures from run folders"),
+    (("record",), "experiments.record", "record every twin/controller topic to MCAP"),
     (("demo",), "twin.cmd_demo", "the main job: sample, mesh, simulate, summarise"),
 )
 

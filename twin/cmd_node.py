@@ -5,7 +5,9 @@ Example (two shells, same ``ROS_DOMAIN_ID``)::
     cdw-twin twin-node --speed 0.4 --duration 60 --mode realtime --out runs/ep0
     cdw-twin controller
 
-The episode log (``events.jsonl``, ``summary.json``) goes to ``--out`` when the episode ends.
+The episode log (``events.jsonl``, ``summary.json``) and the node's telemetry
+(``telemetry.json``: round-trip latency, step rate, belt setpoint and speed; see
+:mod:`twin.telemetry`) go to ``--out`` when the episode ends, also when it is interrupted.
 """
 
 from __future__ import annotations
@@ -90,8 +92,10 @@ def _final_state(twin: Twin) -> dict[str, object]:
 def run(args: argparse.Namespace) -> int:
     """Run one episode as a ROS 2 node."""
     import rclpy
+    from rclpy.utilities import try_shutdown
 
     from twin.episode_log import tracking_summary, write_episode
+    from twin.fileio import write_atomic
     from twin.perception import PerceptionConfig
     from twin.ros_isolation import clean_stale_fastdds_shm
     from twin.ros_node import TwinNode, make_executor, run_loop
@@ -140,9 +144,11 @@ def run(args: argparse.Namespace) -> int:
             "lockstep_timeouts": node.counters.lockstep_timeouts,
             "priorities": list(node.priorities),
             "final_state": _final_state(twin),
+            **node.telemetry.summary(),
         }
         if args.out is not None:
+            write_atomic(args.out / "telemetry.json", node.telemetry.to_json())
             write_episode(args.out, twin.events, summary)
         node.destroy_node()
-        rclpy.shutdown()
+        try_shutdown()  # a SIGTERM may have shut the context down already
     return 130 if interrupted and stop["requested"] else 0

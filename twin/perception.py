@@ -8,6 +8,10 @@ misclassification probability (a uniformly chosen other class). The frame is rel
 ``latency_s`` after capture, stamped with its capture time. ``PerceptionConfig.zero_noise()``
 gives the exact ground truth with no delay, drop or confusion. All randomness comes from the
 generator passed in (the scenario's seed tree).
+
+Detection dropout (an injected fault): a frame captured inside a ``[start_s, end_s)`` dropout
+window is never released. Its random numbers are drawn all the same, so the frames outside the
+windows are exactly those of the same seed without dropout.
 """
 
 from __future__ import annotations
@@ -16,11 +20,14 @@ import math
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from twin.errors import ConfigError
-from twin.monitor import GroundTruth
+
+if TYPE_CHECKING:
+    from twin.monitor import GroundTruth
 
 
 @dataclass(frozen=True)
@@ -107,8 +114,12 @@ class Perception:
         surface_z_m: float,
         dt_s: float,
         rng: np.random.Generator,
+        *,
+        dropout_windows_s: Iterable[tuple[float, float]] = (),
     ) -> None:
         self.config = config
+        self.dropout_windows_s = tuple((float(a), float(b)) for a, b in dropout_windows_s)
+        self.dropped_frames = 0
         self.classes = tuple(classes)
         self.surface_z_m = surface_z_m
         self.every_n_steps = max(1, round(1.0 / (config.rate_hz * dt_s)))
@@ -119,8 +130,16 @@ class Perception:
         """Whether a frame is captured at this step."""
         return step % self.every_n_steps == 0
 
+    def in_dropout(self, time_s: float) -> bool:
+        """Whether the camera delivers nothing at ``time_s`` (inside a dropout window)."""
+        return any(a <= time_s < b for a, b in self.dropout_windows_s)
+
     def capture(self, time_s: float, objects: Iterable[GroundTruth]) -> DetectionFrame:
-        """Take a frame from the ground truth and queue it for release."""
+        """Take a frame from the ground truth and queue it for release.
+
+        Inside a dropout window the frame is returned but not queued (counted in
+        ``dropped_frames``): it is never released.
+        """
         cfg = self.config
         detections = []
         for obj in objects:
@@ -156,7 +175,10 @@ class Perception:
             release_time_s=time_s + cfg.latency_s,
             detections=tuple(detections),
         )
-        self._queue.append(frame)
+        if self.in_dropout(time_s):
+            self.dropped_frames += 1
+        else:
+            self._queue.append(frame)
         return frame
 
     def released(self, time_s: float) -> list[DetectionFrame]:

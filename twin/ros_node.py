@@ -53,6 +53,7 @@ from twin.commands import (
 from twin.events import Event
 from twin.perception import DetectionFrame
 from twin.sim import ArmCommand, Twin
+from twin.telemetry import TelemetryRecorder
 
 
 def _qos(depth: int, *, reliable: bool = True, latched: bool = False) -> QoSProfile:
@@ -101,6 +102,7 @@ class TwinNode(Node):
         self.state_every = state_every
         self.ground_truth_every = ground_truth_every
         self.counters = NodeCounters(published=Counter(), rejected=Counter())
+        self.telemetry = TelemetryRecorder()
         self.priorities: tuple[str, ...] = ()
         self.acks: dict[int, int] = {}
         self.last_ack_tick = -1
@@ -146,6 +148,8 @@ class TwinNode(Node):
         self.twin.record_fault(rejected.reason, text)
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
+        stamp = msg.header.stamp
+        self.telemetry.on_command(stamp.sec + 1e-9 * stamp.nanosec, time.perf_counter())
         self._received()
         if not msg.points:
             self._reject("/arm_controller/joint_trajectory", Rejected("empty", "no points"))
@@ -246,6 +250,9 @@ class TwinNode(Node):
         joints.name = self._joint_names
         joints.position = [float(v) for v in q] + fingers
         joints.velocity = [float(v) for v in qd] + [0.0] * len(fingers)
+        wall_s = time.perf_counter()
+        self.telemetry.on_step(twin.time_s, wall_s)
+        self.telemetry.on_state_published(twin.time_s, wall_s)
         self.pub_joints.publish(joints)
         self._count("/joint_states")
         pos, orn = twin.tcp_pose
@@ -292,6 +299,7 @@ class TwinNode(Node):
         msg.header.stamp = stamp
         msg.header.frame_id = "world"
         self.pub_belt.publish(msg)
+        self.telemetry.on_belt(twin.time_s, twin.setpoint_mps, belt.belt_speed_mps)
         self._count("/conveyor/state")
 
     def publish_detections(self, frame: DetectionFrame) -> None:

@@ -3,7 +3,9 @@
 Three levels, as in the reference: the *object* level (which images and objects, heights
 re-sampled within class ranges, orientation jitter), the *system* level (belt speed, stochastic
 perturbation, order and spacing of the stream) and *physics* (friction and restitution ranges per
-class). All randomness of an episode comes from one ``numpy.random.SeedSequence(seed)``; see
+class); besides them the camera model (``perception``, a :class:`twin.perception.PerceptionConfig`)
+and injected ``faults`` (detection dropout and belt stall windows, controller restarts). All
+randomness of an episode comes from one ``numpy.random.SeedSequence(seed)``; see
 :func:`seed_tree`.
 
 Example ``experiments/scenarios/default.yaml``::
@@ -13,6 +15,10 @@ Example ``experiments/scenarios/default.yaml``::
     duration_s: 60.0
     system:
       belt_speed_mps: 0.4
+    perception:
+      position_noise_m: 0.002
+    faults:
+      detection_dropout: [[20.0, 25.0]]
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ import yaml
 from twin.dataclass_io import from_data, to_data
 from twin.errors import ConfigError
 from twin.fileio import write_atomic
+from twin.perception import PerceptionConfig
 
 CLASS_NAMES: tuple[str, ...] = ("concrete", "brick", "wood", "rubber")
 
@@ -161,6 +168,46 @@ class PhysicsLevel:
             _check_range(f"physics.restitution.{name}", rng, 0.0, 1.0)
 
 
+def _check_windows(key: str, windows: tuple[tuple[float, float], ...]) -> None:
+    for i, (start_s, end_s) in enumerate(windows):
+        _check(
+            0.0 <= start_s < end_s <= 86400.0,
+            f"{key}[{i}]",
+            [start_s, end_s],
+            "needs 0 <= start_s < end_s <= 86400",
+        )
+
+
+@dataclass(frozen=True)
+class FaultLevel:
+    """Injected faults, in simulated seconds.
+
+    ``detection_dropout``: ``[start_s, end_s]`` windows in which the camera delivers no frame.
+    ``belt_stall``: windows in which the belt drive receives a setpoint of 0 whatever was commanded.
+    ``controller_restart_at_s``: times at which ``cdw-twin run`` kills the controller process and
+    starts a new one (the twin itself ignores this list).
+    """
+
+    detection_dropout: tuple[tuple[float, float], ...] = ()
+    belt_stall: tuple[tuple[float, float], ...] = ()
+    controller_restart_at_s: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        _check_windows("faults.detection_dropout", self.detection_dropout)
+        _check_windows("faults.belt_stall", self.belt_stall)
+        for i, t_s in enumerate(self.controller_restart_at_s):
+            _check(
+                0.0 < t_s <= 86400.0,
+                f"faults.controller_restart_at_s[{i}]",
+                t_s,
+                "must be in (0, 86400] s",
+            )
+
+    def stalled(self, time_s: float) -> bool:
+        """Whether the belt is stalled at ``time_s`` (windows are ``[start, end)``)."""
+        return any(start <= time_s < end for start, end in self.belt_stall)
+
+
 @dataclass(frozen=True)
 class Scenario:
     """One episode's definition. ``dataset`` is a meshgen output folder or ``builtin``."""
@@ -173,6 +220,8 @@ class Scenario:
     objects: ObjectLevel = field(default_factory=ObjectLevel)
     system: SystemLevel = field(default_factory=SystemLevel)
     physics: PhysicsLevel = field(default_factory=PhysicsLevel)
+    perception: PerceptionConfig = field(default_factory=PerceptionConfig)
+    faults: FaultLevel = field(default_factory=FaultLevel)
 
     def __post_init__(self) -> None:
         _check(bool(self.name), "name", self.name, "must not be empty")

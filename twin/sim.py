@@ -14,6 +14,12 @@ opening) or ``None`` to keep the last one: the scripted-arm hook for tests and u
 co-simulation master runs a fixed physics step (240 Hz default); every ``fmu_every_n_steps`` it
 sets the FMU's inputs (setpoint, mass on the belt), calls ``doStep`` and reads the belt speed that
 drives the kinematic belt. Time is ``step * dt``, never accumulated.
+
+The camera model is the scenario's ``perception`` unless a :class:`PerceptionConfig` is passed.
+Injected faults (the scenario's ``faults``): inside a ``belt_stall`` window the FMU receives a
+setpoint of 0 whatever was commanded (``setpoint_mps`` keeps the commanded value); inside a
+``detection_dropout`` window no detection frame is released. Each window's start and end is
+logged as a ``fault`` event with ``kind`` ``injected_belt_stall`` / ``injected_detection_dropout``.
 """
 
 from __future__ import annotations
@@ -106,7 +112,7 @@ class Twin:
         self._fmu_path = fmu_path
         self._fmu_parameters = dict(fmu_parameters or {})
         self.realtime = realtime
-        self.perception_config = perception or PerceptionConfig()
+        self.perception_config = perception or scenario.perception
         self.perception_enabled = perception_enabled
         self.perception: Perception | None = None
         self.targets = TargetTracker()
@@ -193,6 +199,7 @@ class Twin:
             self.cell.belt.surface_z_m,
             self.dt_s,
             seeds.perception,
+            dropout_windows_s=self.scenario.faults.detection_dropout,
         )
         self.targets = TargetTracker()
         self._released = []
@@ -251,7 +258,7 @@ class Twin:
         self._apply_schedule()
         if self.step_count % self._fmu_every == 0:
             self._belt_state = drive.step(
-                self.dt_s * self._fmu_every, self.setpoint_mps, monitor.load_mass_kg
+                self.dt_s * self._fmu_every, self.drive_setpoint_mps, monitor.load_mass_kg
             )
         world.set_belt_speed(self._belt_state.belt_speed_mps, self.dt_s)
         self._spawn_due()
@@ -306,10 +313,24 @@ class Twin:
         frames, self._released = self._released, []
         return frames
 
+    @property
+    def drive_setpoint_mps(self) -> float:
+        """The setpoint the belt drive receives now: 0 in a belt-stall window."""
+        return 0.0 if self.scenario.faults.stalled(self.time_s) else self.setpoint_mps
+
     def _apply_schedule(self) -> None:
         for t_s, speed in self.scenario.system.speed_schedule:
             if abs(self.time_s - t_s) < 0.5 * self.dt_s:
                 self.setpoint_mps = speed
+        faults = self.scenario.faults
+        for kind, windows in (
+            ("injected_belt_stall", faults.belt_stall),
+            ("injected_detection_dropout", faults.detection_dropout),
+        ):
+            for start_s, end_s in windows:
+                for edge, t_s in (("start", start_s), ("end", end_s)):
+                    if abs(self.time_s - t_s) < 0.5 * self.dt_s:
+                        self.record_fault(kind, f"{edge} of window [{start_s}, {end_s}] s")
 
     def _spawn_due(self) -> None:
         world, _, monitor, _ = self._started()

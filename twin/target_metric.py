@@ -2,8 +2,12 @@
 
 The controller announces the object it pursues (``PickTarget``: a track id, its estimate of the
 grasp point, a phase). When a new target starts, the twin matches the announced grasp point to
-the nearest object and fixes the grasp point in that object's frame. From then on, each step, it
-measures the distance from the TCP to that point *as the object really is*. The tracking time is
+the nearest object. The true grasp point is on that object's vertical axis through its centre
+of mass (the footprint's centroid for the extruded proxies, the point a controller aims at),
+at the announced grasp height; it is fixed in the object's frame. The controller's estimate
+only chooses the object and the height: its horizontal error is part of what is measured, not
+part of the reference. From then on, each step, the twin measures the distance from the TCP to
+that point *as the object really is*. The tracking time is
 from the start of the target to the moment after which the distance stays below the threshold
 (4 mm) until the pursuit ends (the gripper starts closing, another target starts, or the object
 is picked). A pursuit that never settles has no tracking time and is counted as unsettled.
@@ -79,7 +83,8 @@ class TargetTracker:
             if best and best_d <= self.match_radius_m:
                 pos, orn = poses[best]
                 inv = (-orn[0], -orn[1], -orn[2], orn[3])
-                self._offset = _rotate(inv, np.asarray(grasp_point) - np.asarray(pos))
+                height = np.array([0.0, 0.0, grasp_point[2] - pos[2]])
+                self._offset = _rotate(inv, height)
                 self._track_id, self._object_id = track_id, best
                 self._start_s = time_s
                 self._below_since = None

@@ -49,13 +49,13 @@ def test_every_untargeted_object_has_its_reason() -> None:
     config = ControllerConfig()
     tracks = [
         _track(1, -0.2),
-        _track(2, -0.15, width=0.09),
+        _track(2, -0.15, y=0.3, width=0.09),
         _track(3, -0.1, y=0.95),
         _track(4, 0.3),
         _track(5, -1.5),
         _track(6, -0.1, confidence=0.1),
         _track(7, 0.0),
-        _track(8, -0.05),
+        _track(8, -0.05, y=0.3),
     ]
     result = schedule(tracks, now_s=0.0, tcp_position_m=TCP, config=config, excluded_ids={8})
     reasons = _reasons(result.untargeted)
@@ -87,13 +87,33 @@ def test_class_priority_beats_urgency() -> None:
 
 def test_narrow_side_decides_graspability() -> None:
     config = ControllerConfig()
-    long_thin = _track(1, -0.1, width=0.07)
+    limit = config.robot.gripper_max_opening_m - config.scheduler.grasp_width_margin_m
+    long_thin = _track(1, -0.1, width=limit - 0.001)
     result = schedule([long_thin], now_s=0.0, tcp_position_m=TCP, config=config)
     assert result.target is not None
-    wide = _track(2, -0.1, width=0.08)
+    wide = _track(2, -0.1, width=limit + 0.001)
     result = schedule([wide], now_s=0.0, tcp_position_m=TCP, config=config)
     assert result.target is None
     assert _reasons(result.untargeted) == {2: "too_wide"}
+
+
+def test_a_neighbour_where_the_fingers_come_down_blocks_the_pick() -> None:
+    config = ControllerConfig()
+    sched = config.scheduler
+    reach = config.robot.gripper_max_opening_m / 2 + sched.finger_depth_m + sched.clearance_m
+    target = _track(1, -0.1)
+    # neighbours across the narrow side (y), footprints 5 cm wide: one reaches into the
+    # keep-out rectangle by 1 mm, the other stays 1 mm clear of it
+    inside = _track(2, -0.1, y=0.5 + reach + 0.025 - 0.001)
+    outside = _track(3, -0.1, y=0.5 + reach + 0.025 + 0.001)
+    # along the long side (x) the fingers need only their own width plus the clearance
+    ahead = _track(4, -0.1 + 0.06 + sched.finger_width_m / 2 + sched.clearance_m + 0.001)
+    result = schedule([target, inside], now_s=0.0, tcp_position_m=TCP, config=config)
+    assert result.target is None  # same widths: each is in the other's keep-out rectangle
+    assert _reasons(result.untargeted) == {1: "blocked", 2: "blocked"}
+    for clear in (outside, ahead):
+        result = schedule([target, clear], now_s=0.0, tcp_position_m=TCP, config=config)
+        assert "blocked" not in _reasons(result.untargeted).values()
 
 
 def test_unknown_class_has_no_bin_and_nothing_is_targeted_when_empty() -> None:

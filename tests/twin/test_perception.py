@@ -103,3 +103,30 @@ def test_same_seed_same_detections() -> None:
 
     assert frames(1) == frames(1)
     assert frames(1) != frames(2)
+
+
+def test_dropout_windows_deliver_nothing_and_leave_the_other_frames_unchanged() -> None:
+    objects = [_object(i, -0.2 * i) for i in range(5)]
+
+    def frames(windows: tuple[tuple[float, float], ...]) -> tuple[list[float], list[object]]:
+        perception = Perception(
+            PerceptionConfig(),
+            CLASSES,
+            0.0,
+            1 / 240,
+            np.random.default_rng(7),
+            dropout_windows_s=windows,
+        )
+        released = []
+        for k in range(30):
+            perception.capture(k / 30, objects)
+            released += perception.released(k / 30 + 1.0)
+        assert perception.dropped_frames == (10 if windows else 0)
+        return [f.capture_time_s for f in released], [f.detections for f in released]
+
+    times_all, detections_all = frames(())
+    times, detections = frames(((1 / 3, 2 / 3),))
+    assert times == [t for t in times_all if not 1 / 3 <= t < 2 / 3]
+    assert len(times) == 20
+    kept = dict(zip(times_all, detections_all, strict=True))
+    assert detections == [kept[t] for t in times]

@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 
 from twin.errors import ConfigError
-from twin.scenario import ObjectLevel, PerturbationLevel, Scenario, SystemLevel, seed_tree
+from twin.perception import PerceptionConfig
+from twin.scenario import (
+    FaultLevel,
+    ObjectLevel,
+    PerturbationLevel,
+    Scenario,
+    SystemLevel,
+    seed_tree,
+)
 
 
 def test_round_trip_through_a_file(tmp_path: Path) -> None:
@@ -70,3 +78,44 @@ def test_seed_tree_is_reproducible_and_independent() -> None:
     assert a.fmu_seed == b.fmu_seed != c.fmu_seed
     assert np.array_equal(a.objects.random(5), b.objects.random(5))
     assert not np.array_equal(seed_tree(3).objects.random(5), seed_tree(3).physics.random(5))
+
+
+def test_perception_and_faults_round_trip_and_default_to_the_camera_model(tmp_path: Path) -> None:
+    scenario = Scenario(
+        perception=PerceptionConfig(position_noise_m=0.01, drop_rate=0.1, rate_hz=15.0),
+        faults=FaultLevel(
+            detection_dropout=((1.0, 2.0), (5.0, 6.5)),
+            belt_stall=((3.0, 4.0),),
+            controller_restart_at_s=(2.5,),
+        ),
+    )
+    path = tmp_path / "faults.yaml"
+    scenario.save(path)
+    assert Scenario.load(path) == scenario
+    assert Scenario().perception == PerceptionConfig()
+    assert scenario.faults.stalled(3.0)
+    assert scenario.faults.stalled(3.99)
+    assert not scenario.faults.stalled(4.0)
+    assert not scenario.faults.stalled(2.99)
+
+
+@pytest.mark.parametrize(
+    ("text", "pattern"),
+    [
+        ("perception: {rate_hz: 0}", r"perception\.rate_hz = 0\.0"),
+        ("perception: {drop_rate: 1.5}", r"perception\.drop_rate = 1\.5"),
+        ("perception: {noise: 0.1}", r"perception: unknown key 'noise'"),
+        ("faults: {belt_stall: [[4, 3]]}", r"faults\.belt_stall\[0\] = \[4\.0, 3\.0\]"),
+        ("faults: {detection_dropout: [[-1, 3]]}", r"faults\.detection_dropout\[0\]"),
+        ("faults: {detection_dropout: [[1, 2, 3]]}", r"faults\.detection_dropout\[0\].*2 values"),
+        ("faults: {controller_restart_at_s: [0]}", r"faults\.controller_restart_at_s\[0\] = 0\.0"),
+        ("faults: {crash: true}", r"faults: unknown key 'crash'"),
+    ],
+)
+def test_bad_perception_and_fault_values_name_the_key(
+    tmp_path: Path, text: str, pattern: str
+) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=pattern):
+        Scenario.load(path)

@@ -1,0 +1,90 @@
+"""``cdw-twin bench sweep --json``: the sweep's speed-up with 2 workers against 1.
+
+Runs the same small grid (the default scenario, ``--episodes`` lockstep episodes of
+``--duration`` simulated seconds, built-in dataset) once with 1 worker and once with 2, and
+prints ``{"speedup": wall_s_1 / wall_s_2, "wall_s_1": ..., "wall_s_2": ..., "episodes": ...}``
+plus the episode processes' CPU seconds per pass (``cpu_s_*``), the machine's core count and
+the 1-minute load average at the start of each pass: the speed-up can only reach 2 when the two
+cores are free for this benchmark.
+
+Lockstep is the benchmarked mode: it runs as fast as the CPU allows (twin and controller are two
+busy processes), so the figure measures throughput. Realtime episodes are paced by the wall clock
+and would "parallelise" perfectly whatever the cost, which says nothing about throughput.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+
+from twin.fileio import write_atomic
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the benchmark options."""
+    parser.add_argument("--episodes", type=int, default=4, help="episodes per pass (4)")
+    parser.add_argument("--duration", type=float, default=10.0, help="sim seconds each (10)")
+    parser.add_argument("--workers", type=int, default=2, help="workers of the parallel pass")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+def _grid(folder: Path, episodes: int, duration_s: float) -> Path:
+    scenario = folder / "bench.yaml"
+    write_atomic(
+        scenario, f"name: bench\nduration_s: {duration_s}\nsystem:\n  belt_speed_mps: 0.4\n"
+    )
+    grid = folder / "grid.yaml"
+    write_atomic(
+        grid,
+        f"scenarios: [bench.yaml]\nepisodes: {episodes}\noverrides:\n  mode: [lockstep]\n",
+    )
+    return grid
+
+
+def run(args: argparse.Namespace) -> int:
+    """Time the grid with 1 worker, then with ``--workers``."""
+    from experiments.sweep import run_sweep
+    from twin.builtin import builtin_dataset
+
+    builtin_dataset()  # mesh the sample once, outside the timed passes
+    walls: dict[int, float] = {}
+    cpus: dict[int, float] = {}
+    loads: dict[int, float] = {}
+    with tempfile.TemporaryDirectory(prefix="cdw-bench-sweep-") as tmp:
+        grid = _grid(Path(tmp), args.episodes, args.duration)
+        for workers in (1, args.workers):
+            loads[workers] = os.getloadavg()[0]
+            t0, c0 = time.perf_counter(), os.times()
+            data, code = run_sweep(grid, Path(tmp) / f"w{workers}", workers, quiet=True)
+            walls[workers] = time.perf_counter() - t0
+            c1 = os.times()
+            cpus[workers] = (c1.children_user - c0.children_user) + (
+                c1.children_system - c0.children_system
+            )
+            if code != 0:
+                print(json.dumps({"error": data.get("stopped"), "workers": workers}))
+                return code
+    result = {
+        "speedup": walls[1] / walls[args.workers],
+        "wall_s_1": walls[1],
+        f"wall_s_{args.workers}": walls[args.workers],
+        "workers": args.workers,
+        "episodes": args.episodes,
+        "duration_s": args.duration,
+        "mode": "lockstep",
+        "cpu_s_1": cpus[1],
+        f"cpu_s_{args.workers}": cpus[args.workers],
+        "cpus": os.cpu_count(),
+        "loadavg_1m_1": loads[1],
+        f"loadavg_1m_{args.workers}": loads[args.workers],
+    }
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, value in result.items():
+            print(f"{key:>20}: {value}")
+    return 0

@@ -1,0 +1,824 @@
+"""``cdw-twin report``: an offline HTML report with figures from ``cdw-twin run`` folders.
+
+Example::
+
+    cdw-twin report runs/a runs/b --out runs/report
+    cdw-twin report runs/            # a folder of run folders
+
+Writes ``report.html`` and one PNG per figure into ``--out`` (default: ``<first RUN_DIR>/report``).
+The page references its PNGs relatively and loads nothing from the network (no scripts). Episodes
+of every run are pooled and grouped by belt speed. Figures:
+
+1. step rate over wall time (first 60 s) per belt speed (``telemetry.json``, ``step_rate``);
+2. belt setpoint against measured speed over sim time, one episode per speed (``belt``);
+3. round-trip latency over wall time and 4. its histogram (``rtt``; see :mod:`twin.telemetry`);
+5. tracking time to 4 mm per speed, one dot per settled pursuit (``summary.json``,
+   ``tracking.tracking_times_s``), settled/pursuits noted above each speed;
+6. success and miss rate per speed with 95 % Wilson score intervals over the pooled counts:
+   success = placed in the correct bin / targeted (targeted from ``controller.json``),
+   miss = missed / processed (the twin's scores);
+7. mesh-generation timing of the dataset against the reference (24 ms/image, 5.3 ms/object);
+   meshgen records whole-run means only, so those are shown;
+8. source polygons (the dataset's annotation files when found next to it, else the pixel polygon
+   meshgen recorded in ``scene.json``) over the generated footprints (bottom face of each mesh,
+   placed at its ``scene.csv`` centroid) for up to four images.
+
+A figure whose data is missing becomes a "not available: <why>" panel. The dataset is
+``run.json``'s ``dataset`` when present, else the run's ``scenario.yaml`` dataset, else the
+built-in sample.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import html
+import json
+import math
+import os
+import tempfile
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from twin.errors import CdwTwinError
+from twin.fileio import write_atomic
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+REFERENCE_MS_PER_IMAGE = 24.0
+REFERENCE_MS_PER_OBJECT = 5.3
+STEP_RATE_WINDOW_S = 60.0
+FOOTPRINT_IMAGES = 4
+Z_95 = 1.959963984540054
+
+
+class ReportError(CdwTwinError):
+    """A report input (run folder, its files) is missing or malformed."""
+
+
+class Unavailable(Exception):  # noqa: N818 - reads as "figure unavailable: reason"
+    """A figure's data is missing; the message says why."""
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One episode folder of a run, with whatever files it has (None when missing)."""
+
+    run_dir: Path
+    folder: Path
+    speed_mps: float | None
+    seed: int | None
+    summary: dict[str, Any] | None
+    telemetry: dict[str, Any] | None
+    controller: dict[str, Any] | None
+
+    @property
+    def name(self) -> str:
+        """``<run folder>/<episode folder>``."""
+        return f"{self.run_dir.name}/{self.folder.name}"
+
+
+@dataclass(frozen=True)
+class RunData:
+    """Everything the report reads: episodes of every run and the datasets they used."""
+
+    run_dirs: tuple[Path, ...]
+    episodes: tuple[Episode, ...]
+    datasets: tuple[Path, ...]
+    notes: tuple[str, ...] = field(default=())
+
+    def speeds(self) -> list[float]:
+        """Distinct belt speeds, ascending (episodes without a speed are left out)."""
+        return sorted({e.speed_mps for e in self.episodes if e.speed_mps is not None})
+
+    def at_speed(self, speed: float) -> list[Episode]:
+        """Episodes at belt speed ``speed``."""
+        return [e for e in self.episodes if e.speed_mps == speed]
+
+
+# -- statistics -------------------------------------------------------------------------------
+def wilson_interval(successes: int, trials: int, z: float = Z_95) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion; ``(0, 1)`` when ``trials`` is 0."""
+    if trials <= 0:
+        return 0.0, 1.0
+    p = successes / trials
+    z2 = z * z
+    denom = 1.0 + z2 / trials
+    centre = (p + z2 / (2 * trials)) / denom
+    half = z * math.sqrt(p * (1 - p) / trials + z2 / (4 * trials * trials)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def _percentile(values: Sequence[float], q: float) -> float | None:
+    if not values:
+        return None
+    import numpy as np
+
+    return float(np.percentile(values, q))
+
+
+def _mean(values: Sequence[float]) -> float | None:
+    return sum(values) / len(values) if values else None
+
+
+# -- loading ----------------------------------------------------------------------------------
+def find_run_dirs(paths: Sequence[Path]) -> list[Path]:
+    """Run folders among ``paths``: each one holding ``run.json``, or a folder of such folders."""
+    found: list[Path] = []
+    for path in paths:
+        if (path / "run.json").is_file():
+            found.append(path)
+            continue
+        children = (
+            sorted(p for p in path.iterdir() if (p / "run.json").is_file())
+            if (path.is_dir())
+            else []
+        )
+        if not children:
+            what = "does not exist" if not path.exists() else "has no run.json"
+            msg = (
+                f"{path}: {what} (expected a folder written by `cdw-twin run`, "
+                "or a folder of such folders)"
+            )
+            raise ReportError(msg)
+        found.extend(children)
+    return found
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        msg = f"{path}: not valid JSON (line {exc.lineno}): {exc.msg}"
+        raise ReportError(msg) from exc
+
+
+def _optional_json(path: Path, notes: list[str]) -> dict[str, Any] | None:
+    if not path.is_file():
+        return None
+    try:
+        data = _read_json(path)
+    except ReportError as exc:
+        notes.append(str(exc))
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def _dataset_of(run_dir: Path, run: dict[str, Any], notes: list[str]) -> Path:
+    if isinstance(run.get("dataset"), str):
+        return Path(run["dataset"])
+    scenario = run_dir / "scenario.yaml"
+    if scenario.is_file():
+        import yaml
+
+        data = yaml.safe_load(scenario.read_text(encoding="utf-8")) or {}
+        name = data.get("dataset") if isinstance(data, dict) else None
+        if isinstance(name, str) and name != "builtin":
+            path = Path(name)
+            return path if path.is_absolute() else (run_dir / path).resolve()
+    from twin.builtin import builtin_dataset
+
+    notes.append(f"{run_dir}: no dataset in run.json or scenario.yaml; the built-in sample used")
+    return builtin_dataset()
+
+
+def _episode(run_dir: Path, folder: Path, run: dict[str, Any], notes: list[str]) -> Episode:
+    summary = _optional_json(folder / "twin" / "summary.json", notes)
+    speed = summary.get("belt_speed_mps") if summary else None
+    if speed is None:
+        speed = run.get("speed_mps")
+    seed = summary.get("seed") if summary else None
+    return Episode(
+        run_dir=run_dir,
+        folder=folder,
+        speed_mps=None if speed is None else float(speed),
+        seed=None if seed is None else int(seed),
+        summary=summary,
+        telemetry=_optional_json(folder / "twin" / "telemetry.json", notes),
+        controller=_optional_json(folder / "controller.json", notes),
+    )
+
+
+def load_runs(paths: Sequence[Path]) -> RunData:
+    """Read every run folder (see :func:`find_run_dirs`); raises :class:`ReportError`."""
+    run_dirs = find_run_dirs([Path(p) for p in paths])
+    notes: list[str] = []
+    episodes: list[Episode] = []
+    datasets: list[Path] = []
+    for run_dir in run_dirs:
+        run = _read_json(run_dir / "run.json")
+        if not isinstance(run, dict):
+            msg = f"{run_dir / 'run.json'}: expected a JSON object"
+            raise ReportError(msg)
+        dataset = _dataset_of(run_dir, run, notes)
+        if dataset not in datasets:
+            datasets.append(dataset)
+        folders = sorted(p for p in run_dir.glob("ep[0-9]*") if p.is_dir())
+        episodes.extend(_episode(run_dir, f, run, notes) for f in folders)
+    return RunData(tuple(run_dirs), tuple(episodes), tuple(datasets), tuple(notes))
+
+
+# -- per-episode numbers ----------------------------------------------------------------------
+def _counts(ep: Episode) -> dict[str, int] | None:
+    """Pooled-count ingredients of one episode, None without its twin summary."""
+    if ep.summary is None:
+        return None
+    scores = ep.summary.get("scores") or {}
+    pick = (ep.controller or {}).get("pick") or {}
+    targeted = int(pick.get("completed", 0)) + sum(
+        int(v) for v in (pick.get("aborted") or {}).values()
+    )
+    return {
+        "picked": int(scores.get("picked", 0)),
+        "placed_correct": int(scores.get("placed_correct", 0)),
+        "targeted": targeted,
+        "missed": int(scores.get("missed", 0)),
+        "processed": int(scores.get("processed", 0)),
+    }
+
+
+def _rtt(ep: Episode) -> list[float]:
+    return [float(v) for v in ((ep.telemetry or {}).get("rtt") or {}).get("rtt_ms", [])]
+
+
+def _tracking_times(ep: Episode) -> list[float]:
+    tracking = (ep.summary or {}).get("tracking") or {}
+    times = tracking.get("tracking_times_s")
+    if times is None and tracking.get("tracking_time_4mm_mean_s") is not None:
+        times = [tracking["tracking_time_4mm_mean_s"]]
+    return [float(t) for t in times or []]
+
+
+def episode_rows(data: RunData) -> list[dict[str, Any]]:
+    """One row per episode: counts, rates, tracking, RTT p50/p99 (ms), step rate, RTF."""
+    rows = []
+    for ep in data.episodes:
+        counts = _counts(ep) or {}
+        latency = (ep.summary or {}).get("latency") or {}
+        rtt = _rtt(ep)
+        targeted, processed = counts.get("targeted", 0), counts.get("processed", 0)
+        rows.append(
+            {
+                "episode": ep.name,
+                "speed_mps": ep.speed_mps,
+                "seed": ep.seed,
+                "complete": (ep.summary or {}).get("complete"),
+                **counts,
+                "success_rate": counts["placed_correct"] / targeted if targeted else None,
+                "miss_rate": counts["missed"] / processed if processed else None,
+                "tracking_time_4mm_mean_s": _mean(_tracking_times(ep)),
+                "rtt_ms_p50": latency.get("rtt_ms_p50", _percentile(rtt, 50)),
+                "rtt_ms_p99": latency.get("rtt_ms_p99", _percentile(rtt, 99)),
+                "step_rate_hz_mean": (ep.summary or {}).get("step_rate_hz_mean"),
+                "real_time_factor": (ep.summary or {}).get("real_time_factor"),
+            }
+        )
+    return rows
+
+
+def speed_rows(data: RunData) -> list[dict[str, Any]]:
+    """One row per belt speed over the pooled episodes (rates with Wilson 95 % intervals)."""
+    rows = []
+    for speed in data.speeds():
+        eps = data.at_speed(speed)
+        counts = [c for c in map(_counts, eps) if c is not None]
+        total = {k: sum(c[k] for c in counts) for k in counts[0]} if counts else {}
+        rtt = [v for ep in eps for v in _rtt(ep)]
+        latencies = [_latency(ep) for ep in eps]
+        p50s = [float(x["rtt_ms_p50"]) for x in latencies if x.get("rtt_ms_p50") is not None]
+        p99s = [float(x["rtt_ms_p99"]) for x in latencies if x.get("rtt_ms_p99") is not None]
+        times = [t for ep in eps for t in _tracking_times(ep)]
+        rtfs = [float(ep.summary["real_time_factor"]) for ep in eps if ep.summary]
+        targeted, processed = total.get("targeted", 0), total.get("processed", 0)
+        rows.append(
+            {
+                "speed_mps": speed,
+                "episodes": len(eps),
+                "picks": total.get("picked"),
+                **{f"{k}_total": v for k, v in total.items() if k != "picked"},
+                "success_rate": total["placed_correct"] / targeted if targeted else None,
+                "success_ci95": wilson_interval(total.get("placed_correct", 0), targeted),
+                "miss_rate": total["missed"] / processed if processed else None,
+                "miss_ci95": wilson_interval(total.get("missed", 0), processed),
+                "tracking_time_4mm_mean_s": _mean(times),
+                "rtt_ms_p50": _percentile(rtt, 50) if rtt else _mean(p50s),
+                "rtt_ms_p99": _percentile(rtt, 99) if rtt else _mean(p99s),
+                "real_time_factor": _mean(rtfs),
+            }
+        )
+    return rows
+
+
+def _latency(ep: Episode) -> dict[str, Any]:
+    return dict((ep.summary or {}).get("latency") or {})
+
+
+# -- figures ----------------------------------------------------------------------------------
+def _colour(data: RunData, speed: float | None) -> Any:
+    import matplotlib as mpl
+
+    speeds = data.speeds()
+    index = speeds.index(speed) if speed in speeds else 0
+    return mpl.colormaps["tab10"](index % 10)
+
+
+def _figure(width: float = 7.0, height: float = 4.0) -> Figure:
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width, height), dpi=100, layout="constrained")
+
+
+def _with(data: RunData, key: str, what: str) -> list[Episode]:
+    eps = [e for e in data.episodes if ((e.telemetry or {}).get(key) or {}).get(what)]
+    if not eps:
+        missing = sum(1 for e in data.episodes if e.telemetry is None)
+        msg = (
+            f"no episode has telemetry '{key}' samples ({missing} of {len(data.episodes)} "
+            "episodes have no twin/telemetry.json)"
+        )
+        raise Unavailable(msg)
+    return eps
+
+
+def fig_step_rate(data: RunData) -> Figure:
+    """Steps per wall second over the first 60 s of wall time, per episode, coloured by speed."""
+    eps = _with(data, "step_rate", "wall_s")
+    fig = _figure()
+    ax = fig.add_subplot()
+    seen: set[float | None] = set()
+    for ep in eps:
+        rate = ep.telemetry["step_rate"]  # type: ignore[index]
+        pairs = [(t, r) for t, r in zip(rate["wall_s"], rate["steps_per_s"], strict=True)]
+        pairs = [(t, r) for t, r in pairs if t <= STEP_RATE_WINDOW_S]
+        label = None if ep.speed_mps in seen else f"{ep.speed_mps} m/s"
+        seen.add(ep.speed_mps)
+        ax.plot(
+            *zip(*pairs, strict=True), marker=".", color=_colour(data, ep.speed_mps), label=label
+        )
+    ax.set_xlim(0, STEP_RATE_WINDOW_S)
+    ax.set_xlabel("wall time (s)")
+    ax.set_ylabel("simulated steps per wall second")
+    ax.set_title("Step rate over the first 60 s (1 s windows)")
+    ax.legend(title="belt speed")
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def fig_belt(data: RunData) -> Figure:
+    """Belt setpoint (dashed) and measured speed (solid) over sim time, one episode per speed."""
+    eps = _with(data, "belt", "sim_s")
+    fig = _figure()
+    ax = fig.add_subplot()
+    done: set[float | None] = set()
+    for ep in eps:
+        if ep.speed_mps in done:
+            continue
+        done.add(ep.speed_mps)
+        belt = ep.telemetry["belt"]  # type: ignore[index]
+        colour = _colour(data, ep.speed_mps)
+        ax.plot(
+            belt["sim_s"], belt["setpoint_mps"], "--", color=colour, label=f"setpoint {ep.name}"
+        )
+        ax.plot(belt["sim_s"], belt["speed_mps"], "-", color=colour, label=f"actual {ep.name}")
+    ax.set_xlabel("sim time (s)")
+    ax.set_ylabel("belt speed (m/s)")
+    ax.set_title("Belt velocity: setpoint against actual")
+    ax.legend(fontsize="small")
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def fig_rtt_time(data: RunData) -> Figure:
+    """Round-trip latency of every command over wall time, coloured by speed."""
+    eps = _with(data, "rtt", "rtt_ms")
+    fig = _figure()
+    ax = fig.add_subplot()
+    seen: set[float | None] = set()
+    for ep in eps:
+        rtt = ep.telemetry["rtt"]  # type: ignore[index]
+        label = None if ep.speed_mps in seen else f"{ep.speed_mps} m/s"
+        seen.add(ep.speed_mps)
+        colour = _colour(data, ep.speed_mps)
+        ax.plot(rtt["wall_s"], rtt["rtt_ms"], ".", ms=2, color=colour, label=label)
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time (s)")
+    ax.set_ylabel("round-trip latency (ms)")
+    ax.set_title("Round trip /joint_states -> /arm_controller/joint_trajectory")
+    ax.legend(title="belt speed", markerscale=4)
+    ax.grid(alpha=0.3, which="both")
+    return fig
+
+
+def fig_rtt_hist(data: RunData) -> Figure:
+    """Histogram of the pooled round-trip latency per speed, p50 and p99 marked."""
+    import numpy as np
+
+    _with(data, "rtt", "rtt_ms")
+    fig = _figure()
+    ax = fig.add_subplot()
+    everything = [v for ep in data.episodes for v in _rtt(ep)]
+    low, high = max(min(everything), 1e-3), max(everything)
+    bins: list[float] | int = np.geomspace(low, high * 1.0001, 50).tolist() if high > low else 10
+    for speed in data.speeds():
+        values = [v for ep in data.at_speed(speed) for v in _rtt(ep)]
+        if not values:
+            continue
+        colour = _colour(data, speed)
+        ax.hist(values, bins=bins, histtype="step", color=colour, label=f"{speed} m/s")
+        for q, style in ((50, "-"), (99, ":")):
+            ax.axvline(float(np.percentile(values, q)), color=colour, ls=style, lw=1)
+    ax.set_xscale("log")
+    ax.set_xlabel("round-trip latency (ms); solid line p50, dotted p99")
+    ax.set_ylabel("commands")
+    ax.set_title("Round-trip latency distribution")
+    ax.legend(title="belt speed")
+    return fig
+
+
+def fig_tracking(data: RunData) -> Figure:
+    """Tracking time to 4 mm per speed: one dot per settled pursuit, box over them."""
+    import numpy as np
+
+    speeds = data.speeds()
+    pursuits = {
+        s: sum(
+            int(((e.summary or {}).get("tracking") or {}).get("pursuits", 0))
+            for e in data.at_speed(s)
+        )
+        for s in speeds
+    }
+    if not any(pursuits.values()):
+        msg = "no pursuit was measured in any episode (no twin/summary.json tracking block)"
+        raise Unavailable(msg)
+    fig = _figure()
+    ax = fig.add_subplot()
+    rng = np.random.default_rng(0)
+    for i, speed in enumerate(speeds):
+        times = [t for ep in data.at_speed(speed) for t in _tracking_times(ep)]
+        if times:
+            ax.boxplot([times], positions=[i], widths=0.5, showfliers=False)
+            jitter = rng.uniform(-0.15, 0.15, len(times))
+            ax.plot(i + jitter, times, ".", color=_colour(data, speed), alpha=0.7)
+        ax.annotate(
+            f"{len(times)}/{pursuits[speed]} settled",
+            (i, 1.0),
+            xycoords=("data", "axes fraction"),
+            ha="center",
+            va="top",
+            fontsize="small",
+        )
+    ax.set_xticks(range(len(speeds)), [f"{s} m/s" for s in speeds])
+    ax.set_xlim(-0.6, len(speeds) - 0.4)
+    ax.set_ylabel("time to stay within 4 mm (s)")
+    ax.set_xlabel("belt speed")
+    ax.set_title("Tracking time to 4 mm (ground truth), per pursuit")
+    ax.grid(alpha=0.3, axis="y")
+    return fig
+
+
+def fig_rates(data: RunData) -> Figure:
+    """Success and miss rate per speed with 95 % Wilson intervals over pooled counts."""
+    rows = [
+        r for r in speed_rows(data) if r["success_rate"] is not None or r["miss_rate"] is not None
+    ]
+    if not rows:
+        msg = "no episode has both twin/summary.json scores and targeted objects or processed ones"
+        raise Unavailable(msg)
+    fig = _figure()
+    ax = fig.add_subplot()
+    x = list(range(len(rows)))
+    for offset, key, total, label, colour in (
+        (-0.15, "success", "targeted_total", "success (correct bin / targeted)", "tab:green"),
+        (0.15, "miss", "processed_total", "miss (missed / processed)", "tab:red"),
+    ):
+        xs, ys, lo, hi = [], [], [], []
+        for i, row in enumerate(rows):
+            rate = row[f"{key}_rate"]
+            if rate is None:
+                continue
+            a, b = row[f"{key}_ci95"]
+            xs.append(i + offset)
+            ys.append(rate)
+            lo.append(rate - a)
+            hi.append(b - rate)
+            ax.annotate(f"n={row[total]}", (i + offset, b), ha="center", va="bottom", fontsize=7)
+        ax.errorbar(xs, ys, yerr=[lo, hi], fmt="o", capsize=4, color=colour, label=label)
+    ax.set_xticks(x, [f"{r['speed_mps']} m/s" for r in rows])
+    ax.set_xlim(-0.6, len(rows) - 0.4)
+    ax.set_ylim(-0.02, 1.1)
+    ax.set_ylabel("rate (95 % Wilson interval, pooled episodes)")
+    ax.set_xlabel("belt speed")
+    ax.set_title("Success and miss rate per belt speed")
+    ax.legend(fontsize="small")
+    ax.grid(alpha=0.3, axis="y")
+    return fig
+
+
+def fig_meshgen(data: RunData) -> Figure:
+    """Meshgen ms per image and per object of each dataset against the reference."""
+    found = []
+    reasons = []
+    for dataset in data.datasets:
+        path = dataset / "summary.json"
+        if not path.is_file():
+            reasons.append(f"{path} missing")
+            continue
+        summary = _read_json(path)
+        found.append((dataset, float(summary["ms_per_image"]), float(summary["ms_per_object"])))
+    if not found:
+        raise Unavailable("; ".join(reasons) or "no dataset")
+    fig = _figure()
+    ax = fig.add_subplot()
+    labels = ["ms / image", "ms / object"]
+    width = 0.8 / (len(found) + 1)
+    ref = (REFERENCE_MS_PER_IMAGE, REFERENCE_MS_PER_OBJECT)
+    ax.bar([i - 0.4 + width / 2 for i in range(2)], ref, width, color="grey", label="reference")
+    for k, (dataset, per_image, per_object) in enumerate(found, start=1):
+        xs = [i - 0.4 + width * (k + 0.5) for i in range(2)]
+        bars = ax.bar(
+            xs, (per_image, per_object), width, label=f"{dataset.parent.name}/{dataset.name}"
+        )
+        ax.bar_label(bars, fmt="%.2f", fontsize=7)
+    ax.set_xticks(range(2), labels)
+    ax.set_ylabel("wall-clock milliseconds (whole-run mean)")
+    ax.set_title("Mesh generation timing (meshgen summary.json)")
+    ax.legend(fontsize="small")
+    return fig
+
+
+@dataclass(frozen=True)
+class _Outline:
+    class_name: str
+    source_m: list[tuple[float, float]] | None
+    footprint_m: list[tuple[float, float]]
+
+
+def _source_root(dataset: Path, source: str) -> Path | None:
+    for root in (dataset.parent / "sample", dataset.parent, dataset.parent.parent):
+        if (root / source).is_file():
+            return root
+    return None
+
+
+def _source_polygon_px(path: Path, where: str, size: tuple[int, int]) -> list[tuple[float, float]]:
+    kind, _, number = where.partition(" ")
+    index = int(number)
+    if path.suffix == ".txt" and kind == "line":
+        tokens = path.read_text(encoding="utf-8").splitlines()[index - 1].split()[1:]
+        values = [float(t) for t in tokens]
+        return [(values[i] * size[0], values[i + 1] * size[1]) for i in range(0, len(values), 2)]
+    if path.suffix == ".json" and kind == "shape":
+        shape = _read_json(path)["shapes"][index]
+        return [(float(u), float(v)) for u, v in shape["points"]]
+    msg = f"{path}: cannot read {where!r}"
+    raise ValueError(msg)
+
+
+def _bottom_face(mesh: Path, up: str) -> list[tuple[float, float]]:
+    vertices = [
+        tuple(float(v) for v in line.split()[1:4])
+        for line in mesh.read_text(encoding="utf-8").splitlines()
+        if line.startswith("v ")
+    ]
+    axis = 2 if up == "z" else 1
+    low = min(v[axis] for v in vertices)
+    bottom = [v for v in vertices if abs(v[axis] - low) < 1e-9]
+    return [(v[0], v[1]) if up == "z" else (v[0], -v[2]) for v in bottom]
+
+
+def _image_outlines(dataset: Path, stem: str) -> tuple[list[_Outline], str]:
+    """Outlines of one meshed image in the belt frame (x travel, y across), and the source used."""
+    scene = _read_json(dataset / stem / "scene.json")
+    with (dataset / stem / "scene.csv").open(encoding="utf-8", newline="") as handle:
+        placed = {row["object_id"]: row for row in csv.DictReader(handle)}
+    size = (int(scene["width_px"]), int(scene["height_px"]))
+    m_per_px = float(scene["m_per_px"])
+    root = _source_root(dataset, str(scene["source"]))
+    outlines = []
+    for obj in scene["objects"]:
+        row = placed[obj["object_id"]]
+        if root is not None:
+            polygon = _source_polygon_px(root / obj["source_image"], obj["source_where"], size)
+        else:
+            polygon = [(float(u), float(v)) for u, v in obj["polygon_px"]]
+        source = [((v - size[1] / 2) * m_per_px, (u - size[0] / 2) * m_per_px) for u, v in polygon]
+        cx, cy = float(row["centroid_x_m"]), float(row["centroid_y_m"])
+        bottom = _bottom_face(dataset / stem / row["mesh_path"], str(scene.get("up", "z")))
+        footprint = [(x + cx, y + cy) for x, y in bottom]
+        outlines.append(_Outline(str(row["class_name"]), source, footprint))
+    used = f"annotations in {root}" if root else "polygon_px recorded in scene.json"
+    return outlines, used
+
+
+def fig_footprints(data: RunData) -> Figure:
+    """Source polygons (black dashed) over the generated footprints for up to 4 images."""
+    from matplotlib.patches import Polygon
+
+    if not data.datasets:
+        raise Unavailable("no dataset")
+    dataset = data.datasets[0]
+    index = dataset / "index.csv"
+    if not index.is_file():
+        msg = f"{index} missing"
+        raise Unavailable(msg)
+    with index.open(encoding="utf-8", newline="") as handle:
+        stems = [r["image"] for r in csv.DictReader(handle) if int(r["objects"]) > 0]
+    stems = stems[:FOOTPRINT_IMAGES]
+    if not stems:
+        msg = f"{index}: no image with meshed objects"
+        raise Unavailable(msg)
+    import matplotlib as mpl
+
+    fig = _figure(9.0, 8.0)
+    axes = fig.subplots(2, 2, squeeze=False).ravel()
+    colours: dict[str, Any] = {}
+    used = ""
+    for ax, stem in zip(axes, stems, strict=False):
+        outlines, used = _image_outlines(dataset, stem)
+        for o in outlines:
+            colour = colours.setdefault(o.class_name, mpl.colormaps["tab10"](len(colours) % 10))
+            ring = [(y, x) for x, y in o.footprint_m]
+            ax.add_patch(Polygon(ring, closed=True, color=colour, alpha=0.45))
+            if o.source_m:
+                src = [(y, x) for x, y in o.source_m]
+                ax.add_patch(Polygon(src, closed=True, fill=False, ec="black", ls="--", lw=0.8))
+        ax.autoscale_view()
+        ax.set_aspect("equal")
+        ax.invert_yaxis()
+        ax.set_title(stem, fontsize="small")
+        ax.set_xlabel("y (m, image right)", fontsize="small")
+        ax.set_ylabel("x (m, travel / image down)", fontsize="small")
+    for ax in axes[len(stems) :]:
+        ax.set_axis_off()
+    handles: list[Any] = [
+        mpl.patches.Patch(color=c, alpha=0.45, label=n) for n, c in colours.items()
+    ]
+    handles.append(mpl.lines.Line2D([], [], color="black", ls="--", label="source polygon"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize="small")
+    fig.suptitle(f"Source polygons over generated footprints ({used})", fontsize="medium")
+    return fig
+
+
+FIGURES: tuple[tuple[str, str, Callable[[RunData], Figure]], ...] = (
+    ("step_rate", "Step rate over 60 s per belt speed", fig_step_rate),
+    ("belt", "Belt velocity setpoint against actual", fig_belt),
+    ("rtt_time", "Round-trip latency over time", fig_rtt_time),
+    ("rtt_hist", "Round-trip latency histogram", fig_rtt_hist),
+    ("tracking", "Tracking time to 4 mm per speed", fig_tracking),
+    ("rates", "Success and miss rate per speed (95 % Wilson intervals)", fig_rates),
+    ("meshgen", "Mesh-generation timing", fig_meshgen),
+    ("footprints", "Source polygons over generated footprints", fig_footprints),
+)
+"""``(file stem, heading, figure function)`` in page order."""
+
+
+# -- output -----------------------------------------------------------------------------------
+def _save_png(fig: Figure, path: Path) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            fig.savefig(handle, format="png")
+        Path(tmp).chmod(0o644)
+        Path(tmp).replace(path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _fmt(value: Any, digits: int = 3) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return f"{value:.{digits}g}"
+    if isinstance(value, tuple):
+        return "[" + ", ".join(_fmt(v, 2) for v in value) + "]"
+    return html.escape(str(value))
+
+
+def _table(rows: list[dict[str, Any]], columns: Sequence[tuple[str, str]]) -> str:
+    head = "".join(f"<th>{html.escape(title)}</th>" for _, title in columns)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{_fmt(row.get(key))}</td>" for key, _ in columns) + "</tr>"
+        for row in rows
+    )
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+SPEED_COLUMNS = (
+    ("speed_mps", "speed (m/s)"),
+    ("episodes", "episodes"),
+    ("picks", "picks"),
+    ("success_rate", "success"),
+    ("success_ci95", "success 95% CI"),
+    ("miss_rate", "miss"),
+    ("miss_ci95", "miss 95% CI"),
+    ("tracking_time_4mm_mean_s", "tracking to 4 mm, mean (s)"),
+    ("rtt_ms_p50", "RTT p50 (ms)"),
+    ("rtt_ms_p99", "RTT p99 (ms)"),
+    ("real_time_factor", "RTF"),
+)
+EPISODE_COLUMNS = (
+    ("episode", "episode"),
+    ("speed_mps", "speed (m/s)"),
+    ("seed", "seed"),
+    ("complete", "complete"),
+    ("picked", "picks"),
+    ("targeted", "targeted"),
+    ("success_rate", "success"),
+    ("miss_rate", "miss"),
+    ("tracking_time_4mm_mean_s", "tracking mean (s)"),
+    ("rtt_ms_p50", "RTT p50 (ms)"),
+    ("rtt_ms_p99", "RTT p99 (ms)"),
+    ("step_rate_hz_mean", "steps/s"),
+    ("real_time_factor", "RTF"),
+)
+
+_CSS = (
+    "body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}"
+    "table{border-collapse:collapse;font-size:0.85em;margin-bottom:1.5em}"
+    "th,td{border:1px solid #bbb;padding:0.25em 0.5em;text-align:right}"
+    "th{background:#eee}figure{margin:1.5em 0}img{max-width:100%}"
+    ".na{border:2px dashed #c33;background:#fee;padding:1em;color:#900}"
+    ".notes{font-size:0.8em;color:#666}"
+)
+
+
+def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
+    """Write ``report.html`` and its PNGs into ``out``; returns the HTML path.
+
+    Raises :class:`ReportError` when a path is not a run folder (nor a folder of them).
+    """
+    import matplotlib as mpl
+
+    mpl.use("Agg")
+    data = load_runs(run_dirs)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    sections = []
+    for stem, heading, make in FIGURES:
+        png = out / f"{stem}.png"
+        try:
+            fig = make(data)
+        except Unavailable as exc:
+            png.unlink(missing_ok=True)
+            body = f'<div class="na" id="na-{stem}">not available: {html.escape(str(exc))}</div>'
+        except (KeyError, IndexError, TypeError, ValueError, OSError, ReportError) as exc:
+            png.unlink(missing_ok=True)
+            reason = f"could not read its data: {type(exc).__name__}: {exc}"
+            body = f'<div class="na" id="na-{stem}">not available: {html.escape(reason)}</div>'
+        else:
+            _save_png(fig, png)
+            body = f'<img id="fig-{stem}" src="{png.name}" alt="{html.escape(heading)}">'
+        sections.append(f"<figure><h2>{html.escape(heading)}</h2>{body}</figure>")
+    runs = "".join(f"<li>{html.escape(str(p))}</li>" for p in data.run_dirs)
+    sets = "".join(f"<li>{html.escape(str(p))}</li>" for p in data.datasets)
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in data.notes)
+    page = (
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        f"<title>cdw-twin report</title><style>{_CSS}</style></head><body>"
+        "<h1>cdw-twin report</h1>"
+        f"<p>Runs:</p><ul>{runs}</ul><p>Datasets:</p><ul>{sets}</ul>"
+        "<h2>Per belt speed</h2>"
+        "<p>Rates pool the counts of every episode at a speed; intervals are Wilson score "
+        "intervals (95 %). RTT pools every command's round trip.</p>"
+        f"{_table(speed_rows(data), SPEED_COLUMNS)}"
+        f"<h2>Per episode</h2>{_table(episode_rows(data), EPISODE_COLUMNS)}"
+        + "".join(sections)
+        + (f'<div class="notes"><p>Notes:</p><ul>{notes}</ul></div>' if notes else "")
+        + "</body></html>\n"
+    )
+    path = out / "report.html"
+    write_atomic(path, page)
+    return path
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the report options."""
+    parser.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR", help="run folders")
+    parser.add_argument("--out", type=Path, default=None, help="folder (RUN_DIR/report)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Write the report and print its path."""
+    out = args.out if args.out is not None else args.run_dirs[0] / "report"
+    print(write_report(args.run_dirs, out))
+    return 0
+
+
+__all__ = [
+    "FIGURES",
+    "Episode",
+    "ReportError",
+    "RunData",
+    "episode_rows",
+    "find_run_dirs",
+    "load_runs",
+    "speed_rows",
+    "wilson_interval",
+    "write_report",
+]

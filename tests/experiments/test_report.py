@@ -1,0 +1,159 @@
+"""``cdw-twin report`` on a real closed-loop run: figures, tables, offline HTML in chromium."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from experiments.report import FIGURES, ReportError, wilson_interval, write_report
+
+CHROMIUM = Path("/usr/bin/chromium")
+PROBE_SCRIPT = (
+    "<script>window.addEventListener('load', () => {"
+    " for (const img of document.images) img.setAttribute('data-natural-width', img.naturalWidth);"
+    "});</script>"
+)
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory, builtin_meshes: Path) -> Path:
+    """One 5 s lockstep episode at 0.4 m/s, twin node and controller as real processes."""
+    pytest.importorskip("rclpy")
+    pytest.importorskip("cdw_interfaces")
+    out = tmp_path_factory.mktemp("runs") / "run_a"
+    cmd = [sys.executable, "-m", "twin.cli", "run", "--duration", "5", "--speed", "0.4"]
+    cmd += ["--episodes", "1", "--dataset", str(builtin_meshes), "--out", str(out), "--json"]
+    subprocess.run(cmd, check=True, timeout=180, capture_output=True)
+    return out
+
+
+def _img_sources(page: str) -> list[str]:
+    return re.findall(r'<img [^>]*src="([^"]+)"', page)
+
+
+def test_the_run_leaves_telemetry_with_matched_round_trips(run_dir: Path) -> None:
+    twin = run_dir / "ep000" / "twin"
+    telemetry = json.loads((twin / "telemetry.json").read_text(encoding="utf-8"))
+    summary = json.loads((twin / "summary.json").read_text(encoding="utf-8"))
+    rtt = telemetry["rtt"]["rtt_ms"]
+    assert len(rtt) > 100
+    assert min(rtt) > 0.0
+    assert summary["latency"]["samples"] == len(rtt)
+    assert summary["latency"]["unmatched_commands"] == 0
+    assert 0 < summary["latency"]["rtt_ms_p50"] <= summary["latency"]["rtt_ms_p99"]
+    assert summary["step_rate_hz_mean"] > 0
+    belt = telemetry["belt"]
+    assert belt["sim_s"][-1] == pytest.approx(5.0, abs=0.2)
+    assert belt["speed_mps"][-1] == pytest.approx(0.4, abs=0.05)
+    assert set(belt["setpoint_mps"]) == {0.4}
+
+
+def test_report_has_every_figure_and_opens_offline_in_chromium(
+    run_dir: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "report"
+    html_path = write_report([run_dir], out)
+    page = html_path.read_text(encoding="utf-8")
+    sources = _img_sources(page)
+    assert sources == [f"{stem}.png" for stem, _, _ in FIGURES]
+    assert "not available" not in page
+    assert "http://" not in page
+    assert "https://" not in page
+    for src in sources:
+        assert (out / src).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(out.glob(".*.tmp"))
+    assert "RTT p50 (ms)" in page
+    assert "RTT p99 (ms)" in page
+    if not CHROMIUM.is_file():
+        pytest.skip(f"no chromium at {CHROMIUM}: `apt-get install chromium` to run this check")
+    probe = out / "probe.html"
+    probe.write_text(page.replace("</body>", PROBE_SCRIPT + "</body>"), encoding="utf-8")
+    flags = ["--headless", "--disable-gpu", "--no-sandbox", "--virtual-time-budget=5000"]
+    flags.append("--host-resolver-rules=MAP * ~NOTFOUND")
+    dom = subprocess.run(
+        [str(CHROMIUM), *flags, "--dump-dom", probe.as_uri()],
+        check=True,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    ).stdout
+    widths = dict(re.findall(r'<img [^>]*src="([^"]+)"[^>]*data-natural-width="(\d+)"', dom))
+    assert set(widths) == set(sources)
+    assert all(int(w) > 0 for w in widths.values()), widths
+    shot = tmp_path / "shot.png"
+    subprocess.run(
+        [
+            str(CHROMIUM),
+            *flags,
+            "--window-size=1200,3000",
+            f"--screenshot={shot}",
+            html_path.as_uri(),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=120,
+    )
+    assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_missing_telemetry_gives_not_available_panels(run_dir: Path, tmp_path: Path) -> None:
+    old = tmp_path / "old_run"
+    shutil.copytree(run_dir, old)
+    (old / "ep000" / "twin" / "telemetry.json").unlink()
+    out = tmp_path / "report"
+    page = write_report([old], out).read_text(encoding="utf-8")
+    for stem in ("step_rate", "belt", "rtt_time", "rtt_hist"):
+        assert f'id="na-{stem}">not available: no episode has telemetry' in page
+        assert not (out / f"{stem}.png").exists()
+    for stem in ("rates", "meshgen", "footprints"):
+        assert f'src="{stem}.png"' in page
+
+
+def test_a_folder_of_runs_is_accepted(run_dir: Path, tmp_path: Path) -> None:
+    parent = tmp_path / "runs"
+    shutil.copytree(run_dir, parent / "a")
+    shutil.copytree(run_dir, parent / "b")
+    page = write_report([parent], tmp_path / "report").read_text(encoding="utf-8")
+    assert "a/ep000" in page
+    assert "b/ep000" in page
+    assert len(_img_sources(page)) == len(FIGURES)
+
+
+def test_folder_without_run_json_is_a_clear_error(tmp_path: Path) -> None:
+    empty = tmp_path / "not_a_run"
+    empty.mkdir()
+    with pytest.raises(ReportError, match=r"not_a_run: has no run\.json"):
+        write_report([empty], tmp_path / "report")
+    with pytest.raises(ReportError, match=r"missing: does not exist"):
+        write_report([tmp_path / "missing"], tmp_path / "report")
+
+
+def test_cli_reports_a_bad_folder_and_exits_2(tmp_path: Path) -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "twin.cli", "report", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert result.returncode == 2
+    assert f"{tmp_path}: has no run.json" in result.stderr
+
+
+@pytest.mark.parametrize(("k", "n"), [(0, 1), (1, 1), (3, 10), (50, 100), (0, 0)])
+def test_wilson_interval_contains_the_estimate_and_stays_in_unit_range(k: int, n: int) -> None:
+    low, high = wilson_interval(k, n)
+    assert 0.0 <= low <= high <= 1.0
+    if n:
+        assert low <= k / n <= high
+
+
+def test_wilson_interval_known_value() -> None:
+    # 50 of 100 at 95 %: 0.5 +- 0.0962 (Wilson)
+    assert wilson_interval(50, 100) == pytest.approx((0.4038, 0.5962), abs=1e-4)

@@ -1,0 +1,116 @@
+"""``cdw-twin run`` end to end across real processes: two episodes, bad input, interruption."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from twin.scenario import Scenario
+
+SCENARIO = "name: e2e\nduration_s: 3.0\nsystem: {prefill_m: 1.0}\n"
+
+
+def _needs_ros() -> None:
+    for module in ("rclpy", "cdw_interfaces"):
+        if importlib.util.find_spec(module) is None:
+            pytest.skip(f"{module} is not installed in this venv")
+
+
+def _cli(*args: str | Path) -> list[str]:
+    return [sys.executable, "-m", "twin.cli", "run", *map(str, args)]
+
+
+def _json(path: Path) -> Any:
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def test_two_episodes_end_to_end(builtin_meshes: Path, tmp_path: Path) -> None:
+    _needs_ros()
+    scenario = tmp_path / "e2e.yaml"
+    scenario.write_text(SCENARIO, encoding="utf-8")
+    out = tmp_path / "run"
+    done = subprocess.run(
+        _cli(scenario, "--episodes", 2, "--seed", 5, "--dataset", builtin_meshes, "--out", out),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "episode 2/2 (seed 6)" in done.stdout
+    run = _json(out / "run.json")
+    assert run["complete"] is True
+    assert "stopped" not in run
+    assert run["episodes"] == 2
+    assert run["dataset"] == str(builtin_meshes.resolve())
+    assert run["scenario_path"] == str(scenario)
+    rows = _json(out / "episodes.json")
+    assert [r["seed"] for r in rows] == [5, 6]
+    assert all(r["complete"] and r["mode"] == "lockstep" for r in rows)
+    assert all(r["processed"] >= r["missed"] >= 0 for r in rows)
+    with (out / "episodes.csv").open(encoding="utf-8") as handle:
+        assert [row["seed"] for row in csv.DictReader(handle)] == ["5", "6"]
+    assert Scenario.load(out / "scenario.yaml").duration_s == 3.0
+    for i in range(2):
+        summary = _json(out / f"ep00{i}" / "twin" / "summary.json")
+        assert summary["sim_seconds"] == pytest.approx(3.0)
+        assert summary["lockstep_timeouts"] == 0
+        assert (out / f"ep00{i}" / "controller.json").is_file()
+
+
+def test_a_bad_scenario_is_rejected_before_anything_starts(tmp_path: Path) -> None:
+    scenario = tmp_path / "bad.yaml"
+    scenario.write_text("faults: {belt_stall: [[5, 2]]}\n", encoding="utf-8")
+    out = tmp_path / "run"
+    done = subprocess.run(
+        _cli(scenario, "--out", out), capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.returncode == 2
+    assert "faults.belt_stall[0] = [5.0, 2.0]" in done.stderr
+    assert str(scenario) in done.stderr
+    assert not out.exists()
+
+
+def test_interrupt_keeps_the_finished_episodes_and_says_incomplete(
+    builtin_meshes: Path, tmp_path: Path
+) -> None:
+    _needs_ros()
+    scenario = tmp_path / "e2e.yaml"
+    scenario.write_text(SCENARIO, encoding="utf-8")
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        _cli(scenario, "--episodes", 3, "--dataset", builtin_meshes, "--out", out),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 90
+        while not (out / "ep001" / "twin.log").is_file():
+            assert proc.poll() is None, proc.communicate()[1][-3000:]
+            assert time.monotonic() < deadline
+            time.sleep(0.2)
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, stderr[-3000:]
+    assert "stopped after 1/3 episodes" in stderr
+    run = _json(out / "run.json")
+    assert run["complete"] is False
+    assert run["stopped"].startswith("interrupted")
+    rows = _json(out / "episodes.json")
+    assert [r["seed"] for r in rows] == [0]
+    assert _json(out / "ep000" / "twin" / "summary.json")["complete"] is True
+    assert not (out / "ep002").exists()

@@ -1,0 +1,77 @@
+"""The scenario suite loads and validates; injected belt stalls act on the real twin."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from twin.scenario import FaultLevel, Scenario
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "scenarios"
+EXPECTED = {
+    "default",
+    "speed_0.2",
+    "speed_0.4",
+    "speed_0.6",
+    "dense",
+    "perturbed",
+    "perception_low",
+    "perception_high",
+    "fault_dropout",
+    "fault_belt_stall",
+    "fault_controller_restart",
+}
+
+
+def test_every_scenario_file_loads_and_round_trips(tmp_path: Path) -> None:
+    files = sorted(SCENARIOS.glob("*.yaml"))
+    assert {f.stem for f in files} >= EXPECTED
+    for path in files:
+        scenario = Scenario.load(path)
+        assert scenario.name == path.stem
+        assert 0 < scenario.duration_s <= 600
+        copy = tmp_path / path.name
+        scenario.save(copy)
+        assert Scenario.load(copy) == scenario
+    speeds = [
+        Scenario.load(SCENARIOS / f"speed_{v}.yaml").system.belt_speed_mps for v in (0.2, 0.4, 0.6)
+    ]
+    assert speeds == [0.2, 0.4, 0.6]
+    low = Scenario.load(SCENARIOS / "perception_low.yaml").perception
+    high = Scenario.load(SCENARIOS / "perception_high.yaml").perception
+    assert low.position_noise_m < Scenario().perception.position_noise_m < high.position_noise_m
+    assert Scenario.load(SCENARIOS / "fault_dropout.yaml").faults.detection_dropout
+    assert Scenario.load(SCENARIOS / "fault_belt_stall.yaml").faults.belt_stall
+    assert Scenario.load(SCENARIOS / "fault_controller_restart.yaml").faults.controller_restart_at_s
+
+
+def test_belt_stall_stops_the_belt_and_dropout_silences_the_camera(builtin_meshes: Path) -> None:
+    from twin.sim import Twin
+
+    scenario = dataclasses.replace(
+        Scenario(duration_s=2.0),
+        faults=FaultLevel(belt_stall=((0.5, 2.0),), detection_dropout=((1.0, 2.0),)),
+    )
+    speeds: dict[float, float] = {}
+    frames_after_dropout = 0
+    with Twin(scenario, dataset_dir=builtin_meshes) as twin:
+        twin.reset()
+        while True:
+            _, _, _, truncated, _ = twin.step()
+            speeds[round(twin.time_s, 4)] = twin.observe_belt().belt_speed_mps
+            frames = twin.take_detections()
+            if twin.time_s > 1.2:
+                frames_after_dropout += len(frames)
+            if truncated:
+                break
+        kinds = [(e.data["kind"], e.time_s) for e in twin.events if e.type.value == "fault"]
+        assert twin.setpoint_mps == pytest.approx(0.4)
+    assert speeds[0.5] == pytest.approx(0.4, abs=0.05)
+    assert speeds[2.0] < 0.05
+    assert frames_after_dropout == 0
+    assert kinds == [
+        ("injected_belt_stall", 0.5),
+        ("injected_detection_dropout", 1.0),
+    ]

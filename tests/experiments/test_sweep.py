@@ -1,0 +1,148 @@
+"""Sweep grids expand and validate; aggregation gives the textbook intervals (no ROS)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from pathlib import Path
+
+import pytest
+
+from experiments.sweep import (
+    CI_METRICS,
+    Grid,
+    aggregate_cell,
+    expand,
+    student_t_interval,
+    sweep_csv,
+    wilson_interval,
+)
+from twin.errors import ConfigError
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "scenarios"
+
+
+def _row(placed: int, targeted: int, missed: int, processed: int, **extra: float) -> dict:
+    return {
+        "picks": placed,
+        "placed_correct": placed,
+        "targeted": targeted,
+        "missed": missed,
+        "processed": processed,
+        "success_rate": placed / targeted if targeted else 0.0,
+        "miss_rate": missed / processed if processed else 0.0,
+        "tracking_time_4mm_mean_s": extra.get("tracking"),
+        **{k: v for k, v in extra.items() if k != "tracking"},
+    }
+
+
+def test_student_t_interval_matches_the_textbook_value() -> None:
+    mean, low, high = student_t_interval([1.0, 2.0, 3.0, 4.0])
+    half = 3.182446305284263 * math.sqrt(5 / 3) / 2  # t(0.975, 3) * s / sqrt(n)
+    assert mean == pytest.approx(2.5)
+    assert (low, high) == pytest.approx((2.5 - half, 2.5 + half))
+    assert student_t_interval([7.0]) == (7.0, None, None)
+    assert student_t_interval([]) == (None, None, None)
+
+
+def test_wilson_interval_matches_the_textbook_value_and_stays_in_unit_range() -> None:
+    low, high = wilson_interval(8, 10)
+    assert (low, high) == pytest.approx((0.4901624, 0.9433178), abs=1e-6)
+    assert wilson_interval(0, 5)[0] == 0.0
+    assert wilson_interval(5, 5)[1] == pytest.approx(1.0)
+    assert wilson_interval(0, 0) == (None, None)
+
+
+def test_aggregate_cell_pools_counts_and_skips_missing_values() -> None:
+    rows = [
+        _row(4, 5, 1, 6, tracking=1.0),
+        _row(3, 5, 2, 6),
+        _row(5, 5, 0, 6, tracking=3.0),
+    ]
+    agg = aggregate_cell(rows)
+    assert agg["episodes"] == 3
+    assert set(agg["metrics"]) == set(CI_METRICS)
+    success = agg["metrics"]["success_rate"]
+    assert success["mean"] == pytest.approx(0.8)
+    assert success["ci95_low"] < 0.8 < success["ci95_high"]
+    tracking = agg["metrics"]["tracking_time_4mm_mean_s"]
+    assert tracking["n"] == 2
+    assert tracking["mean"] == pytest.approx(2.0)
+    wilson = agg["wilson"]["success_rate"]
+    assert (wilson["successes"], wilson["trials"]) == (12, 15)
+    assert (wilson["ci95_low"], wilson["ci95_high"]) == pytest.approx(wilson_interval(12, 15))
+    miss = agg["wilson"]["miss_rate"]
+    assert (miss["successes"], miss["trials"], miss["pooled"]) == (3, 18, pytest.approx(1 / 6))
+    table = list(
+        csv.DictReader(
+            io.StringIO(
+                sweep_csv(
+                    [
+                        {
+                            "cell": "c",
+                            "scenario": "s",
+                            "mode": "lockstep",
+                            "speed_mps": 0.4,
+                            "duration_s": 5.0,
+                            "aggregate": agg,
+                        },
+                    ]
+                )
+            )
+        )
+    )
+    assert float(table[0]["success_rate_mean"]) == pytest.approx(0.8)
+    assert float(table[0]["success_rate_wilson_low"]) == pytest.approx(wilson["ci95_low"])
+
+
+def test_aggregate_of_no_episodes_has_no_numbers() -> None:
+    agg = aggregate_cell([])
+    assert agg["metrics"]["picks"] == {"mean": None, "ci95_low": None, "ci95_high": None, "n": 0}
+    assert agg["wilson"]["success_rate"]["pooled"] is None
+
+
+def test_grid_expands_scenarios_times_overrides_with_resolved_values(tmp_path: Path) -> None:
+    grid_path = tmp_path / "grid.yaml"
+    grid_path.write_text(
+        f"scenarios: [{SCENARIOS / 'default.yaml'}, {SCENARIOS / 'dense.yaml'}]\n"
+        "episodes: 2\n"
+        "overrides: {speed: [0.2, 0.6], duration_s: [5], mode: [lockstep]}\n",
+        encoding="utf-8",
+    )
+    cells = expand(Grid.load(grid_path), tmp_path)
+    assert [c.name for c in cells] == [
+        "default-speed0.2-duration_s5.0-modelockstep",
+        "default-speed0.6-duration_s5.0-modelockstep",
+        "dense-speed0.2-duration_s5.0-modelockstep",
+        "dense-speed0.6-duration_s5.0-modelockstep",
+    ]
+    assert [c.scenario.system.belt_speed_mps for c in cells] == [0.2, 0.6, 0.2, 0.6]
+    assert all(c.scenario.duration_s == 5.0 and c.seeds == (0, 1) for c in cells)
+    assert cells[2].scenario.system.image_gap_m == 0.0
+
+
+@pytest.mark.parametrize(
+    ("text", "pattern"),
+    [
+        ("scenarios: [a.yaml]\nworkers: 3\n", r"unknown key 'workers'"),
+        ("scenarios: []\n", r"scenarios = \[\]"),
+        ("scenarios: [a.yaml]\nseeds: [1]\nepisodes: 2\n", r"seeds and episodes"),
+        ("scenarios: [a.yaml]\noverrides: {speed: [3.0]}\n", r"overrides\.speed\[0\] = 3\.0"),
+        ("scenarios: [a.yaml]\noverrides: {mode: [fast]}\n", r"overrides\.mode\[0\] = 'fast'"),
+        ("scenarios: [a.yaml]\noverrides: {belt: [1]}\n", r"overrides: unknown key 'belt'"),
+    ],
+)
+def test_bad_grids_name_the_file_and_key(tmp_path: Path, text: str, pattern: str) -> None:
+    path = tmp_path / "grid.yaml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=pattern) as info:
+        Grid.load(path)
+    assert str(path) in str(info.value)
+
+
+def test_a_bad_scenario_in_a_grid_fails_before_anything_runs(tmp_path: Path) -> None:
+    (tmp_path / "bad.yaml").write_text("system: {belt_speed_mps: 9}\n", encoding="utf-8")
+    (tmp_path / "grid.yaml").write_text("scenarios: [bad.yaml]\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"bad\.yaml: .*system\.belt_speed_mps = 9\.0"):
+        expand(Grid.load(tmp_path / "grid.yaml"), tmp_path)
