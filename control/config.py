@@ -310,7 +310,7 @@ class PickConfig:
     the object the gripper is commanded to close.
     """
 
-    approach_height_m: float = field(default=0.03, metadata=_meta("float"))
+    approach_height_m: float = field(default=0.06, metadata=_meta("float"))
     ik_failures_to_abort: int = field(default=3, metadata=_meta("int"))
     schedule_before_ready_s: float = field(default=0.2, metadata=_meta("float"))
     grasp_below_top_m: float = field(default=0.02, metadata=_meta("float"))
@@ -349,6 +349,7 @@ class SchedulerConfig:
     An object is blocked when another lies in the rectangle its open fingers come down on:
     across its narrow side the opening plus two ``finger_depth_m`` and ``clearance_m``, along
     its long side ``finger_width_m`` plus ``clearance_m`` (Panda fingers: 2 cm by 1.2 cm).
+    Objects lower than ``min_height_m`` are too flat for the finger pads (about 2 cm tall).
     """
 
     class_priorities: dict[str, float] = field(
@@ -361,10 +362,11 @@ class SchedulerConfig:
     finger_width_m: float = field(default=0.02, metadata=_meta("float"))
     finger_depth_m: float = field(default=0.012, metadata=_meta("float"))
     clearance_m: float = field(default=0.008, metadata=_meta("float"))
+    min_height_m: float = field(default=0.02, metadata=_meta("float"))
 
     def __post_init__(self) -> None:
         """Validate every field."""
-        for name in ("finger_width_m", "finger_depth_m", "clearance_m"):
+        for name in ("finger_width_m", "finger_depth_m", "clearance_m", "min_height_m"):
             value = cast(float, getattr(self, name))
             _require(value >= 0.0, f"scheduler.{name}", value, "must be >= 0")
         for name, value in self.class_priorities.items():

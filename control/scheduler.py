@@ -1,6 +1,7 @@
 """Choose the next object to pick, and say why every other object is not picked.
 
 An object is a candidate when its class has a bin, its footprint's narrow side fits the gripper,
+it stands tall enough for the finger pads,
 the arm can intercept it inside the pick window and finish the dwell before it leaves the window,
 its grasp point stays within reach until the gripper has closed, and no other object lies where
 the open fingers come down (the gripper's keep-out rectangle across the narrow side). Among
@@ -21,6 +22,7 @@ UNTARGETED_REASONS: tuple[str, ...] = (
     "low_confidence",
     "no_bin",
     "too_wide",
+    "too_flat",
     "excluded",
     "too_late",
     "upstream",
@@ -185,6 +187,8 @@ def _reason(
         config.robot.gripper_max_opening_m - sched.grasp_width_margin_m
     ):
         return "too_wide"
+    if track.height_m < sched.min_height_m:
+        return "too_flat"
     x_min, x_max = belt.pick_window_x_m
     x_meet, y_meet = track.position_at(now_s + intercept_s)
     x_done, y_done = track.position_at(
