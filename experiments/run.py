@@ -177,10 +177,14 @@ def side_processes(options: RunOptions, episode: EpisodeSpec) -> dict[str, list[
     """Extra processes of an episode besides the twin and the controller, by log name.
 
     They start after the twin and the controller and are stopped (SIGTERM) when the twin ends.
-    This is the one place to add a recorder.
+    The MCAP recorder of every topic writes ``recording.mcap`` (``recording.mcap.partial``
+    while it runs, and after a crash; see :mod:`experiments.record`). It joins late enough to
+    miss the first few ticks; ``/events`` is transient local, so it still gets every event.
     """
-    del options, episode
-    return {}
+    from experiments.record import recorder_command
+
+    del options
+    return {"recorder": recorder_command(episode.folder / "recording.mcap")}
 
 
 def _controller_stats(folder: Path) -> list[dict[str, Any]]:

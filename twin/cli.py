@@ -48,7 +48,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("bench", "sweep"), "experiments.bench_sweep", "sweep speed-up with 2 workers against 1"),
     (("report",), "experiments.report", "HTML report with figures from run folders"),
     (("record",), "experiments.record", "record every twin/controller topic to MCAP"),
-    (("demo",), "twin.cmd_demo", "the main job: sample, mesh, simulate, summarise"),
+    (("demo",), "experiments.demo", "the main job: sample, mesh, closed-loop runs, report"),
 )
 
 

@@ -127,7 +127,7 @@ class TwinNode(Node):
         )
         self.create_subscription(PickTarget, "/controller/target", self._on_target, STATE_QOS)
         self.create_subscription(Ping, "/ping", self._on_ping, STREAM_QOS)
-        self.create_subscription(StepAck, "/lockstep/ack", self._on_ack, STREAM_QOS)
+        self.sub_ack = self.create_subscription(StepAck, "/lockstep/ack", self._on_ack, STREAM_QOS)
         assert twin.robot is not None
         robot = twin.robot
         self._arm_names = list(twin.cell.robot.arm_joints)
@@ -145,7 +145,7 @@ class TwinNode(Node):
         text = f"{topic}: rejected ({rejected.reason}): {rejected.detail}"
         self.get_logger().error(text)
         self.pub_faults.publish(String(data=text))
-        self.twin.record_fault(rejected.reason, text)
+        self.publish_event(self.twin.record_fault(rejected.reason, text))
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         stamp = msg.header.stamp
@@ -221,13 +221,19 @@ class TwinNode(Node):
             del self.acks[old]
 
     def peers_matched(self) -> bool:
-        """Whether a controller subscribes to the tick and every topic a tick counts.
+        """Whether a controller is there and every subscriber of a counted topic has matched.
 
-        A volatile message sent before the writer has matched its reader is lost, and the
-        controller would then wait for a counted message that never comes.
+        The controller is whoever publishes ``/lockstep/ack`` (a recorder or ``ros2 topic echo``
+        subscribes too, but acknowledges nothing). A volatile message sent before the writer
+        has matched its reader is lost, and the controller would then wait for a counted
+        message that never comes.
         """
+        if self.sub_ack.get_publisher_count() == 0:
+            return False
         pubs = (self.pub_tick, self.pub_joints, self.pub_belt, self.pub_det)
-        return all(p.get_subscription_count() > 0 for p in pubs)
+        return all(
+            p.get_subscription_count() >= max(1, self.count_subscribers(p.topic_name)) for p in pubs
+        )
 
     # -- publishing -------------------------------------------------------------------------
     def _count(self, topic: str) -> None:
@@ -413,7 +419,9 @@ def _lockstep(
         spin_once(timeout_sec=0.05)
     controller_alive = node.peers_matched()
     if not controller_alive:
-        twin.record_fault("controller_timeout", "no controller subscribed before the start")
+        node.publish_event(
+            twin.record_fault("controller_timeout", "no controller subscribed before the start")
+        )
     first_wait = start_timeout_s
     node.publish_step([])
     acks_at_loss = -1
@@ -434,9 +442,11 @@ def _lockstep(
             ok = node.tick_ready(tick)
             if controller_alive and not ok:
                 node.counters.lockstep_timeouts += 1
-                twin.record_fault(
-                    "controller_timeout",
-                    f"no acknowledgement of tick {tick} within {ack_timeout_s} s",
+                node.publish_event(
+                    twin.record_fault(
+                        "controller_timeout",
+                        f"no acknowledgement of tick {tick} within {ack_timeout_s} s",
+                    )
                 )
             controller_alive = ok
             if not ok:
