@@ -349,6 +349,17 @@ class PickController:
         )
         return target, (x, y, z)
 
+    def _not_upstream(self, target: CartesianTarget) -> CartesianTarget:
+        """An approach target upstream of the pick window waits at its entry, at rest.
+
+        Chasing an object upstream takes the arm to the edge of its workspace; it meets the
+        object where the window begins instead, and follows it from there.
+        """
+        x_min = self._cfg.belt.pick_window_x_m[0]
+        if target.position[0] >= x_min:
+            return target
+        return CartesianTarget(position=(x_min, *target.position[1:]))
+
     def _arrived(self, target: CartesianTarget, height_m: float) -> bool:
         """True when the setpoint is on the moving target (position and velocity)."""
         del height_m
@@ -389,6 +400,7 @@ class PickController:
                 return self._plan(t_s, (), belt_velocity_mps)
         if phase == Phase.APPROACH:
             target, aim = self._following_target(t_s, belt_velocity_mps, pick.approach_height_m)
+            target = self._not_upstream(target)
             yaw_error = abs(self._planner.state.position[3] - target.position[3])
             if self._arrived(target, pick.approach_height_m) and yaw_error < pick.yaw_tolerance_rad:
                 self._set_phase(Phase.DESCEND, t_s)
