@@ -144,7 +144,7 @@ def test_parallel_runs_on_separate_domains_do_not_cross_talk(
                 "5",
             )
         )
-        procs.append(_peer(env, "listen", str(tmp_path / f"listen{i}.json"), "5"))
+        procs.append(_peer(env, "listen", str(tmp_path / f"listen{i}.json"), "3"))
     for proc in procs:
         assert _finish(proc) == 0
     seen = [json.loads((tmp_path / f"listen{i}.json").read_text()) for i in range(2)]

@@ -3,7 +3,7 @@
 python twin_peer.py lockstep OUT.json [--die-after TICKS]
     a scripted lockstep controller: waits for each tick's messages, sends a deterministic arm
     command every 24 ticks, acknowledges every tick; optionally dies (exit 3) after a tick
-python twin_peer.py listen OUT.json SECONDS
+python twin_peer.py listen OUT.json SECONDS  (counted from the first message)
     records what arrives on /conveyor/state (setpoints) and how many messages per topic
 """
 
@@ -113,6 +113,10 @@ def listen(out: str, seconds: float) -> int:
         counts["/conveyor/state"] += 1
 
     node.create_subscription(BeltState, "/conveyor/state", on_belt, RELIABLE)
+    # the window starts with the first message (a loaded machine starts the twin late)
+    start_by = time.monotonic() + 60.0
+    while not counts and time.monotonic() < start_by:
+        executor.spin_once(timeout_sec=0.05)
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         executor.spin_once(timeout_sec=0.05)
