@@ -453,7 +453,9 @@ def run(args: argparse.Namespace) -> int:
     write_tables(out, rows, complete=False, extra=extra)
     stopped: str | None = None
     code = 0
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    # SIGINT too: a process started in the background inherits SIGINT ignored, and Python then
+    # installs no KeyboardInterrupt handler of its own
+    previous = {s: signal.signal(s, _raise_interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
     tty = sys.stdout.isatty() and not args.json
     try:
         for i in range(args.episodes):
@@ -477,7 +479,8 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt as exc:
         stopped, code = f"interrupted ({exc.args[0] if exc.args else 'SIGINT'})", 130
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     if stopped is not None:
         write_tables(out, rows, complete=False, extra={**extra, "stopped": stopped})
         print(

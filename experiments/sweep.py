@@ -445,7 +445,9 @@ def run_sweep(
             )
 
     write_all(False)
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    # SIGINT too: a process started in the background inherits SIGINT ignored, and Python then
+    # installs no KeyboardInterrupt handler of its own
+    previous = {s: signal.signal(s, _raise_interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
     pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers)
     try:
         futures = [pool.submit(job, *j) for j in jobs]
@@ -459,7 +461,8 @@ def run_sweep(
         cancel.set()
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     failures = [f for st in states for f in st.failures]
     complete = not stopped and not failures
     if failures and not stopped:
