@@ -145,24 +145,34 @@ def _overlap(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> bool
     return True
 
 
+def _keep_out_half_extents(config: ControllerConfig) -> tuple[float, float]:
+    """Half extents (along the long side, across the narrow side) of the keep-out rectangle."""
+    sched = config.scheduler
+    half_across = config.robot.gripper_max_opening_m / 2 + sched.finger_depth_m + sched.clearance_m
+    return sched.finger_width_m / 2 + sched.clearance_m, half_across
+
+
 def keep_out_corners(track: Track, config: ControllerConfig) -> list[tuple[float, float]]:
     """The ``(4, 2)`` corners of the footprint the open fingers need around ``track``.
 
     Centred on the track, across its narrow side as wide as the open gripper plus two fingers
     and the clearance, along its long side as wide as a finger plus the clearance.
     """
-    sched = config.scheduler
-    half_across = config.robot.gripper_max_opening_m / 2 + sched.finger_depth_m + sched.clearance_m
-    half_long = sched.finger_width_m / 2 + sched.clearance_m
+    half_long, half_across = _keep_out_half_extents(config)
     return _corners(track.position_m, track.yaw_rad, half_long, half_across)
 
 
 def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) -> int | None:
     """The id of a track whose footprint lies in ``track``'s keep-out rectangle, or None."""
     keep_out = keep_out_corners(track, config)
+    keep_out_radius = math.hypot(*_keep_out_half_extents(config))
+    x, y = track.position_m
     for other in others:
         if other.track_id == track.track_id:
             continue
+        reach = keep_out_radius + math.hypot(other.length_m, other.width_m) / 2
+        if math.hypot(other.position_m[0] - x, other.position_m[1] - y) > reach:
+            continue  # bounding circles apart: the rectangles cannot overlap
         footprint = _corners(other.position_m, other.yaw_rad, other.length_m / 2, other.width_m / 2)
         if _overlap(keep_out, footprint):
             return other.track_id

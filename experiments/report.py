@@ -34,7 +34,6 @@ import argparse
 import csv
 import html
 import json
-import math
 import os
 import tempfile
 from collections.abc import Callable, Sequence
@@ -42,6 +41,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from experiments import stats
 from twin.errors import CdwTwinError
 from twin.fileio import write_atomic
 
@@ -52,7 +52,6 @@ REFERENCE_MS_PER_IMAGE = 24.0
 REFERENCE_MS_PER_OBJECT = 5.3
 STEP_RATE_WINDOW_S = 60.0
 FOOTPRINT_IMAGES = 4
-Z_95 = 1.959963984540054
 
 
 class ReportError(CdwTwinError):
@@ -100,16 +99,10 @@ class RunData:
 
 
 # -- statistics -------------------------------------------------------------------------------
-def wilson_interval(successes: int, trials: int, z: float = Z_95) -> tuple[float, float]:
-    """Wilson score interval of a binomial proportion; ``(0, 1)`` when ``trials`` is 0."""
-    if trials <= 0:
-        return 0.0, 1.0
-    p = successes / trials
-    z2 = z * z
-    denom = 1.0 + z2 / trials
-    centre = (p + z2 / (2 * trials)) / denom
-    half = z * math.sqrt(p * (1 - p) / trials + z2 / (4 * trials * trials)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
+def wilson_interval(successes: int, trials: int) -> tuple[float, float]:
+    """95 % Wilson score interval of a binomial proportion; ``(0, 1)`` when ``trials`` is 0."""
+    low, high = stats.wilson_interval(successes, trials)
+    return (0.0, 1.0) if low is None or high is None else (low, high)
 
 
 def _percentile(values: Sequence[float], q: float) -> float | None:

@@ -391,7 +391,8 @@ def write_tables(
     return summary
 
 
-def _raise_interrupt(signum: int, frame: FrameType | None) -> None:
+def raise_interrupt(signum: int, frame: FrameType | None) -> None:
+    """Signal handler: a ``KeyboardInterrupt`` carrying the signal's name."""
     del frame
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
@@ -455,7 +456,7 @@ def run(args: argparse.Namespace) -> int:
     code = 0
     # SIGINT too: a process started in the background inherits SIGINT ignored, and Python then
     # installs no KeyboardInterrupt handler of its own
-    previous = {s: signal.signal(s, _raise_interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
     tty = sys.stdout.isatty() and not args.json
     try:
         for i in range(args.episodes):

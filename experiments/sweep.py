@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import yaml
 
+from experiments.stats import wilson_interval
 from twin.dataclass_io import from_data
 from twin.errors import ConfigError
 from twin.fileio import write_atomic
@@ -77,8 +78,6 @@ WILSON_RATES = {
     "miss_rate": ("missed", "processed"),
 }
 """Rates also given as Wilson intervals: (successes, trials) columns pooled over episodes."""
-
-Z_95 = 1.959963984540054
 
 
 @dataclass(frozen=True)
@@ -222,17 +221,6 @@ def student_t_interval(values: Sequence[float]) -> tuple[float | None, float | N
     return mean, mean - half, mean + half
 
 
-def wilson_interval(successes: int, trials: int) -> tuple[float | None, float | None]:
-    """95 % Wilson score interval of a proportion (None without trials)."""
-    if trials <= 0:
-        return None, None
-    p = successes / trials
-    z2 = Z_95 * Z_95
-    centre = (p + z2 / (2 * trials)) / (1 + z2 / trials)
-    half = Z_95 * math.sqrt(p * (1 - p) / trials + z2 / (4 * trials * trials)) / (1 + z2 / trials)
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
 def aggregate_cell(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Per-metric ``{mean, ci95_low, ci95_high, n}`` and pooled Wilson intervals of the rates.
 
@@ -305,11 +293,6 @@ class _CellState:
     failures: list[str] = field(default_factory=list)
 
 
-def _raise_interrupt(signum: int, frame: object) -> None:
-    del frame
-    raise KeyboardInterrupt(signal.Signals(signum).name)
-
-
 def run_sweep(
     grid_path: Path, out: Path, workers: int, *, quiet: bool = False
 ) -> tuple[dict[str, Any], int]:
@@ -319,6 +302,7 @@ def run_sweep(
         EpisodeFailedError,
         EpisodeSpec,
         RunOptions,
+        raise_interrupt,
         run_episode,
         write_tables,
     )
@@ -447,7 +431,7 @@ def run_sweep(
     write_all(False)
     # SIGINT too: a process started in the background inherits SIGINT ignored, and Python then
     # installs no KeyboardInterrupt handler of its own
-    previous = {s: signal.signal(s, _raise_interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
     pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers)
     try:
         futures = [pool.submit(job, *j) for j in jobs]
