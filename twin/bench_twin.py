@@ -31,12 +31,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     """Add the benchmark's options."""
     parser.add_argument("--objects", type=int, default=40, help="objects on the belt (40)")
     parser.add_argument(
-        "--seconds", type=float, default=None, help="simulated seconds (headless: 4; realtime: 60)"
+        "--seconds", type=float, default=None, help="simulated seconds (headless: 10; realtime: 60)"
     )
     parser.add_argument(
-        "--speed", type=float, default=None, help="belt speed in m/s (headless 0.1, paced 0.2)"
+        "--speed", type=float, default=None, help="belt speed in m/s (headless 0.05, paced 0.2)"
     )
-    parser.add_argument("--repeats", type=int, default=3, help="headless repeats (median)")
+    parser.add_argument("--repeats", type=int, default=5, help="headless repeats (median)")
     parser.add_argument("--realtime", action="store_true", help="pace to the wall clock")
     parser.add_argument(
         "--dataset",

@@ -50,58 +50,80 @@ def read_pieces(path: Path) -> list[np.ndarray]:
     return arrays
 
 
-def _hull_2d(points: np.ndarray) -> np.ndarray:
-    """Convex hull of ``(n, 2)`` points, counter-clockwise, ``(m, 2)`` (monotone chain)."""
-    pts = np.unique(np.round(points, 9), axis=0)
-    if len(pts) < 3:
-        return pts
+def _hulls(rings: list[np.ndarray]) -> list[np.ndarray]:
+    """Convex hull of each ``(n, 2)`` point set, counter-clockwise ``(m, 2)``; ``m < 3`` if flat."""
+    import shapely
 
-    def half(seq: np.ndarray) -> list[np.ndarray]:
-        out: list[np.ndarray] = []
-        for p in seq:
-            while len(out) >= 2:
-                a, b = out[-2], out[-1]
-                if (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]) <= 0:
-                    out.pop()
-                else:
-                    break
-            out.append(p)
-        return out
-
-    lower = half(pts)
-    upper = half(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1])
+    sizes = np.array([len(r) for r in rings])
+    points = shapely.multipoints(
+        np.concatenate(rings), indices=np.repeat(np.arange(len(rings)), sizes)
+    )
+    out: list[np.ndarray] = []
+    for hull in shapely.convex_hull(points):
+        if not isinstance(hull, shapely.Polygon):
+            out.append(np.empty((0, 2)))
+            continue
+        ring = np.asarray(hull.exterior.coords)[:-1]
+        out.append(ring if shapely.is_ccw(hull.exterior) else ring[::-1].copy())
+    return out
 
 
 def _area(ring: np.ndarray) -> float:
     if len(ring) < 3:
         return 0.0
     x, y = ring[:, 0], ring[:, 1]
-    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    twice = x[:-1] @ y[1:] - y[:-1] @ x[1:] + x[-1] * y[0] - y[-1] * x[0]
+    return 0.5 * abs(float(twice))
 
 
 def merge_pieces(pieces: list[np.ndarray], tolerance: float, max_pieces: int) -> list[np.ndarray]:
-    """Greedily merge prism pieces ``(n, 3)`` whose joint hull adds little area (see module)."""
-    footprints = [_hull_2d(p[:, :2]) for p in pieces]
+    """Greedily merge prism pieces ``(n, 3)`` whose joint hull adds little area (see module).
+
+    Each round merges the pair whose joint hull adds the least area relative to the pair's
+    (the first such pair in index order on ties); pair hulls are computed once and only the
+    merged piece's pairs are recomputed. Pieces whose footprint has no area are dropped.
+    """
+    footprints = [f for f in _hulls([p[:, :2] for p in pieces]) if len(f) >= 3]
+    if not footprints:
+        msg = "no convex piece with a footprint of positive area"
+        raise SceneError(msg)
     areas = [_area(f) for f in footprints]
     z_lo = min(float(p[:, 2].min()) for p in pieces)
     z_hi = max(float(p[:, 2].max()) for p in pieces)
+    k = len(footprints)
+    cost = np.full((k, k), np.inf)
+    joint: dict[tuple[int, int], np.ndarray] = {}
+    ids = list(range(k))  # stable identity of each current footprint
+
+    def fill(pairs: list[tuple[int, int]]) -> None:
+        if not pairs:
+            return
+        hulls = _hulls([np.vstack((footprints[i], footprints[j])) for i, j in pairs])
+        for (i, j), hull in zip(pairs, hulls, strict=True):
+            joint[ids[i], ids[j]] = hull
+            pair_area = areas[i] + areas[j]
+            cost[ids[i], ids[j]] = (_area(hull) - pair_area) / pair_area
+
+    fill([(i, j) for i in range(k) for j in range(i + 1, k)])
     while len(footprints) > 1:
-        best: tuple[float, int, int, np.ndarray] | None = None
-        for i in range(len(footprints)):
-            for j in range(i + 1, len(footprints)):
-                hull = _hull_2d(np.vstack([footprints[i], footprints[j]]))
-                joint = areas[i] + areas[j]
-                excess = (_area(hull) - joint) / joint if joint > 0 else 0.0
-                if best is None or excess < best[0]:
-                    best = (excess, i, j, hull)
-        if best is None:
+        live = np.array(ids)
+        sub = cost[np.ix_(live, live)]
+        flat = int(np.argmin(sub))
+        i, j = divmod(flat, len(live))
+        excess = float(sub[i, j])
+        if not np.isfinite(excess):
             break
-        excess, i, j, hull = best
         if excess > tolerance and len(footprints) <= max_pieces:
             break
+        hull = joint[ids[i], ids[j]]
         footprints[i], areas[i] = hull, _area(hull)
-        del footprints[j], areas[j]
+        cost[ids[j], :] = np.inf
+        cost[:, ids[j]] = np.inf
+        del footprints[j], areas[j], ids[j]
+        row = ids[i]
+        cost[row, :] = np.inf
+        cost[:, row] = np.inf
+        fill([(a, i) if a < i else (i, a) for a in range(len(footprints)) if a != i])
     return [
         np.vstack(
             [

@@ -174,24 +174,99 @@ def load_dataset(out_dir: Path, classes: Iterable[str]) -> tuple[ImageLayout, ..
     return tuple(layouts)
 
 
+def read_obj_triangles(path: Path) -> np.ndarray:
+    """Triangles of an OBJ file, ``(t, 3, 3)`` float; polygons are fan-triangulated.
+
+    Reads ``v`` and ``f`` lines only (``f`` may carry ``/vt/vn`` parts and negative indices).
+    """
+    vertices: list[tuple[float, float, float]] = []
+    triangles: list[tuple[int, int, int]] = []
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        msg = f"{path}: cannot read: {exc.strerror}"
+        raise SceneError(msg) from None
+    for number, line in enumerate(lines, start=1):
+        try:
+            if line.startswith("v "):
+                x, y, z = line.split()[1:4]
+                vertices.append((float(x), float(y), float(z)))
+            elif line.startswith("f "):
+                ids = [int(token.split("/")[0]) for token in line.split()[1:]]
+                ids = [i - 1 if i > 0 else len(vertices) + i for i in ids]
+                triangles.extend((ids[0], ids[k], ids[k + 1]) for k in range(1, len(ids) - 1))
+        except ValueError:
+            msg = f"{path}:{number}: malformed line {line!r}"
+            raise SceneError(msg) from None
+    if not triangles:
+        msg = f"{path}: no faces"
+        raise SceneError(msg)
+    index = np.asarray(triangles, dtype=np.int64)
+    if index.min() < 0 or index.max() >= len(vertices):
+        msg = f"{path}: a face refers to a vertex that does not exist"
+        raise SceneError(msg)
+    return np.asarray(vertices, dtype=float)[index]
+
+
+def unit_mass_inertia(triangles: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Volume, centre of mass ``(3,)`` and inertia tensor ``(3, 3)`` about it, for unit mass.
+
+    ``triangles`` ``(t, 3, 3)`` bound a closed, outward-wound solid (Eberly's polyhedral mass
+    properties: surface integrals by the divergence theorem).
+    """
+    p0, p1, p2 = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    d = np.cross(p1 - p0, p2 - p0)
+    temp0 = p0 + p1
+    f1 = temp0 + p2
+    temp1 = p0 * p0
+    temp2 = temp1 + p1 * temp0
+    f2 = temp2 + p2 * f1
+    f3 = p0 * temp1 + p1 * temp2 + p2 * f2
+    g0 = f2 + p0 * (f1 + p0)
+    g1 = f2 + p1 * (f1 + p1)
+    g2 = f2 + p2 * (f1 + p2)
+    x, y, z = 0, 1, 2
+    volume = float(np.sum(d[:, x] * f1[:, x])) / 6.0
+    if volume <= 0.0:
+        msg = f"volume {volume:g} m^3 is not positive (open or inward-wound mesh)"
+        raise SceneError(msg)
+    first = np.sum(d * f2, axis=0) / 24.0
+    second = np.sum(d * f3, axis=0) / 60.0
+    mixed = (
+        np.array(
+            [
+                np.sum(d[:, x] * (p0[:, y] * g0[:, x] + p1[:, y] * g1[:, x] + p2[:, y] * g2[:, x])),
+                np.sum(d[:, y] * (p0[:, z] * g0[:, y] + p1[:, z] * g1[:, y] + p2[:, z] * g2[:, y])),
+                np.sum(d[:, z] * (p0[:, x] * g0[:, z] + p1[:, x] * g1[:, z] + p2[:, x] * g2[:, z])),
+            ]
+        )
+        / 120.0
+    )
+    com = first / volume
+    sx, sy, sz = second / volume
+    mxy, myz, mzx = mixed / volume
+    cx, cy, cz = com
+    tensor = np.array(
+        [
+            [sy + sz - (cy * cy + cz * cz), -(mxy - cx * cy), -(mzx - cz * cx)],
+            [-(mxy - cx * cy), sx + sz - (cz * cz + cx * cx), -(myz - cy * cz)],
+            [-(mzx - cz * cx), -(myz - cy * cz), sx + sy - (cx * cx + cy * cy)],
+        ]
+    )
+    return volume, com, tensor
+
+
 @cache
 def _unit_inertia(mesh_path: Path, z_scale: float) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
-
-    mesh = trimesh.load(mesh_path, force="mesh", process=False)
-    if not isinstance(mesh, trimesh.Trimesh):
-        msg = f"{mesh_path}: not a triangle mesh"
-        raise SceneError(msg)
-    if z_scale != 1.0:
-        mesh.apply_transform(np.diag([1.0, 1.0, z_scale, 1.0]))
-    if mesh.volume <= 0:
-        msg = f"{mesh_path}: mesh has no positive volume"
-        raise SceneError(msg)
-    mesh.density = 1.0 / mesh.volume
-    return (
-        np.asarray(mesh.principal_inertia_components, dtype=float),
-        np.asarray(mesh.principal_inertia_vectors, dtype=float),
-    )
+    """Principal moments ``(3,)`` and axes (rows, ``(3, 3)``) of the mesh for unit mass."""
+    triangles = read_obj_triangles(mesh_path) * np.array([1.0, 1.0, z_scale])
+    try:
+        _, _, tensor = unit_mass_inertia(triangles)
+    except SceneError as exc:
+        msg = f"{mesh_path}: {exc}"
+        raise SceneError(msg) from None
+    components, vectors = np.linalg.eigh(tensor)
+    return components, vectors.T
 
 
 def inertia_of(spec: ObjectSpec, z_scale: float = 1.0) -> Inertia:

@@ -88,6 +88,7 @@ class Robot:
         self._qd_target = np.zeros(len(self.arm_joints))
         self._since_command_s = 0.0
         self._gripper_width_m = config.max_opening_m
+        self._applied_gripper_width_m = math.nan
         self.reset()
 
     @staticmethod
@@ -109,6 +110,7 @@ class Robot:
         self._qd_target = np.zeros(len(self.arm_joints))
         self._since_command_s = 0.0
         self._gripper_width_m = self.config.max_opening_m
+        self._applied_gripper_width_m = math.nan  # finger motors are set when the target changes
         self.apply_commands()
 
     def command(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
@@ -153,7 +155,8 @@ class Robot:
             velocityGains=[self.config.velocity_gain] * n,
             physicsClientId=self.client,
         )
-        if self.finger_joints:
+        if self.finger_joints and self._gripper_width_m != self._applied_gripper_width_m:
+            self._applied_gripper_width_m = self._gripper_width_m
             frac = self._gripper_width_m / self.config.max_opening_m
             targets = [
                 c + frac * (o - c)

@@ -101,16 +101,18 @@ class World:
 
     def set_belt_speed(self, speed_mps: float, dt_s: float) -> None:
         """Give the belt surface the velocity ``speed_mps`` along +x for the next ``dt_s``."""
-        self.belt_speed_mps = speed_mps
         self._drift_m += speed_mps * dt_s
-        if abs(self._drift_m) >= BELT_DRIFT_M:
+        moved = abs(self._drift_m) >= BELT_DRIFT_M
+        if moved:
             pb.resetBasePositionAndOrientation(
                 self.belt, self._belt_pos, (0.0, 0.0, 0.0, 1.0), physicsClientId=self.client
             )
             self._drift_m = speed_mps * dt_s
-        pb.resetBaseVelocity(
-            self.belt, (speed_mps, 0.0, 0.0), (0.0, 0.0, 0.0), physicsClientId=self.client
-        )
+        if moved or speed_mps != self.belt_speed_mps:  # the body keeps its velocity otherwise
+            pb.resetBaseVelocity(
+                self.belt, (speed_mps, 0.0, 0.0), (0.0, 0.0, 0.0), physicsClientId=self.client
+            )
+        self.belt_speed_mps = speed_mps
 
     def _collision_shape(self, spec: ObjectSpec, z_scale: float) -> int:
         key = (str(spec.collision_path), z_scale)
@@ -177,7 +179,7 @@ class World:
             -1,
             lateralFriction=friction,
             restitution=restitution,
-            spinningFriction=0.001,
+            spinningFriction=0.0,
             rollingFriction=0.0,
             localInertiaDiagonal=moments,
             physicsClientId=self.client,
