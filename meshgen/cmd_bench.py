@@ -4,12 +4,16 @@ Without DATASET a fresh built-in sample is generated in a temporary folder. Both
 (one process, ``workers=1``) and the baseline (:mod:`meshgen.baseline`) run ``--repeats`` times,
 alternating, into fresh folders under one temporary folder; the headline figures are the best
 run of each (the machine is shared, so the minimum is the least disturbed run), and
-``spread_ms`` gives min/median/max of both. Outputs go to ``tempfile.mkdtemp()`` (the default
-temporary folder's file system, the same one users write to) unless ``--tmp-dir`` says
+``spread_ms`` gives min/median/max of both. Each run's output is deleted right after it is
+timed, so every run starts from the same file-system state (on ext4 creating a file gets several
+times slower once thousands of fresh files are kept). Outputs go to ``tempfile.mkdtemp()`` (the
+default temporary folder's file system, the same one users write to) unless ``--tmp-dir`` says
 otherwise. ``file_create_us`` calibrates that file system: microseconds to create and write one
 small file, measured before and after the runs; ``files_written`` counts the files each variant
 creates, so ``files_written * file_create_us`` is the part of the time that is file creation
-alone. Example::
+alone.
+
+Example::
 
     cdw-twin bench meshgen /path/to/cdw_stacked_sample --json
 """
@@ -94,15 +98,18 @@ def run(args: argparse.Namespace) -> int:
         pipe_s: list[float] = []
         base_s: list[float] = []
         images = objects = base_objects = 0
+        files = base_files = 0
         for k in range(args.repeats):
             summary = mesh_dataset(dataset, work / f"pipeline_{k}", config)
             pipe_s.append(summary.elapsed_s)
             images, objects = summary.images, summary.objects
+            files = _count_files(work / f"pipeline_{k}")
+            shutil.rmtree(work / f"pipeline_{k}")
             _, base_objects, elapsed = run_baseline(dataset, work / f"baseline_{k}", config)
             base_s.append(elapsed)
+            base_files = _count_files(work / f"baseline_{k}")
+            shutil.rmtree(work / f"baseline_{k}")
         create_after = _file_create_us(work / "cal_after")
-        files = _count_files(work / "pipeline_0")
-        base_files = _count_files(work / "baseline_0")
     finally:
         shutil.rmtree(work, ignore_errors=True)
     best, best_base = min(pipe_s), min(base_s)

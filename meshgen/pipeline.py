@@ -55,13 +55,15 @@ from meshgen.footprint import (
 )
 from meshgen.loaders import ImageSource, discover, load_source
 from meshgen.mesh import (
+    IntArray,
     clear_text_caches,
     hertel_mehlhorn,
     pieces_text,
     prism_faces_text,
-    triangulate,
+    triangulate_many,
     vertex_blocks,
 )
+from meshgen.seeding import first_doubles, pcg64_first_double
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -157,29 +159,16 @@ class DatasetSummary:
         }
 
 
-_PCG_MULT = 0x2360ED051FC65DA44385DF649FCCF645
-_MASK64 = (1 << 64) - 1
-_MASK128 = (1 << 128) - 1
-
-
 def _pcg64_first_double(seed_key: list[int]) -> float:
     """First ``random()`` double of ``numpy.random.default_rng(seed_key)``, computed directly.
 
-    Same seeding as numpy's PCG64 (XSL-RR 128/64): ``SeedSequence(seed_key)`` gives four
-    64-bit words, the first two the initial state and the last two the increment; one step,
-    add the state, one step, then one step per output. Constructing a ``Generator`` costs
-    about four times as much, and this runs once per object.
+    numpy's own ``SeedSequence`` gives the four state words; the PCG64 step is
+    :func:`meshgen.seeding.pcg64_first_double` (constructing a ``Generator`` costs about four
+    times as much). The pipeline uses the batched :func:`object_heights_m`; this one-key form
+    serves :func:`object_height_m` (and so the baseline).
     """
     words: list[int] = np.random.SeedSequence(seed_key).generate_state(4, np.uint64).tolist()
-    init = (words[0] << 64) | words[1]
-    inc = (((words[2] << 64) | words[3]) << 1 | 1) & _MASK128
-    state = (inc + init) & _MASK128
-    state = (state * _PCG_MULT + inc) & _MASK128
-    state = (state * _PCG_MULT + inc) & _MASK128
-    rot = state >> 122
-    xored = ((state >> 64) ^ state) & _MASK64
-    value = ((xored >> rot) | (xored << ((64 - rot) & 63))) & _MASK64
-    return (value >> 11) * (1.0 / 9007199254740992.0)
+    return pcg64_first_double((words[0], words[1], words[2], words[3]))
 
 
 def object_height_m(seed: int, stem: str, index: int, spec: ClassSpec) -> float:
@@ -191,6 +180,16 @@ def object_height_m(seed: int, stem: str, index: int, spec: ClassSpec) -> float:
     key = [seed, zlib.crc32(stem.encode()), index]
     low, high = spec.height_min_m, spec.height_max_m
     return low + (high - low) * _pcg64_first_double(key)
+
+
+def object_heights_m(seed: int, objects: list[tuple[str, int, ClassSpec]]) -> list[float]:
+    """:func:`object_height_m` of many ``(stem, index, spec)`` objects, seeded in one batch."""
+    crcs = {stem: zlib.crc32(stem.encode()) for stem, _, _ in objects}
+    keys = [[seed, crcs[stem], index] for stem, index, _ in objects]
+    return [
+        spec.height_min_m + (spec.height_max_m - spec.height_min_m) * u
+        for (_, _, spec), u in zip(objects, first_doubles(keys), strict=True)
+    ]
 
 
 def _skip(ann: ImageAnnotation, poly: RawPolygon, reason: str, detail: str) -> Skip:
@@ -237,16 +236,21 @@ def _mesh_object(
     fp: Footprint,
     spec: ClassSpec,
     class_id: int,
+    height: float,
+    ring: FloatArray,
+    tris: IntArray,
     config: MeshgenConfig,
     folder: str,
     sink: FileSink,
 ) -> tuple[ObjectRecord, str]:
-    """Write the mesh (and convex pieces) of one footprint; return its record and JSON text."""
+    """Write the mesh (and convex pieces) of one footprint; return its record and JSON text.
+
+    The caller computes in batches: ``height`` (:func:`object_heights_m`), ``ring``, the
+    ``(n, 2)`` footprint relative to its centroid, and ``tris``, its earcut triangles
+    (:func:`meshgen.mesh.triangulate_many`).
+    """
     object_id = f"{ann.stem}_{poly.index:03d}"
-    height = object_height_m(config.seed, ann.stem, poly.index, spec)
     cx, cy = fp.centroid_m
-    ring = fp.ring_m - np.array([cx, cy])
-    tris = triangulate(ring)
     n = len(ring)
     if len(tris) != n - 2:
         msg = f"earcut gave {len(tris)} triangles for {n} points"
@@ -403,17 +407,31 @@ def mesh_images(
         sink.mkdir(folder)
     records: list[list[ObjectRecord]] = [[] for _ in anns]
     metas: list[list[str]] = [[] for _ in anns]
+    good = [
+        (item, fp)
+        for item, fp in zip(kept, footprints, strict=True)
+        if not isinstance(fp, FootprintRejected)
+    ]
+    heights = iter(
+        object_heights_m(config.seed, [(anns[t[0]].stem, t[2].index, t[4]) for t, _ in good])
+    )
+    local_rings = [fp.ring_m - np.array(fp.centroid_m) for _, fp in good]
+    shapes = iter(zip(local_rings, triangulate_many(local_rings), strict=True))
     for (img, pos, poly, class_id, spec), fp in zip(kept, footprints, strict=True):
         ann = anns[img]
         try:
             if isinstance(fp, FootprintRejected):
                 raise fp
+            ring, tris = next(shapes)
             record, meta = _mesh_object(
                 ann,
                 poly,
                 fp=fp,
                 spec=spec,
                 class_id=class_id,
+                height=next(heights),
+                ring=ring,
+                tris=tris,
                 config=config,
                 folder=folders[img],
                 sink=sink,
