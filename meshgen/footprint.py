@@ -29,6 +29,7 @@ import numpy.typing as npt
 import shapely
 
 from meshgen.annotations import FloatArray
+from meshgen.ragged import split_rows
 
 IntArray = npt.NDArray[np.int64]
 
@@ -302,7 +303,7 @@ def _repair_all(
         idx = np.arange(len(pts))
         mirrored = 2 * starts[owner] + sizes[owner] - 1 - idx
         pts = pts[np.where(flip[owner], mirrored, idx)]
-    split = np.split(pts, np.cumsum(sizes)[:-1])
+    split = split_rows(pts, sizes)
     usable = np.flatnonzero(sizes >= 3)
     valid = np.zeros(count, dtype=bool)
     if len(usable):
@@ -364,7 +365,7 @@ def _simplify_all(
     live = sizes > 0
     if live.any():
         areas[live] = _signed_areas(pts, sizes[live])
-    split = np.split(pts, np.cumsum(sizes)[:-1])
+    split = split_rows(pts, sizes)
     out: list[FloatArray | None] = []
     for i in range(len(rings)):
         if not accept[i]:

@@ -375,6 +375,82 @@ def _points_from_json(raw: Any, fast: bool) -> tuple[np.ndarray | None, str, str
     return np.array(flat, dtype=np.float64).reshape(-1, 2), "", ""
 
 
+def _checked_points(
+    raws: list[Any], fast: bool, width: int, height: int
+) -> list[tuple[np.ndarray | None, str, str]]:
+    """:func:`_points_from_json` and :func:`_check_range` of every point list of one file.
+
+    Returns per list its ``(n, 2) float`` points or ``(None, reason, detail)``. With ``fast``
+    (see :func:`_points_from_json`), when all lists together form one numeric ``(N, 2)`` array,
+    that array is built with one numpy call and the per-list checks (at least 3 points, all
+    finite, inside the image) are vectorised over it; the lists' points are views of it.
+    Otherwise (some list is malformed) each list is converted and checked on its own, with
+    the same results.
+    """
+    points = _numeric_pairs(raws) if fast and raws else None
+    if points is None:
+        out: list[tuple[np.ndarray | None, str, str]] = []
+        for raw in raws:
+            pts, reason, detail = _points_from_json(raw, fast)
+            if pts is not None:
+                problem = _check_range(pts, width, height)
+                if problem is not None:
+                    pts, reason = None, problem
+                    detail = f"pixel coordinates outside the {width}x{height} image"
+            out.append((pts, reason, detail))
+        return out
+    sizes = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
+    ends = np.cumsum(sizes)
+    starts = ends - sizes
+    live = sizes > 0
+    finite = np.ones(len(raws), dtype=bool)
+    inside = np.ones(len(raws), dtype=bool)
+    if live.any():
+        at = starts[live]
+        if points.dtype.kind == "f":
+            finite[live] = np.logical_and.reduceat(np.isfinite(points).all(axis=1), at)
+        margin = np.array([OUT_OF_RANGE_FRACTION * width, OUT_OF_RANGE_FRACTION * height])
+        low = np.minimum.reduceat(points, at) >= -margin
+        high = np.maximum.reduceat(points, at) <= np.array([width, height]) + margin
+        inside[live] = (low & high).all(axis=1)
+    as_float = points.astype(np.float64)
+    out = []
+    for start, end, size, ok, within in zip(
+        starts.tolist(),
+        ends.tolist(),
+        sizes.tolist(),
+        finite.tolist(),
+        inside.tolist(),
+        strict=True,
+    ):
+        if size < 3:
+            out.append((None, "too_few_points", f"{size} point(s), need at least 3"))
+        elif not ok:
+            out.append((None, "not_a_number", "a coordinate is not finite"))
+        elif not within:
+            detail = f"pixel coordinates outside the {width}x{height} image"
+            out.append((None, "out_of_range", detail))
+        else:
+            out.append((as_float[start:end], "", ""))
+    return out
+
+
+def _numeric_pairs(raws: list[Any]) -> np.ndarray | None:
+    """All point lists of ``raws`` as one ``(N, 2)`` int or float array, or None if malformed."""
+    if not all(type(raw) is list for raw in raws):
+        return None
+    flat: list[Any] = []
+    for raw in raws:
+        flat += raw
+    try:
+        arr = np.array(flat)
+    except (ValueError, TypeError, OverflowError):
+        return None
+    if arr.ndim != 2 or arr.shape[1] != 2 or arr.dtype.kind not in "if":
+        return None
+    return arr
+
+
 def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None, list[Skip]]:
     """Parse one labelme JSON file; bad shapes become skips, good shapes polygons."""
     name = _rel(source.path, root)
@@ -409,34 +485,42 @@ def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | No
         detail = "no image file, no imageWidth/imageHeight and no --image-size"
         return None, [Skip(file=name, where="", reason="missing_image_size", detail=detail)]
     width, height = size
+    fast = "true" not in text and "false" not in text
     polygons: list[RawPolygon] = []
     skips: list[Skip] = []
-    fast = "true" not in text and "false" not in text
+    pending: list[tuple[int, str, str]] = []  # (index, where, label) of shapes with points
+    pending_points: list[Any] = []
+    outcome: list[Skip | None] = []  # per shape: its skip, or None when it has points to check
     for index, shape in enumerate(data["shapes"]):
         where = f"shape {index}"
         if not isinstance(shape, dict):
-            skips.append(Skip(file=name, where=where, reason="bad_file", detail="not an object"))
+            outcome.append(Skip(file=name, where=where, reason="bad_file", detail="not an object"))
             continue
         shape_type = shape.get("shape_type", "polygon")
         if shape_type != "polygon":
             detail = f"shape_type {shape_type!r}"
-            skips.append(Skip(file=name, where=where, reason="not_a_polygon", detail=detail))
+            outcome.append(Skip(file=name, where=where, reason="not_a_polygon", detail=detail))
             continue
         label = shape.get("label")
         if not isinstance(label, str) or not label:
             detail = f"label {label!r} is not a class name"
-            skips.append(Skip(file=name, where=where, reason="unknown_class", detail=detail))
+            outcome.append(Skip(file=name, where=where, reason="unknown_class", detail=detail))
             continue
-        points, reason, detail = _points_from_json(shape.get("points"), fast)
+        outcome.append(None)
+        pending.append((index, where, label))
+        pending_points.append(shape.get("points"))
+    checked = iter(zip(pending, _checked_points(pending_points, fast, width, height), strict=True))
+    for skip in outcome:
+        if skip is not None:
+            skips.append(skip)
+            continue
+        (index, where, label), (points, reason, detail) = next(checked)
         if points is None:
             skips.append(Skip(file=name, where=where, reason=reason, detail=detail))
-            continue
-        problem = _check_range(points, width, height)
-        if problem is not None:
-            detail = f"pixel coordinates outside the {width}x{height} image"
-            skips.append(Skip(file=name, where=where, reason=problem, detail=detail))
-            continue
-        polygons.append(RawPolygon(index=index, where=where, class_name=label, points_px=points))
+        else:
+            polygons.append(
+                RawPolygon(index=index, where=where, class_name=label, points_px=points)
+            )
     annotation = ImageAnnotation(
         stem=source.stem,
         source=name,

@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from meshgen.annotations import FloatArray
+from meshgen.ragged import split_rows
 
 IntArray = npt.NDArray[np.int64]
 
@@ -73,7 +74,7 @@ def triangulate_many(rings: list[FloatArray]) -> list[IntArray]:
     flip = d1[:, 0] * d2[:, 1] < d1[:, 1] * d2[:, 0]
     faces[flip] = faces[flip][:, ::-1]
     faces -= shift
-    return np.split(faces, np.cumsum(counts)[:-1])
+    return split_rows(faces, counts)
 
 
 def extrude(ring: FloatArray, tris: IntArray, height_m: float) -> tuple[FloatArray, IntArray]:
@@ -130,6 +131,43 @@ def _diagonals(tris: IntArray, n: int) -> tuple[IntArray, IntArray]:
     return candidates[found], order[at[found]]
 
 
+def diagonals_many(tris_list: list[IntArray], sizes: list[int]) -> list[tuple[IntArray, IntArray]]:
+    """:func:`_diagonals` of many triangulations (of rings of ``sizes[i]`` points) at once.
+
+    The half-edges of all triangulations are shifted to one numbering (vertex indices by the
+    preceding rings' sizes, half-edges by the preceding half-edge counts), so edge keys never
+    collide between rings and one stable sort and one search serve them all. Gives exactly
+    the per-ring results (same pairs, same order, indices local to each ring).
+    """
+    if not tris_list:
+        return []
+    counts = np.fromiter((t.size for t in tris_list), dtype=np.int64, count=len(tris_list))
+    ring_sizes = np.array(sizes, dtype=np.int64)
+    vertex_shift = np.repeat(np.cumsum(ring_sizes) - ring_sizes, counts)
+    org = np.concatenate([t.ravel() for t in tris_list]) + vertex_shift
+    total = len(org)
+    stride = int(ring_sizes.sum())
+    ring_next = np.arange(1, total + 1, dtype=np.int64)
+    ring_next[2::3] -= 3
+    dst = org[ring_next]
+    keys = org * stride + dst
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    candidates = np.flatnonzero(org < dst)
+    twin_keys = dst[candidates] * stride + org[candidates]
+    at = np.minimum(np.searchsorted(sorted_keys, twin_keys), total - 1)
+    found = sorted_keys[at] == twin_keys
+    first, second = candidates[found], order[at[found]]
+    edge_ends = np.cumsum(counts)
+    per_ring = np.searchsorted(first, edge_ends).tolist()
+    starts = [0, *per_ring[:-1]]
+    offsets = (edge_ends - counts).tolist()
+    return [
+        (first[a:b] - off, second[a:b] - off)
+        for a, b, off in zip(starts, per_ring, offsets, strict=True)
+    ]
+
+
 _NEXT_IN_TRIANGLE: list[int] = []
 _PREV_IN_TRIANGLE: list[int] = []
 
@@ -149,7 +187,9 @@ def _triangle_links(count: int) -> tuple[list[int], list[int]]:
     return _NEXT_IN_TRIANGLE[:count], _PREV_IN_TRIANGLE[:count]
 
 
-def hertel_mehlhorn(ring: FloatArray, tris: IntArray) -> list[list[int]]:
+def hertel_mehlhorn(
+    ring: FloatArray, tris: IntArray, diagonals: tuple[IntArray, IntArray] | None = None
+) -> list[list[int]]:
     """Exact convex decomposition of a CCW ring from its triangulation (Hertel–Mehlhorn).
 
     Removes every diagonal whose removal keeps both of its end points convex; the result has at
@@ -157,7 +197,8 @@ def hertel_mehlhorn(ring: FloatArray, tris: IntArray) -> list[list[int]]:
     The triangles are held as half-edges (``e`` runs from ``org[e]`` to ``org[nxt[e]]``), so
     removing a diagonal is four pointer updates and its test two cross products. Diagonals are
     visited in half-edge order; finding them and their twins is vectorised
-    (:func:`_diagonals`), only the removals, which depend on earlier ones, run in Python.
+    (:func:`_diagonals`; pass ``diagonals`` when :func:`diagonals_many` found them for many
+    rings at once), only the removals, which depend on earlier ones, run in Python.
     """
     xs: list[float] = ring[:, 0].tolist()
     ys: list[float] = ring[:, 1].tolist()
@@ -167,7 +208,7 @@ def hertel_mehlhorn(ring: FloatArray, tris: IntArray) -> list[list[int]]:
     count = len(org)
     nxt, prv = _triangle_links(count)
     alive = [True] * count
-    first, second = _diagonals(tris, len(ring))
+    first, second = _diagonals(tris, len(ring)) if diagonals is None else diagonals
     for e, f in zip(first.tolist(), second.tolist(), strict=True):
         a = org[e]
         b = org[f]

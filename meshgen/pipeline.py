@@ -40,7 +40,6 @@ from meshgen.export import (
     FileSink,
     ThreadedFileSink,
     check_replaceable,
-    csv_field,
     csv_text,
     mtl_text,
     staging_dir,
@@ -57,44 +56,16 @@ from meshgen.loaders import ImageSource, discover, load_source
 from meshgen.mesh import (
     IntArray,
     clear_text_caches,
+    diagonals_many,
     hertel_mehlhorn,
     pieces_text,
     prism_faces_text,
     triangulate_many,
     vertex_blocks,
 )
+from meshgen.ragged import split_rows
+from meshgen.records import ObjectRecord, csv_row, object_json, whole_pixels
 from meshgen.seeding import first_doubles, pcg64_first_double
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class ObjectRecord:
-    """One meshed object: the scene.csv row (belt-frame pose, size, mass, file paths)."""
-
-    object_id: str
-    source_image: str
-    class_id: int
-    class_name: str
-    centroid_x_m: float
-    centroid_y_m: float
-    yaw_rad: float
-    length_m: float
-    width_m: float
-    area_m2: float
-    height_m: float
-    volume_m3: float
-    mass_kg: float
-    mesh_path: str
-    convex_path: str
-    n_convex_pieces: int
-    area_change_ratio: float
-    repairs: tuple[str, ...]
-
-    def row(self) -> tuple[object, ...]:
-        """Values in ``SCENE_COLUMNS`` order (repairs joined with ``;``)."""
-        return tuple(
-            ";".join(self.repairs) if name == "repairs" else getattr(self, name)
-            for name in SCENE_COLUMNS
-        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -196,39 +167,6 @@ def _skip(ann: ImageAnnotation, poly: RawPolygon, reason: str, detail: str) -> S
     return Skip(file=ann.source, where=poly.where, reason=reason, detail=detail)
 
 
-def _points_json(points: FloatArray, fmt: str) -> str:
-    """``[[a,b],...]`` JSON text of ``(n, 2)`` points, each number with the %-format ``fmt``."""
-    pair = f"[{fmt},{fmt}],"
-    return "[" + (pair * len(points))[:-1] % tuple(points.ravel().tolist()) + "]"
-
-
-def _csv_row(record: ObjectRecord) -> str:
-    """One scene.csv line (same formatting as :func:`meshgen.export.csv_text`)."""
-    return _ROW_FORMAT % (
-        csv_field(record.object_id),
-        csv_field(record.source_image),
-        record.class_id,
-        csv_field(record.class_name),
-        record.centroid_x_m,
-        record.centroid_y_m,
-        record.yaw_rad,
-        record.length_m,
-        record.width_m,
-        record.area_m2,
-        record.height_m,
-        record.volume_m3,
-        record.mass_kg,
-        csv_field(record.mesh_path),
-        csv_field(record.convex_path),
-        record.n_convex_pieces,
-        record.area_change_ratio,
-        csv_field(";".join(record.repairs)),
-    )
-
-
-_ROW_FORMAT = "%s,%s,%d,%s," + "%.9g," * 9 + "%s,%s,%d,%.9g,%s\n"
-
-
 def _mesh_object(
     ann: ImageAnnotation,
     poly: RawPolygon,
@@ -239,6 +177,8 @@ def _mesh_object(
     height: float,
     ring: FloatArray,
     tris: IntArray,
+    diagonals: tuple[IntArray, IntArray] | None,
+    whole_px: bool,
     config: MeshgenConfig,
     folder: str,
     sink: FileSink,
@@ -246,8 +186,10 @@ def _mesh_object(
     """Write the mesh (and convex pieces) of one footprint; return its record and JSON text.
 
     The caller computes in batches: ``height`` (:func:`object_heights_m`), ``ring``, the
-    ``(n, 2)`` footprint relative to its centroid, and ``tris``, its earcut triangles
-    (:func:`meshgen.mesh.triangulate_many`).
+    ``(n, 2)`` footprint relative to its centroid, ``tris``, its earcut triangles
+    (:func:`meshgen.mesh.triangulate_many`), and for a concave footprint the ``diagonals`` of
+    that triangulation (:func:`meshgen.mesh.diagonals_many`); ``whole_px`` tells whether its
+    pixel polygon holds whole numbers only (:func:`meshgen.records.whole_pixels`).
     """
     object_id = f"{ann.stem}_{poly.index:03d}"
     cx, cy = fp.centroid_m
@@ -264,7 +206,7 @@ def _mesh_object(
     convex_path = ""
     n_pieces = 1
     if not fp.convex:
-        pieces = hertel_mehlhorn(ring, tris)
+        pieces = hertel_mehlhorn(ring, tris, diagonals)
         n_pieces = len(pieces)
         convex_path = f"{object_id}_convex.obj"
         sink.write(f"{folder}/{convex_path}", header + pieces_text(bottom, top, pieces))
@@ -289,18 +231,17 @@ def _mesh_object(
         area_change_ratio=fp.area_change_ratio,
         repairs=fp.repairs,
     )
-    meta: dict[str, Any] = dict(zip(SCENE_COLUMNS, record.row(), strict=True))
-    meta["repairs"] = list(fp.repairs)
-    meta["source_where"] = poly.where
-    meta["density_kg_m3"] = spec.density_kg_m3
-    meta["seed"] = config.seed
-    meta["rng_key"] = [config.seed, zlib.crc32(ann.stem.encode()), poly.index]
-    text = json.dumps(meta, sort_keys=True, separators=(",", ":"))
-    arrays = (
-        f',"footprint_m":{_points_json(fp.ring_m, "%.9f")}'
-        f',"polygon_px":{_points_json(poly.points_px, "%.3f")}}}'
+    meta = object_json(
+        record,
+        source_where=poly.where,
+        density_kg_m3=spec.density_kg_m3,
+        seed=config.seed,
+        rng_key=(config.seed, zlib.crc32(ann.stem.encode()), poly.index),
+        footprint_m=fp.ring_m,
+        polygon_px=poly.points_px,
+        polygon_px_whole=whole_px,
     )
-    return record, text[:-1] + arrays
+    return record, meta
 
 
 def _select(
@@ -342,7 +283,7 @@ def _select(
     metric = np.empty_like(pts)
     metric[:, 0] = (pts[:, 1] - 0.5 * per_point[:, 1]) * per_point[:, 2]
     metric[:, 1] = (pts[:, 0] - 0.5 * per_point[:, 0]) * per_point[:, 2]
-    rings = np.split(metric, np.cumsum(sizes)[:-1])
+    rings = split_rows(metric, sizes)
     kept: list[tuple[int, int, RawPolygon, int, ClassSpec]] = []
     kept_rings: list[FloatArray] = []
     cuts = [bool(c) for c in border.tolist()]
@@ -416,13 +357,20 @@ def mesh_images(
         object_heights_m(config.seed, [(anns[t[0]].stem, t[2].index, t[4]) for t, _ in good])
     )
     local_rings = [fp.ring_m - np.array(fp.centroid_m) for _, fp in good]
-    shapes = iter(zip(local_rings, triangulate_many(local_rings), strict=True))
+    triangles = triangulate_many(local_rings)
+    concave = [k for k, (_, fp) in enumerate(good) if not fp.convex]
+    found = diagonals_many([triangles[k] for k in concave], [len(local_rings[k]) for k in concave])
+    diagonals: list[tuple[IntArray, IntArray] | None] = [None] * len(good)
+    for k, pair in zip(concave, found, strict=True):
+        diagonals[k] = pair
+    wholes = whole_pixels([t[2].points_px for t, _ in good])
+    shapes = iter(zip(local_rings, triangles, diagonals, wholes, strict=True))
     for (img, pos, poly, class_id, spec), fp in zip(kept, footprints, strict=True):
         ann = anns[img]
         try:
             if isinstance(fp, FootprintRejected):
                 raise fp
-            ring, tris = next(shapes)
+            ring, tris, diags, whole = next(shapes)
             record, meta = _mesh_object(
                 ann,
                 poly,
@@ -432,6 +380,8 @@ def mesh_images(
                 height=next(heights),
                 ring=ring,
                 tris=tris,
+                diagonals=diags,
+                whole_px=whole,
                 config=config,
                 folder=folders[img],
                 sink=sink,
@@ -446,7 +396,7 @@ def mesh_images(
     for img, ann in enumerate(anns):
         early[img].sort(key=lambda item: item[0])
         skips = list(ann.skips) + [s for _, s in early[img]]
-        sink.write(f"{folders[img]}/scene.csv", header + "".join(map(_csv_row, records[img])))
+        sink.write(f"{folders[img]}/scene.csv", header + "".join(map(csv_row, records[img])))
         sink.write(f"{folders[img]}/scene.json", _scene_json(ann, config, skips, metas[img]))
         results.append(
             ImageResult(

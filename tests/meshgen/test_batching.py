@@ -1,0 +1,86 @@
+"""Batched forms give exactly what their one-at-a-time forms give."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from meshgen.loaders import _check_range, _checked_points, _points_from_json
+from meshgen.mesh import _diagonals, diagonals_many, triangulate
+from meshgen.ragged import split_rows
+
+
+def _star(points: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    angles = np.linspace(0.0, 2.0 * np.pi, points, endpoint=False)
+    radii = rng.uniform(0.3, 1.0, points)
+    return np.stack((radii * np.cos(angles), radii * np.sin(angles)), axis=1)
+
+
+def test_diagonals_many_matches_one_ring_at_a_time() -> None:
+    rings = [_star(n, seed) for seed, n in enumerate((3, 4, 7, 12, 30, 5, 64))]
+    tris = [triangulate(r) for r in rings]
+    batched = diagonals_many(tris, [len(r) for r in rings])
+    assert len(batched) == len(rings)
+    for ring, t, (first, second) in zip(rings, tris, batched, strict=True):
+        want_first, want_second = _diagonals(t, len(ring))
+        np.testing.assert_array_equal(first, want_first)
+        np.testing.assert_array_equal(second, want_second)
+    assert diagonals_many([], []) == []
+
+
+def test_split_rows_matches_numpy_split() -> None:
+    rows = np.arange(40.0).reshape(20, 2)
+    sizes = np.array([3, 0, 5, 12], dtype=np.int64)
+    got = split_rows(rows, sizes)
+    want = np.split(rows, np.cumsum(sizes)[:-1])
+    assert len(got) == len(want)
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def _one_at_a_time(raws: list[Any], fast: bool, width: int, height: int) -> list[Any]:
+    out = []
+    for raw in raws:
+        pts, reason, detail = _points_from_json(raw, fast)
+        if pts is not None:
+            problem = _check_range(pts, width, height)
+            if problem is not None:
+                pts, reason = None, problem
+                detail = f"pixel coordinates outside the {width}x{height} image"
+        out.append((pts, reason, detail))
+    return out
+
+
+GOOD = [[10, 10], [50, 10], [50, 40]]
+CASES: list[list[Any]] = [
+    [GOOD, [[1.5, 2.25], [30, 2], [30, 9.75], [4, 9]]],
+    [GOOD, [], [[1, 2]], [[1, 2], [3, 4]]],
+    [GOOD, [[10, 10], [5000, 10], [50, 40]], [[-4.9, 10], [50, 10], [50, 40]]],
+    [GOOD, [[10, 10], [float("nan"), 10], [50, 40]], [[10, 10], [float("inf"), 1], [5, 4]]],
+    [GOOD, [[1, 2, 3], [4, 5], [6, 7]]],
+    [GOOD, [[1, 2], [3, "4"], [5, 6]]],
+    [GOOD, [[1, 2], [3, None], [5, 6]]],
+    [GOOD, {"x": 1}],
+    [GOOD, [[10**20, 2], [3, 4], [5, 6]]],
+    [[[-0.0, 5], [3, 5], [3, 9]]],
+]
+
+
+@pytest.mark.parametrize("raws", CASES)
+@pytest.mark.parametrize("fast", [True, False])
+def test_checked_points_matches_one_list_at_a_time(raws: list[Any], fast: bool) -> None:
+    got = _checked_points(raws, fast, 100, 80)
+    want = _one_at_a_time(raws, fast, 100, 80)
+    assert len(got) == len(want)
+    for (pts, reason, detail), (want_pts, want_reason, want_detail) in zip(got, want, strict=True):
+        assert (reason, detail) == (want_reason, want_detail)
+        if want_pts is None:
+            assert pts is None
+        else:
+            assert pts is not None
+            assert pts.dtype == np.float64
+            np.testing.assert_array_equal(pts, want_pts)
+            assert np.signbit(pts).tolist() == np.signbit(want_pts).tolist()
