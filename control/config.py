@@ -75,7 +75,7 @@ class RobotConfig:
     )
     gripper_max_opening_m: float = field(default=0.08, metadata=_meta("float"))
     ready_tcp_position_m: tuple[float, float, float] = field(
-        default=(-0.15, 0.5, 0.2), metadata=_meta("vec")
+        default=(-0.3, 0.5, 0.2), metadata=_meta("vec")
     )
     ready_yaw_rad: float = field(default=math.pi / 2, metadata=_meta("float"))
     ready_joint_positions_rad: tuple[float, ...] = field(
@@ -299,8 +299,9 @@ class PickConfig:
     ``surface_z + max(height - grasp_below_top_m, height * grasp_height_fraction,
     min_grasp_height_m)``. The approach ends ``approach_height_m`` above it.
     ``arrive_tolerance_m`` and ``arrive_speed_tolerance_mps`` decide when a Ruckig segment has
-    caught its moving target; the descent starts, and the gripper closes, only once the yaw is
-    within ``yaw_tolerance_rad`` of the grasp yaw.
+    caught its moving target; the descent starts once the yaw is within ``yaw_tolerance_rad``
+    of the grasp yaw or will be within ``descend_yaw_lead_s`` (the fingertips are still above
+    the object then), and the gripper closes only once the yaw is within the tolerance.
     The next target is chosen at the ready pose, or ``schedule_before_ready_s`` before the return
     move reaches it (a pursuit starts near the belt, not from the bin).
     ``ik_failures_to_abort`` consecutive IK failures (the last command held meanwhile) abort a
@@ -323,6 +324,7 @@ class PickConfig:
     arrive_tolerance_m: float = field(default=0.005, metadata=_meta("float"))
     arrive_speed_tolerance_mps: float = field(default=0.1, metadata=_meta("float"))
     yaw_tolerance_rad: float = field(default=0.02, metadata=_meta("float"))
+    descend_yaw_lead_s: float = field(default=0.1, metadata=_meta("float"))
     lost_timeout_s: float = field(default=0.3, metadata=_meta("float"))
     grip_squeeze_m: float = field(default=0.01, metadata=_meta("float"))
 

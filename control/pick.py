@@ -31,7 +31,7 @@ from control.planner import (
     JointCommander,
     JointPlanner,
 )
-from control.scheduler import grasp_height_m, schedule
+from control.scheduler import approach_time_s, grasp_height_m, schedule
 from control.tracking import Track
 
 FloatArray = NDArray[np.float64]
@@ -56,6 +56,14 @@ WRIST_MARGIN_RAD = 0.15
 """Least room on the tool-turning joint at the intercept for the nearest grasp yaw."""
 
 FOLLOWING_PHASES = frozenset({Phase.DESCEND, Phase.DWELL, Phase.CLOSE})
+
+MAX_APPROACH_LEAD_S = 1.0
+"""Cap (s) on the approach's lead: it aims where the object will be that much later.
+
+The lead starts at the scheduler's estimate of the time to get above the object and shrinks by
+one control period per tick (the goal is the predicted meeting point, fixed in space), or to
+Ruckig's time left to reach the goal when that is shorter; at zero the approach follows the
+object itself. (A lead that could grow diverges when the arm is barely faster than the belt.)"""
 """Phases in which the TCP moves with the object and the feedback term is active."""
 
 
@@ -157,6 +165,9 @@ class PickController:
         self._joint_planner = JointPlanner(self._kin, config.motion)
         self._joint_mode = False
         self._joint_remaining_s = 0.0
+        self._approach_lead_s = 0.0
+        self._approach_waiting = False
+        self._yaw_remaining_s = 0.0
         self._drop_q = np.array(self.q_ready)
         self._commander = JointCommander(self._kin, config.motion, q0)
         self._feedback = FeedbackTerm(config.motion)
@@ -258,6 +269,10 @@ class PickController:
         self._feedback.reset()
         self._joint_mode = False
         self._grasp_yaw_rad = self._best_grasp_yaw(track, intercept_s)
+        tcp = self._planner.state.position_m
+        lead_s = approach_time_s(track, t_s + self._cfg.motion.command_latency_s, tcp, self._cfg)
+        self._approach_lead_s = min(lead_s, MAX_APPROACH_LEAD_S)
+        self._approach_waiting = False
         self._set_phase(Phase.APPROACH, t_s)
 
     def _best_grasp_yaw(self, track: Track, intercept_s: float) -> float:
@@ -334,10 +349,32 @@ class PickController:
         return t_s - self._target_seen_s <= self._cfg.pick.lost_timeout_s
 
     def _following_target(
-        self, t_s: float, belt_velocity_mps: tuple[float, float], height_m: float
+        self,
+        t_s: float,
+        belt_velocity_mps: tuple[float, float],
+        height_m: float,
+        *,
+        lead_s: float = 0.0,
     ) -> tuple[CartesianTarget, Vec3]:
+        """Ruckig goal ``height_m`` above the target's grasp point, and the grasp point itself.
+
+        The goal is the target's predicted state when the command takes effect, ``lead_s``
+        later still (the approach aims where the object will be when the arm gets there).
+        """
         motion = self._cfg.motion
         t_cmd = t_s + motion.command_latency_s
+        if lead_s > 0.0:
+            obj = self._object_state(t_cmd + lead_s, belt_velocity_mps, now_s=t_s)
+            now = self._object_state(t_cmd, belt_velocity_mps, now_s=t_s)
+            if obj is None or now is None:
+                msg = "following without a target"
+                raise ControlError(msg)
+            (x, y, z), (vx, vy, _) = obj
+            target = CartesianTarget(
+                position=(x, y, z + height_m, self._grasp_yaw_rad),
+                velocity=(vx, vy, 0.0, 0.0),
+            )
+            return target, now[0]
         obj = self._object_state(t_cmd, belt_velocity_mps, now_s=t_s)
         if obj is None:
             msg = "following without a target"
@@ -399,10 +436,20 @@ class PickController:
                 self._abort("too_late", t_s)
                 return self._plan(t_s, (), belt_velocity_mps)
         if phase == Phase.APPROACH:
-            target, aim = self._following_target(t_s, belt_velocity_mps, pick.approach_height_m)
-            target = self._not_upstream(target)
+            target, aim = self._following_target(
+                t_s, belt_velocity_mps, pick.approach_height_m, lead_s=self._approach_lead_s
+            )
+            waiting = self._not_upstream(target)
+            self._approach_waiting = waiting is not target
+            if self._approach_waiting:  # the meeting point is not in the window yet: wait there
+                return waiting, aim
             yaw_error = abs(self._planner.state.position[3] - target.position[3])
-            if self._arrived(target, pick.approach_height_m) and yaw_error < pick.yaw_tolerance_rad:
+            on_object = self._approach_lead_s <= period_s  # not on a point ahead of it
+            yaw_ready = (
+                yaw_error < pick.yaw_tolerance_rad
+                or self._yaw_remaining_s <= pick.descend_yaw_lead_s
+            )
+            if on_object and yaw_ready and self._arrived(target, pick.approach_height_m):
                 self._set_phase(Phase.DESCEND, t_s)
                 phase = Phase.DESCEND
             else:
@@ -530,7 +577,13 @@ class PickController:
         self, target: CartesianTarget, t_s: float, belt: tuple[float, float]
     ) -> None:
         try:
-            self._planner.step(target)
+            step = self._planner.step(target)
+            self._yaw_remaining_s = step.yaw_remaining_s
+            if self._phase == Phase.APPROACH and not self._approach_waiting:
+                period_s = self._cfg.motion.control_period_s
+                self._approach_lead_s = max(
+                    0.0, min(self._approach_lead_s - period_s, step.position_remaining_s)
+                )
         except PlanningError as exc:
             self._errors["ruckig_error"] += 1
             self.last_error = f"{self._phase}: {exc}"

@@ -65,14 +65,15 @@ class PlannerStep:
 
     ``state`` is the new setpoint, ``remaining_s`` the time left of the current trajectory,
     ``position_remaining_s`` the time left until x, y and z reach their target (the degrees of
-    freedom are not synchronised, so yaw may take longer), and ``finished`` is True when the
-    target state has been reached.
+    freedom are not synchronised, so yaw may take longer), ``yaw_remaining_s`` the same for
+    the yaw, and ``finished`` is True when the target state has been reached.
     """
 
     state: CartesianState
     remaining_s: float
     position_remaining_s: float
     finished: bool
+    yaw_remaining_s: float = 0.0
 
 
 class _AxisGroup:
@@ -221,6 +222,7 @@ class CartesianPlanner:
             remaining_s=max(left_xyz, left_yaw),
             position_remaining_s=left_xyz,
             finished=max(left_xyz, left_yaw) == 0.0,
+            yaw_remaining_s=left_yaw,
         )
 
 

@@ -95,28 +95,76 @@ def grasp_height_m(track: Track, config: ControllerConfig) -> float:
     return grasp_z_m(track.height_m, config)
 
 
+INTERCEPT_HORIZON_S = 5.0
+"""Latest intercept searched for; an object the arm cannot meet sooner gets this estimate."""
+
+_SCAN_STEP_S = 0.1
+_BISECTIONS = 7
+
+
+def approach_time_s(
+    track: Track,
+    now_s: float,
+    tcp_position_m: tuple[float, float, float],
+    config: ControllerConfig,
+) -> float:
+    """Earliest time from ``now_s`` at which the TCP can be above the moving track's grasp point.
+
+    The first ``t >= 0`` with ``move_time(|tcp - p(now + t)|) <= t``, ``p`` the track's
+    constant-velocity prediction at approach height: a scan in 0.1 s steps, then bisection to
+    about 1 ms. (A fixed-point iteration on ``t`` oscillates for fast objects far upstream.)
+    """
+    motion = config.motion
+    v, a, j = motion.max_velocity[0], motion.max_acceleration[0], motion.max_jerk[0]
+    z = grasp_height_m(track, config) + config.pick.approach_height_m
+
+    def late(t_s: float) -> bool:
+        x, y = track.position_at(now_s + t_s)
+        return move_time_s(math.dist(tcp_position_m, (x, y, z)), v, a, j) <= t_s
+
+    if late(0.0):
+        return 0.0
+    lo = 0.0
+    hi = _SCAN_STEP_S
+    while not late(hi):
+        lo = hi
+        hi += _SCAN_STEP_S
+        if hi > INTERCEPT_HORIZON_S:
+            return INTERCEPT_HORIZON_S
+    for _ in range(_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        if late(mid):
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
 def intercept_time_s(
     track: Track,
     now_s: float,
     tcp_position_m: tuple[float, float, float],
     config: ControllerConfig,
 ) -> float:
-    """Estimated time from ``now_s`` until the TCP reaches the grasp point of the moving track."""
+    """Estimated time from ``now_s`` until the TCP reaches the grasp point of the moving track.
+
+    :func:`approach_time_s`, then the descent of ``pick.approach_height_m``, plus
+    ``scheduler.time_margin_s``.
+    """
+    descend_s = descend_time_s(config)
+    approach_s = approach_time_s(track, now_s, tcp_position_m, config)
+    return approach_s + descend_s + config.scheduler.time_margin_s
+
+
+def descend_time_s(config: ControllerConfig) -> float:
+    """Estimated time to descend ``pick.approach_height_m`` from the approach point."""
     motion = config.motion
-    v, a, j = motion.max_velocity[0], motion.max_acceleration[0], motion.max_jerk[0]
-    z = grasp_height_m(track, config) + config.pick.approach_height_m
-    t_s = 0.0
-    for _ in range(3):
-        x, y = track.position_at(now_s + t_s)
-        distance = math.dist(tcp_position_m, (x, y, z))
-        t_s = move_time_s(distance, v, a, j)
-    descend_s = move_time_s(
+    return move_time_s(
         config.pick.approach_height_m,
         motion.max_velocity[2],
         motion.max_acceleration[2],
         motion.max_jerk[2],
     )
-    return t_s + descend_s + config.scheduler.time_margin_s
 
 
 def _corners(
@@ -209,7 +257,10 @@ def _reason(
     x_dwelt, _ = track.position_at(now_s + intercept_s + config.pick.dwell_s)
     if x_dwelt > x_max or track.position_m[0] > x_max:
         return "too_late"
-    if x_meet < x_min:
+    x_above, _ = track.position_at(
+        now_s + intercept_s - descend_time_s(config) - config.scheduler.time_margin_s
+    )
+    if x_above < x_min:
         return "upstream"
     z = grasp_height_m(track, config)
     base = config.robot.base_position_m

@@ -59,10 +59,15 @@ class ObjectLevel:
     height_ranges_m: dict[str, tuple[float, float]] = field(default_factory=dict)
     orientation_jitter_rad: float = 0.0
     classes: tuple[str, ...] = CLASS_NAMES
+    max_width_m: float | None = None
+    """Only objects whose footprint's narrow side is at most this enter (e.g. what fits a
+    gripper); None lets every object in."""
 
     def __post_init__(self) -> None:
         if self.max_objects is not None:
             _check(self.max_objects >= 1, "objects.max_objects", self.max_objects, "must be >= 1")
+        if self.max_width_m is not None:
+            _check(self.max_width_m > 0.0, "objects.max_width_m", self.max_width_m, "must be > 0")
         _check(
             0.0 <= self.orientation_jitter_rad <= np.pi,
             "objects.orientation_jitter_rad",

@@ -140,6 +140,11 @@ class Stream:
                 break
             if spec.class_name not in objects_cfg.classes:
                 continue
+            if (
+                objects_cfg.max_width_m is not None
+                and min(spec.width_m, spec.length_m) > objects_cfg.max_width_m
+            ):
+                continue
             height = spec.height_m
             if objects_cfg.resample_heights and spec.class_name in objects_cfg.height_ranges_m:
                 lo, hi = objects_cfg.height_ranges_m[spec.class_name]

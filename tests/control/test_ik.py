@@ -97,10 +97,7 @@ def test_ik_failure_is_flagged_and_stays_in_limits() -> None:
 def test_warm_start_converges_in_few_iterations() -> None:
     robot = RobotConfig()
     kin = Kinematics(robot)
-    q = kin.solve(
-        tool_pose(robot.ready_tcp_position_m, robot.ready_yaw_rad),
-        np.asarray(robot.ready_joint_positions_rad),
-    ).q
+    q = kin.solve(tool_pose((0.0, 0.45, 0.30), 1.5), np.asarray(robot.ready_joint_positions_rad)).q
     for k in range(50):
         result = kin.solve(tool_pose((0.002 * k, 0.45, 0.30 - 0.002 * k), 1.5), q)
         assert result.success

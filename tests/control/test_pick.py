@@ -66,13 +66,14 @@ def _drive(
     tracks_at: Callable[[float], tuple[Track, ...]],
     ticks: int,
     belt: tuple[float, float] = (0.4, 0.0),
+    dt_s: float = 0.005,
 ) -> list[Command]:
     """Run the controller with an ideal arm; every joint command must be within the limits."""
     kin = controller.kinematics
     q = controller.q_ready
     commands: list[Command] = []
     for k in range(ticks):
-        t_s = k * 0.005
+        t_s = k * dt_s
         pose = kin.fk(q)
         x, y, z = (float(v) for v in pose.translation)
         measured = TcpMeasurement(position_m=(x, y, z), yaw_rad=0.0)
@@ -146,3 +147,23 @@ def test_grasp_yaw_is_across_the_narrow_side() -> None:
     finger_axis = (math.sin(yaw), -math.cos(yaw))
     long_side = (math.cos(0.7), math.sin(0.7))
     assert abs(finger_axis[0] * long_side[0] + finger_axis[1] * long_side[1]) < 1e-12
+
+
+def test_fast_object_from_upstream_is_met_inside_the_window() -> None:
+    """At 0.6 m/s from far upstream: no descent before the object is under the fingers."""
+    config = ControllerConfig()
+    controller = PickController(config)
+    x0, vx = -1.3, 0.6
+    dt_s = config.motion.control_period_s
+    commands = _drive(
+        controller, lambda t: (_track(x0, t, vx=vx),), ticks=360, belt=(vx, 0.0), dt_s=dt_s
+    )
+    x_min = config.belt.pick_window_x_m[0]
+    following = [c for c in commands if c.phase in (Phase.APPROACH, Phase.DESCEND, Phase.DWELL)]
+    assert any(c.phase == Phase.DWELL for c in following)
+    for c in following:
+        assert c.setpoint.position_m[0] >= x_min - 1e-6, "the arm never chases upstream"
+    first_descend = next(c for c in commands if c.phase == Phase.DESCEND)
+    object_x = x0 + vx * first_descend.t_s
+    assert object_x >= x_min
+    assert abs(first_descend.setpoint.position_m[0] - object_x) < 0.02

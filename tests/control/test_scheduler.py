@@ -7,7 +7,13 @@ import math
 import numpy as np
 
 from control.config import ControllerConfig, SchedulerConfig
-from control.scheduler import UNTARGETED_REASONS, move_time_s, schedule
+from control.scheduler import (
+    UNTARGETED_REASONS,
+    approach_time_s,
+    grasp_height_m,
+    move_time_s,
+    schedule,
+)
 from control.tracking import Track
 
 TCP = (0.0, 0.45, 0.30)
@@ -133,3 +139,44 @@ def test_move_time_is_monotonic_and_bounded() -> None:
     assert times == sorted(times)
     assert times[0] == 0.0
     assert times[-1] >= 1.0 / 0.8
+
+
+def test_intercept_is_the_earliest_feasible_meeting() -> None:
+    config = ControllerConfig()
+    motion = config.motion
+    v, a, j = motion.max_velocity[0], motion.max_acceleration[0], motion.max_jerk[0]
+    ready = (-0.15, 0.5, 0.2)
+    z = grasp_height_m(_track(1, 0.0), config) + config.pick.approach_height_m
+
+    def move_s(track: Track, t_s: float) -> float:
+        x, y = track.position_at(t_s)
+        return move_time_s(math.dist(ready, (x, y, z)), v, a, j)
+
+    for x0, vx in ((-1.2, 0.6), (-0.8, 0.4), (-0.5, 0.2), (0.2, 0.6), (-0.15, 0.0)):
+        track = _track(1, x0, vx=vx)
+        t_s = approach_time_s(track, 0.0, ready, config)
+        assert move_s(track, t_s) <= t_s + 1e-12, (x0, vx)
+        # nothing earlier works: checked on a fine grid below the answer
+        for early in np.arange(0.0, t_s - 2e-3, 1e-3):
+            assert move_s(track, float(early)) > early, (x0, vx, early)
+
+
+def test_fast_object_far_upstream_is_not_targeted_before_it_can_be_met_in_the_window() -> None:
+    config = ControllerConfig()
+    ready = (-0.15, 0.5, 0.2)
+    track = _track(1, -1.2, vx=0.6)
+    result = schedule([track], now_s=0.0, tcp_position_m=ready, config=config)
+    assert result.target is None
+    assert _reasons(result.untargeted) == {1: "upstream"}
+    # once it is close enough, it is targeted and the meeting point is inside the window
+    for x0 in np.arange(-1.2, -0.3, 0.01):
+        near = _track(1, float(x0), vx=0.6)
+        result = schedule([near], now_s=0.0, tcp_position_m=ready, config=config)
+        if result.target is not None:
+            break
+    assert result.target is not None
+    meet_s = approach_time_s(result.target, 0.0, ready, config)
+    x_meet, _ = result.target.position_at(meet_s)
+    x_min, x_max = config.belt.pick_window_x_m
+    assert x_min <= x_meet <= x_max
+    assert x_meet - x_min < 0.6 * 0.02, "targeted as soon as the meeting point enters the window"

@@ -30,6 +30,7 @@ def test_round_trip_through_a_file(tmp_path: Path) -> None:
             resample_heights=True,
             height_ranges_m={"wood": (0.02, 0.05)},
             orientation_jitter_rad=0.3,
+            max_width_m=0.065,
         ),
         system=SystemLevel(
             belt_speed_mps=0.6,
@@ -63,6 +64,7 @@ def test_empty_file_gives_the_defaults(tmp_path: Path) -> None:
         ("physics: {friction: {wood: [0.9, 0.1]}}", r"physics\.friction\.wood = \[0\.9, 0\.1\]"),
         ("[1, 2]", r"top level must be a mapping"),
         ("a: [", r"not valid YAML"),
+        ("objects: {max_width_m: 0}", r"objects\.max_width_m = 0\.0: must be > 0"),
     ],
 )
 def test_bad_scenarios_name_the_key(tmp_path: Path, text: str, pattern: str) -> None:
@@ -119,3 +121,21 @@ def test_bad_perception_and_fault_values_name_the_key(
     path.write_text(text, encoding="utf-8")
     with pytest.raises(ConfigError, match=pattern):
         Scenario.load(path)
+
+
+def test_max_width_lets_only_narrow_objects_onto_the_belt() -> None:
+    from twin.builtin import builtin_dataset
+    from twin.config import CellConfig
+    from twin.objects import load_dataset
+    from twin.stream import Stream
+
+    layouts = load_dataset(builtin_dataset(), ("concrete", "brick", "wood", "rubber"))
+    narrow = sum(1 for lay in layouts for o in lay.objects if min(o.width_m, o.length_m) <= 0.065)
+    assert 0 < narrow < sum(len(lay.objects) for lay in layouts)
+    scenario = Scenario(
+        objects=ObjectLevel(max_width_m=0.065), system=SystemLevel(repeat_images=False)
+    )
+    stream = Stream(layouts, scenario, CellConfig().belt, seed_tree(0))
+    widths = [min(p.spec.width_m, p.spec.length_m) for b in stream for p in b.placements]
+    assert len(widths) == narrow
+    assert max(widths) <= 0.065
