@@ -350,7 +350,10 @@ class SchedulerConfig:
     object's narrow side; ``time_margin_s`` is added to every intercept estimate.
     An object is blocked when another lies in the rectangle its open fingers come down on:
     across its narrow side the opening plus two ``finger_depth_m`` and ``clearance_m``, along
-    its long side ``finger_width_m`` plus ``clearance_m`` (Panda fingers: 2 cm by 1.2 cm).
+    its long side ``finger_width_m`` plus ``clearance_m`` (Panda fingers: 2 cm by 1.2 cm); or
+    when an object whose top reaches the palm (``palm_above_tcp_m`` above the grasp point) lies
+    under the hand, ``hand_width_m`` along the jaw by ``hand_depth_m`` (Panda hand: 21 by 7 cm,
+    palm 3.5 cm above the TCP), both plus ``clearance_m``.
     Objects lower than ``min_height_m`` are too flat for the finger pads (about 2 cm tall).
     """
 
@@ -364,6 +367,9 @@ class SchedulerConfig:
     finger_width_m: float = field(default=0.02, metadata=_meta("float"))
     finger_depth_m: float = field(default=0.012, metadata=_meta("float"))
     clearance_m: float = field(default=0.008, metadata=_meta("float"))
+    hand_width_m: float = field(default=0.21, metadata=_meta("float"))
+    hand_depth_m: float = field(default=0.072, metadata=_meta("float"))
+    palm_above_tcp_m: float = field(default=0.035, metadata=_meta("float"))
     min_height_m: float = field(default=0.02, metadata=_meta("float"))
 
     def __post_init__(self) -> None:

@@ -210,19 +210,37 @@ def keep_out_corners(track: Track, config: ControllerConfig) -> list[tuple[float
     return _corners(track.position_m, track.yaw_rad, half_long, half_across)
 
 
+def _hand_half_extents(config: ControllerConfig) -> tuple[float, float]:
+    """Half extents (along the long side, across the narrow side) of the hand's footprint."""
+    sched = config.scheduler
+    return sched.hand_depth_m / 2 + sched.clearance_m, sched.hand_width_m / 2 + sched.clearance_m
+
+
 def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) -> int | None:
-    """The id of a track whose footprint lies in ``track``'s keep-out rectangle, or None."""
+    """The id of a track in the way of the gripper coming down on ``track``, or None.
+
+    In the way: any footprint in the fingers' keep-out rectangle, or a footprint in the hand's
+    rectangle of an object whose top reaches the palm (``palm_above_tcp_m`` above the grasp
+    point, less the clearance) when the fingers are at the grasp point.
+    """
+    sched = config.scheduler
     keep_out = keep_out_corners(track, config)
-    keep_out_radius = math.hypot(*_keep_out_half_extents(config))
+    hand_half = _hand_half_extents(config)
+    hand = _corners(track.position_m, track.yaw_rad, *hand_half)
+    palm_z = grasp_height_m(track, config) + sched.palm_above_tcp_m - sched.clearance_m
+    radius = max(math.hypot(*_keep_out_half_extents(config)), math.hypot(*hand_half))
     x, y = track.position_m
     for other in others:
         if other.track_id == track.track_id:
             continue
-        reach = keep_out_radius + math.hypot(other.length_m, other.width_m) / 2
+        reach = radius + math.hypot(other.length_m, other.width_m) / 2
         if math.hypot(other.position_m[0] - x, other.position_m[1] - y) > reach:
             continue  # bounding circles apart: the rectangles cannot overlap
         footprint = _corners(other.position_m, other.yaw_rad, other.length_m / 2, other.width_m / 2)
         if _overlap(keep_out, footprint):
+            return other.track_id
+        tall = config.belt.surface_z_m + other.height_m >= palm_z
+        if tall and _overlap(hand, footprint):
             return other.track_id
     return None
 

@@ -10,7 +10,9 @@ from control.config import ControllerConfig, SchedulerConfig
 from control.scheduler import (
     UNTARGETED_REASONS,
     approach_time_s,
+    blocked_by,
     grasp_height_m,
+    grasp_z_m,
     move_time_s,
     schedule,
 )
@@ -28,6 +30,7 @@ def _track(
     class_name: str = "brick",
     vx: float = 0.2,
     confidence: float = 1.0,
+    height: float = 0.04,
 ) -> Track:
     return Track(
         track_id=track_id,
@@ -40,7 +43,7 @@ def _track(
         yaw_rad=0.0,
         length_m=max(0.12, width),
         width_m=width,
-        height_m=0.04,
+        height_m=height,
         hits=10,
         confirmed=True,
         last_update_s=0.0,
@@ -120,6 +123,24 @@ def test_a_neighbour_where_the_fingers_come_down_blocks_the_pick() -> None:
     for clear in (outside, ahead):
         result = schedule([target, clear], now_s=0.0, tcp_position_m=TCP, config=config)
         assert "blocked" not in _reasons(result.untargeted).values()
+
+
+def test_a_tall_neighbour_under_the_hand_blocks_the_pick() -> None:
+    config = ControllerConfig()
+    sched = config.scheduler
+    fingers = config.robot.gripper_max_opening_m / 2 + sched.finger_depth_m + sched.clearance_m
+    hand = sched.hand_width_m / 2 + sched.clearance_m
+    target = _track(1, -0.1)
+    # across the jaw, clear of the fingers but under the hand (footprints 5 cm wide)
+    y = 0.5 + fingers + 0.025 + 0.005
+    assert y - 0.025 < 0.5 + hand
+    palm_z = grasp_z_m(target.height_m, config) + sched.palm_above_tcp_m - sched.clearance_m
+    low = _track(2, -0.1, y=y, height=palm_z - config.belt.surface_z_m - 0.002)
+    tall = _track(3, -0.1, y=y, height=palm_z - config.belt.surface_z_m + 0.002)
+    beyond = _track(4, -0.1, y=0.5 + hand + 0.025 + 0.002, height=0.2)
+    assert blocked_by(target, [target, low], config) is None
+    assert blocked_by(target, [target, tall], config) == 3
+    assert blocked_by(target, [target, beyond], config) is None
 
 
 def test_unknown_class_has_no_bin_and_nothing_is_targeted_when_empty() -> None:
