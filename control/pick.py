@@ -56,6 +56,7 @@ WRIST_MARGIN_RAD = 0.15
 """Least room on the tool-turning joint at the intercept for the nearest grasp yaw."""
 
 FOLLOWING_PHASES = frozenset({Phase.DESCEND, Phase.DWELL, Phase.CLOSE})
+"""Phases in which the TCP moves with the object and the feedback term is active."""
 
 MAX_APPROACH_LEAD_S = 1.0
 """Cap (s) on the approach's lead: it aims where the object will be that much later.
@@ -64,7 +65,6 @@ The lead starts at the scheduler's estimate of the time to get above the object 
 one control period per tick (the goal is the predicted meeting point, fixed in space), or to
 Ruckig's time left to reach the goal when that is shorter; at zero the approach follows the
 object itself. (A lead that could grow diverges when the arm is barely faster than the belt.)"""
-"""Phases in which the TCP moves with the object and the feedback term is active."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -361,22 +361,10 @@ class PickController:
         The goal is the target's predicted state when the command takes effect, ``lead_s``
         later still (the approach aims where the object will be when the arm gets there).
         """
-        motion = self._cfg.motion
-        t_cmd = t_s + motion.command_latency_s
-        if lead_s > 0.0:
-            obj = self._object_state(t_cmd + lead_s, belt_velocity_mps, now_s=t_s)
-            now = self._object_state(t_cmd, belt_velocity_mps, now_s=t_s)
-            if obj is None or now is None:
-                msg = "following without a target"
-                raise ControlError(msg)
-            (x, y, z), (vx, vy, _) = obj
-            target = CartesianTarget(
-                position=(x, y, z + height_m, self._grasp_yaw_rad),
-                velocity=(vx, vy, 0.0, 0.0),
-            )
-            return target, now[0]
-        obj = self._object_state(t_cmd, belt_velocity_mps, now_s=t_s)
-        if obj is None:
+        t_cmd = t_s + self._cfg.motion.command_latency_s
+        obj = self._object_state(t_cmd + lead_s, belt_velocity_mps, now_s=t_s)
+        now = obj if lead_s == 0.0 else self._object_state(t_cmd, belt_velocity_mps, now_s=t_s)
+        if obj is None or now is None:
             msg = "following without a target"
             raise ControlError(msg)
         (x, y, z), (vx, vy, _) = obj
@@ -384,7 +372,7 @@ class PickController:
             position=(x, y, z + height_m, self._grasp_yaw_rad),
             velocity=(vx, vy, 0.0, 0.0),
         )
-        return target, (x, y, z)
+        return target, now[0]
 
     def _not_upstream(self, target: CartesianTarget) -> CartesianTarget:
         """An approach target upstream of the pick window waits at its entry, at rest.

@@ -4,7 +4,9 @@ An object is a candidate when its class has a bin, its footprint's narrow side f
 it stands tall enough for the finger pads,
 the arm can intercept it inside the pick window and finish the dwell before it leaves the window,
 its grasp point stays within reach until the gripper has closed, and no other object lies where
-the open fingers come down (the gripper's keep-out rectangle across the narrow side). Among
+the open fingers come down (the gripper's keep-out rectangle across the narrow side) or reaches
+up to the palm under the hand. The arm can intercept an object when it can be above it inside
+the window: the earliest such meeting is searched, not iterated. Among
 candidates the highest class priority wins, then the least time left in the window, then the
 shortest time to intercept.
 """
