@@ -171,6 +171,7 @@ class World:
             baseOrientation=quat_xyzw,
             baseInertialFramePosition=[0.0, 0.0, 0.0],
             baseInertialFrameOrientation=inertia.frame_quat_xyzw,
+            useMaximalCoordinates=True,
             physicsClientId=self.client,
         )
         moments = list(inertia.principal_kgm2)
@@ -181,7 +182,9 @@ class World:
             restitution=restitution,
             spinningFriction=0.0,
             rollingFriction=0.0,
+            mass=mass_kg,  # PyBullet zeroes a rigid body's mass when only the inertia is given
             localInertiaDiagonal=moments,
+            activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING,  # a stalled belt restarts
             physicsClientId=self.client,
         )
         return SpawnedBody(
