@@ -352,8 +352,8 @@ class SchedulerConfig:
     across its narrow side the opening plus two ``finger_depth_m`` and ``clearance_m``, along
     its long side ``finger_width_m`` plus ``clearance_m`` (Panda fingers: 2 cm by 1.2 cm); or
     when an object whose top reaches the palm (``palm_above_tcp_m`` above the grasp point) lies
-    under the hand, ``hand_width_m`` along the jaw by ``hand_depth_m`` (Panda hand: 21 by 7 cm,
-    palm 3.5 cm above the TCP), both plus ``clearance_m``.
+    under the hand, ``hand_width_m`` in the closing direction by ``hand_depth_m`` across it
+    (Panda hand: 21 by 7 cm, palm 3.5 cm above the TCP), both plus ``clearance_m``.
     Objects lower than ``min_height_m`` are too flat for the finger pads (about 2 cm tall).
     """
 
@@ -374,9 +374,19 @@ class SchedulerConfig:
 
     def __post_init__(self) -> None:
         """Validate every field."""
-        for name in ("finger_width_m", "finger_depth_m", "clearance_m", "min_height_m"):
+        lengths = (
+            "finger_width_m",
+            "finger_depth_m",
+            "clearance_m",
+            "min_height_m",
+            "hand_width_m",
+            "hand_depth_m",
+            "palm_above_tcp_m",
+        )
+        for name in lengths:
             value = cast(float, getattr(self, name))
-            _require(value >= 0.0, f"scheduler.{name}", value, "must be >= 0")
+            ok = value >= 0.0 and math.isfinite(value)
+            _require(ok, f"scheduler.{name}", value, "must be finite and >= 0")
         for name, value in self.class_priorities.items():
             _require(
                 math.isfinite(value), f"scheduler.class_priorities.{name}", value, "must be finite"

@@ -31,7 +31,7 @@ from control.planner import (
     JointCommander,
     JointPlanner,
 )
-from control.scheduler import approach_time_s, grasp_height_m, schedule
+from control.scheduler import Schedule, grasp_height_m, schedule
 from control.tracking import Track
 
 FloatArray = NDArray[np.float64]
@@ -258,7 +258,8 @@ class PickController:
         )
         self._set_phase(Phase.LIFT, t_s)
 
-    def _start_pick(self, track: Track, intercept_s: float, t_s: float) -> None:
+    def _start_pick(self, track: Track, decision: Schedule, t_s: float) -> None:
+        intercept_s = decision.intercept_s
         self._target = track
         self._target_seen_s = t_s
         self._targeted += 1
@@ -269,10 +270,9 @@ class PickController:
         self._feedback.reset()
         self._joint_mode = False
         self._grasp_yaw_rad = self._best_grasp_yaw(track, intercept_s)
-        tcp = self._planner.state.position_m
-        lead_s = approach_time_s(track, t_s + self._cfg.motion.command_latency_s, tcp, self._cfg)
-        self._approach_lead_s = min(lead_s, MAX_APPROACH_LEAD_S)
+        self._approach_lead_s = min(decision.approach_s, MAX_APPROACH_LEAD_S)
         self._approach_waiting = False
+        self._yaw_remaining_s = math.inf  # until the first Cartesian step of this pick
         self._set_phase(Phase.APPROACH, t_s)
 
     def _best_grasp_yaw(self, track: Track, intercept_s: float) -> float:
@@ -314,7 +314,7 @@ class PickController:
             if item.track_id not in self._targeted_ids:
                 self._untargeted[item.track_id] = item.reason
         if result.target is not None:
-            self._start_pick(result.target, result.intercept_s, t_s)
+            self._start_pick(result.target, result, t_s)
 
     def _object_state(
         self, t_s: float, belt_velocity_mps: tuple[float, float], *, now_s: float | None = None

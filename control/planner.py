@@ -73,7 +73,7 @@ class PlannerStep:
     remaining_s: float
     position_remaining_s: float
     finished: bool
-    yaw_remaining_s: float = 0.0
+    yaw_remaining_s: float
 
 
 class _AxisGroup:

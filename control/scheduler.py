@@ -47,12 +47,14 @@ class Untargeted:
 class Schedule:
     """Result of one scheduling decision.
 
-    ``target`` is None when nothing can be picked; ``intercept_s`` is the estimated time from now
-    until the TCP reaches the target's grasp point; ``time_left_s`` the time until the target
-    leaves the pick window.
+    ``target`` is None when nothing can be picked; ``approach_s`` is the estimated time from now
+    until the TCP can be above the target (:func:`approach_time_s`), ``intercept_s`` until it
+    reaches the target's grasp point; ``time_left_s`` the time until the target leaves the pick
+    window.
     """
 
     target: Track | None
+    approach_s: float
     intercept_s: float
     time_left_s: float
     untargeted: tuple[Untargeted, ...]
@@ -98,7 +100,7 @@ def grasp_height_m(track: Track, config: ControllerConfig) -> float:
 
 
 INTERCEPT_HORIZON_S = 5.0
-"""Latest intercept searched for; an object the arm cannot meet sooner gets this estimate."""
+"""Latest intercept searched for (s); an object the arm cannot meet sooner is not targeted."""
 
 _SCAN_STEP_S = 0.1
 _BISECTIONS = 7
@@ -115,6 +117,7 @@ def approach_time_s(
     The first ``t >= 0`` with ``move_time(|tcp - p(now + t)|) <= t``, ``p`` the track's
     constant-velocity prediction at approach height: a scan in 0.1 s steps, then bisection to
     about 1 ms. (A fixed-point iteration on ``t`` oscillates for fast objects far upstream.)
+    ``math.inf`` when there is no such time within :data:`INTERCEPT_HORIZON_S`.
     """
     motion = config.motion
     v, a, j = motion.max_velocity[0], motion.max_acceleration[0], motion.max_jerk[0]
@@ -132,7 +135,7 @@ def approach_time_s(
         lo = hi
         hi += _SCAN_STEP_S
         if hi > INTERCEPT_HORIZON_S:
-            return INTERCEPT_HORIZON_S
+            return math.inf
     for _ in range(_BISECTIONS):
         mid = 0.5 * (lo + hi)
         if late(mid):
@@ -142,20 +145,9 @@ def approach_time_s(
     return hi
 
 
-def intercept_time_s(
-    track: Track,
-    now_s: float,
-    tcp_position_m: tuple[float, float, float],
-    config: ControllerConfig,
-) -> float:
-    """Estimated time from ``now_s`` until the TCP reaches the grasp point of the moving track.
-
-    :func:`approach_time_s`, then the descent of ``pick.approach_height_m``, plus
-    ``scheduler.time_margin_s``.
-    """
-    descend_s = descend_time_s(config)
-    approach_s = approach_time_s(track, now_s, tcp_position_m, config)
-    return approach_s + descend_s + config.scheduler.time_margin_s
+def descend_after_s(config: ControllerConfig) -> float:
+    """Time from above the object to its grasp point: the descent plus the time margin."""
+    return descend_time_s(config) + config.scheduler.time_margin_s
 
 
 def descend_time_s(config: ControllerConfig) -> float:
@@ -250,7 +242,7 @@ def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) 
 def _reason(
     track: Track,
     now_s: float,
-    intercept_s: float,
+    approach_s: float,
     config: ControllerConfig,
     excluded_ids: Collection[int],
     *,
@@ -267,19 +259,20 @@ def _reason(
         return "too_wide"
     if track.height_m < sched.min_height_m:
         return "too_flat"
+    if track.track_id in excluded_ids:
+        return "excluded"
+    if not math.isfinite(approach_s):  # cannot be met within the search horizon
+        return "too_late" if track.velocity_mps[0] > 0.0 else "out_of_reach"
+    intercept_s = approach_s + descend_after_s(config)
     x_min, x_max = belt.pick_window_x_m
     x_meet, y_meet = track.position_at(now_s + intercept_s)
     x_done, y_done = track.position_at(
         now_s + intercept_s + config.pick.dwell_s + config.pick.close_s
     )
-    if track.track_id in excluded_ids:
-        return "excluded"
     x_dwelt, _ = track.position_at(now_s + intercept_s + config.pick.dwell_s)
     if x_dwelt > x_max or track.position_m[0] > x_max:
         return "too_late"
-    x_above, _ = track.position_at(
-        now_s + intercept_s - descend_time_s(config) - config.scheduler.time_margin_s
-    )
+    x_above, _ = track.position_at(now_s + approach_s)
     if x_above < x_min:
         return "upstream"
     z = grasp_height_m(track, config)
@@ -308,31 +301,37 @@ def schedule(
     x_max = config.belt.pick_window_x_m[1]
     ranked: list[tuple[tuple[float, float, float, int], Track, float, float]] = []
     untargeted: list[Untargeted] = []
+    after_s = descend_after_s(config)
     for track in tracks:
         if not track.confirmed:
             continue
-        intercept_s = intercept_time_s(track, now_s, tcp_position_m, config)
-        reason = _reason(track, now_s, intercept_s, config, excluded_ids, others=tracks)
+        approach_s = approach_time_s(track, now_s, tcp_position_m, config)
+        reason = _reason(track, now_s, approach_s, config, excluded_ids, others=tracks)
         if reason is not None:
             untargeted.append(Untargeted(track_id=track.track_id, reason=reason))
             continue
         vx = track.velocity_mps[0]
         time_left_s = (x_max - track.position_m[0]) / vx if vx > 1e-6 else math.inf
         priority = config.scheduler.class_priorities.get(track.class_name, 0.0)
-        key = (-priority, time_left_s, intercept_s, track.track_id)
-        ranked.append((key, track, intercept_s, time_left_s))
+        key = (-priority, time_left_s, approach_s + after_s, track.track_id)
+        ranked.append((key, track, approach_s, time_left_s))
     if not ranked:
         return Schedule(
-            target=None, intercept_s=math.nan, time_left_s=math.nan, untargeted=tuple(untargeted)
+            target=None,
+            approach_s=math.nan,
+            intercept_s=math.nan,
+            time_left_s=math.nan,
+            untargeted=tuple(untargeted),
         )
     ranked.sort(key=lambda item: item[0])
-    _, target, intercept_s, time_left_s = ranked[0]
+    _, target, approach_s, time_left_s = ranked[0]
     untargeted.extend(
         Untargeted(track_id=item[1].track_id, reason="lower_priority") for item in ranked[1:]
     )
     return Schedule(
         target=target,
-        intercept_s=intercept_s,
+        approach_s=approach_s,
+        intercept_s=approach_s + after_s,
         time_left_s=time_left_s,
         untargeted=tuple(untargeted),
     )

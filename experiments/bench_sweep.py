@@ -24,6 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from twin.errors import CdwTwinError
 from twin.fileio import write_atomic
 
 
@@ -61,7 +62,9 @@ def machine_speedup(workers: int, repeats: int = 3) -> float:
         start = time.perf_counter()
         procs = [subprocess.Popen([sys.executable, "-c", _CALIBRATION]) for _ in range(copies)]
         for proc in procs:
-            proc.wait()
+            if proc.wait() != 0:
+                msg = f"machine calibration: a CPU-loop process exited with {proc.returncode}"
+                raise CdwTwinError(msg)
         return time.perf_counter() - start
 
     ratios = [workers * wall(1) / wall(workers) for _ in range(repeats)]

@@ -109,35 +109,16 @@ def is_convex(ring: FloatArray) -> bool:
     return bool((cross >= -CONVEX_REL_TOL * scale * scale).all())
 
 
-def _diagonals(tris: IntArray, n: int) -> tuple[IntArray, IntArray]:
-    """Interior half-edge pairs of a triangulation of an ``n``-ring, found in numpy.
-
-    Half-edge ``e`` runs from ``tris.ravel()[e]`` to the next corner of its triangle. Returns
-    ``(e, f)``: every half-edge ``e`` whose start index is below its end index and that has a
-    twin ``f`` (the same edge, reversed, in the neighbouring triangle), ``e`` increasing.
-    """
-    org = tris.ravel()
-    count = len(org)
-    ring_next = np.arange(1, count + 1, dtype=np.int64)
-    ring_next[2::3] -= 3
-    dst = org[ring_next]
-    keys = org * n + dst
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    candidates = np.flatnonzero(org < dst)
-    twin_keys = dst[candidates] * n + org[candidates]
-    at = np.minimum(np.searchsorted(sorted_keys, twin_keys), count - 1)
-    found = sorted_keys[at] == twin_keys
-    return candidates[found], order[at[found]]
-
-
 def diagonals_many(tris_list: list[IntArray], sizes: list[int]) -> list[tuple[IntArray, IntArray]]:
-    """:func:`_diagonals` of many triangulations (of rings of ``sizes[i]`` points) at once.
+    """Interior half-edge pairs of many triangulations (of rings of ``sizes[i]`` points) at once.
 
-    The half-edges of all triangulations are shifted to one numbering (vertex indices by the
-    preceding rings' sizes, half-edges by the preceding half-edge counts), so edge keys never
-    collide between rings and one stable sort and one search serve them all. Gives exactly
-    the per-ring results (same pairs, same order, indices local to each ring).
+    Half-edge ``e`` runs from ``tris.ravel()[e]`` to the next corner of its triangle. For each
+    triangulation: ``(e, f)``, every half-edge ``e`` whose start index is below its end index
+    and that has a twin ``f`` (the same edge, reversed, in the neighbouring triangle), ``e``
+    increasing. The half-edges of all triangulations are shifted to one numbering (vertex
+    indices by the preceding rings' sizes, half-edges by the preceding half-edge counts), so
+    edge keys never collide between rings and one stable sort and one search serve them all.
+    Gives exactly the per-ring results (same pairs, same order, indices local to each ring).
     """
     if not tris_list:
         return []
@@ -197,7 +178,7 @@ def hertel_mehlhorn(
     The triangles are held as half-edges (``e`` runs from ``org[e]`` to ``org[nxt[e]]``), so
     removing a diagonal is four pointer updates and its test two cross products. Diagonals are
     visited in half-edge order; finding them and their twins is vectorised
-    (:func:`_diagonals`; pass ``diagonals`` when :func:`diagonals_many` found them for many
+    (:func:`diagonals_many`; pass ``diagonals`` when it found them for many
     rings at once), only the removals, which depend on earlier ones, run in Python.
     """
     xs: list[float] = ring[:, 0].tolist()
@@ -208,7 +189,9 @@ def hertel_mehlhorn(
     count = len(org)
     nxt, prv = _triangle_links(count)
     alive = [True] * count
-    first, second = _diagonals(tris, len(ring)) if diagonals is None else diagonals
+    if diagonals is None:
+        diagonals = diagonals_many([tris], [len(ring)])[0]
+    first, second = diagonals
     for e, f in zip(first.tolist(), second.tolist(), strict=True):
         a = org[e]
         b = org[f]

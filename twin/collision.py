@@ -83,7 +83,7 @@ def merge_pieces(pieces: list[np.ndarray], tolerance: float, max_pieces: int) ->
     (the first such pair in index order on ties); pair hulls are computed once and only the
     merged piece's pairs are recomputed. Pieces whose footprint has no area are dropped.
     """
-    footprints = [f for f in _hulls([p[:, :2] for p in pieces]) if len(f) >= 3]
+    footprints = [f for f in _hulls([p[:, :2] for p in pieces]) if len(f) >= 3] if pieces else []
     if not footprints:
         msg = "no convex piece with a footprint of positive area"
         raise SceneError(msg)
@@ -161,7 +161,13 @@ def merged_collision_file(
     """Write (once) and return the merged-pieces OBJ for ``source`` and its piece count."""
     key = hashlib.sha1(f"{source}|{tolerance}|{max_pieces}".encode()).hexdigest()[:16]
     target = cache_dir / f"{source.stem}-{key}.obj"
-    pieces = merge_pieces(read_pieces(source), tolerance, max_pieces)
-    if not target.is_file():
+    count = _written.get(target)
+    if count is None or not target.is_file():
+        pieces = merge_pieces(read_pieces(source), tolerance, max_pieces)
         write_atomic(target, pieces_obj_text(pieces, source.name))
-    return target, len(pieces)
+        count = _written[target] = len(pieces)
+    return target, count
+
+
+_written: dict[Path, int] = {}
+"""Merged files written by this process and their piece counts (each source is merged once)."""

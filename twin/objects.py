@@ -194,6 +194,9 @@ def read_obj_triangles(path: Path) -> np.ndarray:
             elif line.startswith("f "):
                 ids = [int(token.split("/")[0]) for token in line.split()[1:]]
                 ids = [i - 1 if i > 0 else len(vertices) + i for i in ids]
+                if any(not 0 <= i < len(vertices) for i in ids):
+                    msg = f"{path}:{number}: face {line!r} refers to a vertex not defined before it"
+                    raise SceneError(msg)
                 triangles.extend((ids[0], ids[k], ids[k + 1]) for k in range(1, len(ids) - 1))
         except ValueError:
             msg = f"{path}:{number}: malformed line {line!r}"
@@ -201,11 +204,7 @@ def read_obj_triangles(path: Path) -> np.ndarray:
     if not triangles:
         msg = f"{path}: no faces"
         raise SceneError(msg)
-    index = np.asarray(triangles, dtype=np.int64)
-    if index.min() < 0 or index.max() >= len(vertices):
-        msg = f"{path}: a face refers to a vertex that does not exist"
-        raise SceneError(msg)
-    return np.asarray(vertices, dtype=float)[index]
+    return np.asarray(vertices, dtype=float)[np.asarray(triangles, dtype=np.int64)]
 
 
 def unit_mass_inertia(triangles: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -227,7 +226,7 @@ def unit_mass_inertia(triangles: np.ndarray) -> tuple[float, np.ndarray, np.ndar
     g2 = f2 + p2 * (f1 + p2)
     x, y, z = 0, 1, 2
     volume = float(np.sum(d[:, x] * f1[:, x])) / 6.0
-    if volume <= 0.0:
+    if not volume > 0.0:  # also NaN
         msg = f"volume {volume:g} m^3 is not positive (open or inward-wound mesh)"
         raise SceneError(msg)
     first = np.sum(d * f2, axis=0) / 24.0

@@ -166,7 +166,7 @@ def test_intercept_is_the_earliest_feasible_meeting() -> None:
     config = ControllerConfig()
     motion = config.motion
     v, a, j = motion.max_velocity[0], motion.max_acceleration[0], motion.max_jerk[0]
-    ready = (-0.15, 0.5, 0.2)
+    ready = config.robot.ready_tcp_position_m
     z = grasp_height_m(_track(1, 0.0), config) + config.pick.approach_height_m
 
     def move_s(track: Track, t_s: float) -> float:
@@ -184,7 +184,7 @@ def test_intercept_is_the_earliest_feasible_meeting() -> None:
 
 def test_fast_object_far_upstream_is_not_targeted_before_it_can_be_met_in_the_window() -> None:
     config = ControllerConfig()
-    ready = (-0.15, 0.5, 0.2)
+    ready = config.robot.ready_tcp_position_m
     track = _track(1, -1.2, vx=0.6)
     result = schedule([track], now_s=0.0, tcp_position_m=ready, config=config)
     assert result.target is None

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from meshgen.loaders import _check_range, _checked_points, _points_from_json
-from meshgen.mesh import _diagonals, diagonals_many, triangulate
+from meshgen.mesh import diagonals_many, triangulate
 from meshgen.ragged import split_rows
 
 
@@ -25,9 +25,17 @@ def test_diagonals_many_matches_one_ring_at_a_time() -> None:
     batched = diagonals_many(tris, [len(r) for r in rings])
     assert len(batched) == len(rings)
     for ring, t, (first, second) in zip(rings, tris, batched, strict=True):
-        want_first, want_second = _diagonals(t, len(ring))
-        np.testing.assert_array_equal(first, want_first)
-        np.testing.assert_array_equal(second, want_second)
+        # reference: a dictionary of directed edges, every interior edge once
+        org = t.ravel().tolist()
+        nxt = [e + 1 if e % 3 != 2 else e - 2 for e in range(len(org))]
+        edge = {(org[e], org[nxt[e]]): e for e in range(len(org))}
+        want = [
+            (e, edge[org[nxt[e]], org[e]])
+            for e in range(len(org))
+            if org[e] < org[nxt[e]] and (org[nxt[e]], org[e]) in edge
+        ]
+        assert list(zip(first.tolist(), second.tolist(), strict=True)) == want
+        assert len(want) == len(ring) - 3  # a triangulated n-gon has n - 3 diagonals
     assert diagonals_many([], []) == []
 
 

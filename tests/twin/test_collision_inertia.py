@@ -64,10 +64,12 @@ def test_zero_tolerance_keeps_the_exact_decomposition() -> None:
     assert len(merged) == 2
 
 
-def test_flat_pieces_only_is_an_error() -> None:
+def test_flat_pieces_only_or_none_is_an_error() -> None:
     flat = _prism([(0.0, 0.0), (0.1, 0.0), (0.2, 0.0)])
     with pytest.raises(SceneError, match="positive area"):
         merge_pieces([flat], tolerance=0.1, max_pieces=6)
+    with pytest.raises(SceneError, match="positive area"):
+        merge_pieces([], tolerance=0.1, max_pieces=6)
 
 
 def _box_obj(path: Path, a: float, b: float, c: float, offset: tuple[float, float, float]) -> None:
@@ -121,5 +123,5 @@ def test_malformed_obj_line_is_named(tmp_path: Path) -> None:
     with pytest.raises(SceneError, match=r"bad\.obj:3: malformed line"):
         read_obj_triangles(path)
     path.write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n", encoding="utf-8")
-    with pytest.raises(SceneError, match="does not exist"):
+    with pytest.raises(SceneError, match=r"bad\.obj:3: face 'f 1 2 9' refers to a vertex"):
         read_obj_triangles(path)
