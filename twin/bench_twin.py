@@ -1,8 +1,9 @@
 """``cdw-twin bench twin``: the twin's real-time factor, and its step rate when paced.
 
-Headless (default): the arm (moving through a scripted joint-space sweep) and ``--objects``
-objects on the belt at 240 Hz, FMU co-simulation and event detection included (simulated
-perception, which only the ROS node publishes, is off); prints
+Headless (default): the arm (moving through a scripted joint-space sweep, commanded at 120 Hz
+as the controller commands it) and ``--objects`` objects on the belt at 240 Hz, FMU
+co-simulation and event detection included (simulated perception, which only the ROS node
+publishes, is off); prints
 ``real_time_factor`` = simulated seconds / wall seconds. The belt starts full (prefilled) so the
 object count holds for the whole measurement.
 
@@ -106,8 +107,10 @@ def _measure(scenario: Scenario, dataset: Path, args: argparse.Namespace) -> dic
         second_marks: list[int] = []
         on_belt_samples: list[int] = []
         next_mark = wall0 + 1.0
-        for _ in range(steps):
-            twin.advance(ArmCommand(_arm_sweep(home, twin.time_s)))
+        for step in range(steps):
+            # commands at 120 Hz, as the controller sends them; the twin extrapolates between
+            command = ArmCommand(_arm_sweep(home, twin.time_s)) if step % 2 == 0 else None
+            twin.advance(command)
             if twin.step_count % 240 == 0:
                 on_belt_samples.append(sum(1 for o in twin.observe_objects() if o.on_belt))
             now = time.perf_counter()
