@@ -97,6 +97,7 @@ class Monitor:
         self.world = world
         self.robot = robot
         self._records: list[_Record] = []
+        self._active: list[_Record] = []  # simulated ones, in spawn order
         self._by_body: dict[int, _Record] = {}
         self._tcp_shape = pb.createCollisionShape(
             pb.GEOM_BOX, halfExtents=list(cell.grasp.tcp_half_extents_m), physicsClientId=client
@@ -121,6 +122,7 @@ class Monitor:
             on_belt=True,
         )
         self._records.append(record)
+        self._active.append(record)
         self._by_body[spawned.body] = record
         self.load_mass_kg += record.mass_kg
         event = Event(
@@ -157,8 +159,8 @@ class Monitor:
     ) -> dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
         """True poses of every simulated object on the belt."""
         out = {}
-        for record in self._records:
-            if record.active and record.on_belt:
+        for record in self._active:
+            if record.on_belt:
                 pose = self.pose_of(record.id)
                 if pose is not None:
                     out[record.id] = pose
@@ -212,10 +214,9 @@ class Monitor:
         ws_lo, ws_hi = ws.min_x_m, ws.max_x_m
         tcp_x, tcp_y = tcp_pos[0], tcp_pos[1]
         near2 = _NEAR_TCP_M**2
-        for record in self._records:
-            if not record.active:
-                continue
-            pos, orn = pb.getBasePositionAndOrientation(record.body, physicsClientId=c)
+        get_pose = pb.getBasePositionAndOrientation
+        for record in tuple(self._active):  # a record may be deactivated in the loop
+            pos, orn = get_pose(record.body, physicsClientId=c)
             record.position, record.orientation = pos, orn
             x, y, z = pos
             # fast path: riding the belt, away from the robot, nothing to detect but the window
@@ -412,6 +413,7 @@ class Monitor:
         if record.held:
             self._release(record)
         record.active = False
+        self._active.remove(record)
         record.on_belt = False
         record.in_workspace = False
         record.overlap_since = None
