@@ -36,6 +36,18 @@ from twin.world import SpawnedBody, World
 
 _NEAR_TCP_M = 0.25
 
+_MAX_SINKING_SPEED_MPS = 1.0
+"""Bound on how fast the centre of mass of an object riding the belt can sink towards it."""
+
+_MAX_CLOSING_SPEED_MPS = 4.0
+"""Bound on how fast an object riding the belt and the TCP approach each other or a boundary.
+
+An object on the fast path (riding, away from the TCP, untouched) is polled again only when it
+could have reached a boundary (belt edge, workspace limit, the TCP's near zone) at this speed,
+or its centre of mass the belt surface at :data:`_MAX_SINKING_SPEED_MPS`;
+until then nothing about it can change. Objects touched by the arm are polled every step, and
+poses asked for (ground truth, the target metric) are always read fresh."""
+
 
 @dataclass(frozen=True)
 class GroundTruth:
@@ -86,6 +98,8 @@ class _Record:
     fingers: frozenset[int] = frozenset()
     arm_links: frozenset[int] = frozenset()
     constraint: int | None = None
+    polled_step: int = -1
+    next_poll_step: int = 0
 
 
 class Monitor:
@@ -98,6 +112,9 @@ class Monitor:
         self.robot = robot
         self._records: list[_Record] = []
         self._active: list[_Record] = []  # simulated ones, in spawn order
+        self._step = 0
+        self._poll_reach_m = _MAX_CLOSING_SPEED_MPS / cell.physics.physics_hz
+        self._poll_vertical_ratio = _MAX_CLOSING_SPEED_MPS / _MAX_SINKING_SPEED_MPS
         self._by_body: dict[int, _Record] = {}
         self._tcp_shape = pb.createCollisionShape(
             pb.GEOM_BOX, halfExtents=list(cell.grasp.tcp_half_extents_m), physicsClientId=client
@@ -149,6 +166,7 @@ class Monitor:
         record = self._records[object_id - 1]
         if not record.active:
             return None
+        self._fresh(record)
         _, orientation = pb.multiplyTransforms(
             (0.0, 0.0, 0.0), record.orientation, (0.0, 0.0, 0.0), record.inertial_inv
         )
@@ -160,6 +178,7 @@ class Monitor:
         """True poses of every simulated object on the belt."""
         out = {}
         for record in self._active:
+            self._fresh(record)
             if record.on_belt:
                 pose = self.pose_of(record.id)
                 if pose is not None:
@@ -172,6 +191,14 @@ class Monitor:
             record = self._records[object_id - 1]
             return record.body if record.active else None
         return None
+
+    def _fresh(self, record: _Record) -> None:
+        """Read the record's pose from the physics unless it was read at this step."""
+        if record.polled_step != self._step:
+            record.position, record.orientation = pb.getBasePositionAndOrientation(
+                record.body, physicsClientId=self.client
+            )
+            record.polled_step = self._step
 
     # -- per step ---------------------------------------------------------------------------
     def update(self, step: int, time_s: float) -> list[Event]:
@@ -215,9 +242,16 @@ class Monitor:
         tcp_x, tcp_y = tcp_pos[0], tcp_pos[1]
         near2 = _NEAR_TCP_M**2
         get_pose = pb.getBasePositionAndOrientation
+        reach_m = self._poll_reach_m
+        self._step = step
         for record in tuple(self._active):  # a record may be deactivated in the loop
+            if record.next_poll_step > step and record.id not in fingers and record.id not in arm:
+                load += record.mass_kg  # still riding the belt (see _MAX_CLOSING_SPEED_MPS)
+                continue
             pos, orn = get_pose(record.body, physicsClientId=c)
             record.position, record.orientation = pos, orn
+            record.polled_step = step
+            record.next_poll_step = step + 1
             x, y, z = pos
             # fast path: riding the belt, away from the robot, nothing to detect but the window
             if (
@@ -241,6 +275,16 @@ class Monitor:
                     else:
                         self._left_workspace(record, x, emit)
                     record.in_workspace = in_ws
+                margin_m = min(
+                    (z - surface_z) * self._poll_vertical_ratio,
+                    x - start_x,
+                    end_x - x,
+                    half_w - abs(y - centre_y),
+                    abs(x - ws_lo),
+                    abs(x - ws_hi),
+                    math.sqrt((x - tcp_x) ** 2 + (y - tcp_y) ** 2) - _NEAR_TCP_M,
+                )
+                record.next_poll_step = step + max(1, int(margin_m / reach_m))
                 continue
             # -- release of a held object
             if record.held and gripper_open:
@@ -428,6 +472,7 @@ class Monitor:
             if not record.active and not record.in_bin:
                 continue
             if record.active:
+                self._fresh(record)
                 lin, ang = pb.getBaseVelocity(record.body, physicsClientId=self.client)
             else:
                 lin, ang = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
