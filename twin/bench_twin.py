@@ -4,8 +4,10 @@ Headless (default): the arm (moving through a scripted joint-space sweep, comman
 as the controller commands it) and ``--objects`` objects on the belt at 240 Hz, FMU
 co-simulation and event detection included (simulated perception, which only the ROS node
 publishes, is off); prints
-``real_time_factor`` = simulated seconds / wall seconds. The belt starts full (prefilled) so the
-object count holds for the whole measurement.
+``real_time_factor`` = simulated seconds / wall seconds of the best of ``--repeats`` episodes
+(the machine may be shared, so the fastest run is the least disturbed one, as in
+``bench meshgen``), with ``real_time_factor_median`` and every run's figure beside it. The belt
+starts full (prefilled) so the object count holds for the whole measurement.
 
 Paced (``--realtime --speed V --seconds 60``): a continuous dense stream (the belt stays full
 at every speed; ``objects_on_belt_mean`` reports how full) paced to the wall clock; prints the
@@ -37,7 +39,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--speed", type=float, default=None, help="belt speed in m/s (headless 0.05, paced 0.2)"
     )
-    parser.add_argument("--repeats", type=int, default=5, help="headless repeats (median)")
+    parser.add_argument("--repeats", type=int, default=5, help="headless repeats (best and median)")
     parser.add_argument("--realtime", action="store_true", help="pace to the wall clock")
     parser.add_argument(
         "--dataset",
@@ -77,8 +79,10 @@ def run(args: argparse.Namespace) -> int:
         factors = sorted(r["real_time_factor"] for r in runs)
         result = {
             **runs[0],
-            "real_time_factor": float(np.median(factors)),
+            "real_time_factor": factors[-1],
+            "real_time_factor_median": float(np.median(factors)),
             "real_time_factor_runs": factors,
+            "statistic": "best of repeats (wall clock); median beside it",
             "repeats": len(runs),
         }
     if args.json:
