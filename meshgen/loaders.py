@@ -375,6 +375,22 @@ def _points_from_json(raw: Any, fast: bool) -> tuple[np.ndarray | None, str, str
     return np.array(flat, dtype=np.float64).reshape(-1, 2), "", ""
 
 
+def points_one_by_one(
+    raws: list[Any], fast: bool, width: int, height: int
+) -> list[tuple[np.ndarray | None, str, str]]:
+    """Each point list converted and checked on its own: ``(points or None, reason, detail)``."""
+    out: list[tuple[np.ndarray | None, str, str]] = []
+    for raw in raws:
+        pts, reason, detail = _points_from_json(raw, fast)
+        if pts is not None:
+            problem = _check_range(pts, width, height)
+            if problem is not None:
+                pts, reason = None, problem
+                detail = f"pixel coordinates outside the {width}x{height} image"
+        out.append((pts, reason, detail))
+    return out
+
+
 def _checked_points(
     raws: list[Any], fast: bool, width: int, height: int
 ) -> list[tuple[np.ndarray | None, str, str]]:
@@ -389,16 +405,7 @@ def _checked_points(
     """
     points = _numeric_pairs(raws) if fast and raws else None
     if points is None:
-        out: list[tuple[np.ndarray | None, str, str]] = []
-        for raw in raws:
-            pts, reason, detail = _points_from_json(raw, fast)
-            if pts is not None:
-                problem = _check_range(pts, width, height)
-                if problem is not None:
-                    pts, reason = None, problem
-                    detail = f"pixel coordinates outside the {width}x{height} image"
-            out.append((pts, reason, detail))
-        return out
+        return points_one_by_one(raws, fast, width, height)
     sizes = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
     ends = np.cumsum(sizes)
     starts = ends - sizes
@@ -414,7 +421,7 @@ def _checked_points(
         high = np.maximum.reduceat(points, at) <= np.array([width, height]) + margin
         inside[live] = (low & high).all(axis=1)
     as_float = points.astype(np.float64)
-    out = []
+    out: list[tuple[np.ndarray | None, str, str]] = []
     for start, end, size, ok, within in zip(
         starts.tolist(),
         ends.tolist(),

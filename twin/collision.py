@@ -19,18 +19,14 @@ import numpy as np
 
 from twin.errors import SceneError
 from twin.fileio import write_atomic
+from twin.objects import read_lines
 
 
 def read_pieces(path: Path) -> list[np.ndarray]:
     """Vertices of each ``o`` block of a convex-pieces OBJ, ``[(n, 3) float, ...]``."""
     pieces: list[list[list[float]]] = []
     current: list[list[float]] | None = None
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except OSError as exc:
-        msg = f"{path}: cannot read: {exc.strerror}"
-        raise SceneError(msg) from None
-    for number, line in enumerate(lines, start=1):
+    for number, line in enumerate(read_lines(path), start=1):
         if line.startswith("o "):
             current = []
             pieces.append(current)

@@ -174,6 +174,15 @@ def load_dataset(out_dir: Path, classes: Iterable[str]) -> tuple[ImageLayout, ..
     return tuple(layouts)
 
 
+def read_lines(path: Path) -> list[str]:
+    """The lines of a UTF-8 text file (a mesh); :class:`SceneError` naming it when unreadable."""
+    try:
+        return path.read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        msg = f"{path}: cannot read: {exc.strerror}"
+        raise SceneError(msg) from None
+
+
 def read_obj_triangles(path: Path) -> np.ndarray:
     """Triangles of an OBJ file, ``(t, 3, 3)`` float; polygons are fan-triangulated.
 
@@ -181,12 +190,7 @@ def read_obj_triangles(path: Path) -> np.ndarray:
     """
     vertices: list[tuple[float, float, float]] = []
     triangles: list[tuple[int, int, int]] = []
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except OSError as exc:
-        msg = f"{path}: cannot read: {exc.strerror}"
-        raise SceneError(msg) from None
-    for number, line in enumerate(lines, start=1):
+    for number, line in enumerate(read_lines(path), start=1):
         try:
             if line.startswith("v "):
                 x, y, z = line.split()[1:4]

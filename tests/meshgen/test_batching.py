@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from meshgen.loaders import _check_range, _checked_points, _points_from_json
+from meshgen.loaders import _checked_points, points_one_by_one
 from meshgen.mesh import diagonals_many, triangulate
 from meshgen.ragged import split_rows
 
@@ -49,19 +49,6 @@ def test_split_rows_matches_numpy_split() -> None:
         np.testing.assert_array_equal(a, b)
 
 
-def _one_at_a_time(raws: list[Any], fast: bool, width: int, height: int) -> list[Any]:
-    out = []
-    for raw in raws:
-        pts, reason, detail = _points_from_json(raw, fast)
-        if pts is not None:
-            problem = _check_range(pts, width, height)
-            if problem is not None:
-                pts, reason = None, problem
-                detail = f"pixel coordinates outside the {width}x{height} image"
-        out.append((pts, reason, detail))
-    return out
-
-
 GOOD = [[10, 10], [50, 10], [50, 40]]
 CASES: list[list[Any]] = [
     [GOOD, [[1.5, 2.25], [30, 2], [30, 9.75], [4, 9]]],
@@ -81,7 +68,7 @@ CASES: list[list[Any]] = [
 @pytest.mark.parametrize("fast", [True, False])
 def test_checked_points_matches_one_list_at_a_time(raws: list[Any], fast: bool) -> None:
     got = _checked_points(raws, fast, 100, 80)
-    want = _one_at_a_time(raws, fast, 100, 80)
+    want = points_one_by_one(raws, fast, 100, 80)
     assert len(got) == len(want)
     for (pts, reason, detail), (want_pts, want_reason, want_detail) in zip(got, want, strict=True):
         assert (reason, detail) == (want_reason, want_detail)
