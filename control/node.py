@@ -129,6 +129,7 @@ def detections_of(msg: DetectionArray) -> tuple[float, list[Detection]]:
             length_m=float(d.length_m),
             width_m=float(d.width_m),
             height_m=float(d.height_m),
+            base_z_m=float(d.position.z),
         )
         for d in msg.detections
     ]

@@ -94,9 +94,16 @@ def grasp_z_m(height_m: float, config: ControllerConfig) -> float:
     )
 
 
+def base_lift_m(track: Track, config: ControllerConfig) -> float:
+    """How far the track's underside is above the belt surface (0 when unknown or below)."""
+    if not math.isfinite(track.base_z_m):
+        return 0.0
+    return max(0.0, track.base_z_m - config.belt.surface_z_m)
+
+
 def grasp_height_m(track: Track, config: ControllerConfig) -> float:
-    """World z of the grasp point of ``track`` (see :func:`grasp_z_m`)."""
-    return grasp_z_m(track.height_m, config)
+    """World z of the grasp point of ``track``: :func:`grasp_z_m`, raised by what it lies on."""
+    return grasp_z_m(track.height_m, config) + base_lift_m(track, config)
 
 
 INTERCEPT_HORIZON_S = 5.0
@@ -233,7 +240,8 @@ def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) 
         footprint = _corners(other.position_m, other.yaw_rad, other.length_m / 2, other.width_m / 2)
         if _overlap(keep_out, footprint):
             return other.track_id
-        tall = config.belt.surface_z_m + other.height_m >= palm_z
+        top_z = config.belt.surface_z_m + base_lift_m(other, config) + other.height_m
+        tall = top_z >= palm_z
         if tall and _overlap(hand, footprint):
             return other.track_id
     return None

@@ -42,10 +42,12 @@ def wrap_half_turn(yaw_rad: float) -> float:
 
 @dataclass(frozen=True, kw_only=True)
 class Detection:
-    """One detected object in the world frame, on the belt surface.
+    """One detected object in the world frame.
 
     ``stamp_s`` is the capture time (not the arrival time). ``length_m >= width_m`` is not
     required; the tracker normalises the footprint so that ``yaw_rad`` is along the long side.
+    ``base_z_m`` is the world z of the object's underside (the belt surface, or the top of the
+    object it lies on); NaN when the camera does not say.
     """
 
     stamp_s: float
@@ -57,9 +59,10 @@ class Detection:
     length_m: float
     width_m: float
     height_m: float
+    base_z_m: float = math.nan
 
     def is_finite(self) -> bool:
-        """True when every numeric field is a finite number."""
+        """True when every numeric field is a finite number (``base_z_m`` may be NaN)."""
         values = (
             self.stamp_s,
             self.confidence,
@@ -79,7 +82,8 @@ class Track:
 
     ``position_m`` and ``velocity_mps`` are ``(x, y)``; ``position_std_m`` is the square root of
     the larger eigenvalue of the position covariance. ``length_m >= width_m`` and ``yaw_rad`` is
-    the direction of the long side in ``[-pi/2, pi/2)``.
+    the direction of the long side in ``[-pi/2, pi/2)``. ``base_z_m`` is the smoothed world z of
+    the object's underside, NaN when no detection gave one (then it lies on the belt).
     """
 
     track_id: int
@@ -96,6 +100,7 @@ class Track:
     hits: int
     confirmed: bool
     last_update_s: float
+    base_z_m: float = math.nan
 
     def position_at(self, t_s: float) -> tuple[float, float]:
         """The constant-velocity prediction of the position at ``t_s``."""
@@ -136,6 +141,7 @@ class _TrackState:
         self.length_m = detection.length_m
         self.width_m = detection.width_m
         self.height_m = detection.height_m
+        self.base_z_m = detection.base_z_m
 
     def predict(self, t_s: float, accel_var: float) -> None:
         dt_s = t_s - self.stamp_s
@@ -170,6 +176,10 @@ class _TrackState:
         self.length_m = (1 - a) * self.length_m + a * detection.length_m
         self.width_m = (1 - a) * self.width_m + a * detection.width_m
         self.height_m = (1 - a) * self.height_m + a * detection.height_m
+        if math.isfinite(detection.base_z_m):
+            known = math.isfinite(self.base_z_m)
+            base = detection.base_z_m
+            self.base_z_m = (1 - a) * self.base_z_m + a * base if known else base
 
     def snapshot(self, x: NDArray[np.float64], p: NDArray[np.float64], t_s: float) -> Track:
         class_name, weight = max(self.votes.items(), key=lambda item: item[1])
@@ -190,6 +200,7 @@ class _TrackState:
             hits=self.hits,
             confirmed=self.confirmed,
             last_update_s=self.last_update_s,
+            base_z_m=self.base_z_m,
         )
 
 

@@ -2,8 +2,9 @@
 
 Every ``1 / rate_hz`` seconds a frame is captured from the ground truth: objects lying on the belt
 inside the camera's field of view (an x interval over the belt's width). Each detection carries
-the footprint centroid on the belt surface, the long-axis yaw (modulo pi), length, width and
-height, with Gaussian position and yaw noise, a per-object drop probability and a
+the footprint centroid (its z at the object's underside: the belt surface, or the top of the
+object it lies on), the long-axis yaw (modulo pi), length, width and height, with Gaussian
+position and yaw noise, a per-object drop probability and a
 misclassification probability (a uniformly chosen other class). The frame is released
 ``latency_s`` after capture, stamped with its capture time. ``PerceptionConfig.zero_noise()``
 gives the exact ground truth with no delay, drop or confusion. All randomness comes from the
@@ -72,7 +73,8 @@ class PerceptionConfig:
 
 @dataclass(frozen=True)
 class Detection:
-    """One detected object (world frame, centroid on the belt surface)."""
+    """One detected object (world frame). ``z_m`` is its underside: the belt surface, or the top of
+    the object it lies on (what a depth camera sees around it)."""
 
     class_name: str
     confidence: float
@@ -161,7 +163,7 @@ class Perception:
                     confidence=1.0,
                     x_m=x + cfg.position_noise_m * float(noise[0]),
                     y_m=y + cfg.position_noise_m * float(noise[1]),
-                    z_m=self.surface_z_m,
+                    z_m=max(self.surface_z_m, obj.position_m[2] - 0.5 * obj.height_m),
                     yaw_rad=wrap_half_pi(
                         obj.footprint_yaw_rad + cfg.yaw_noise_rad * float(noise[2])
                     ),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from control.config import ControllerConfig, SchedulerConfig
 from control.scheduler import (
@@ -31,6 +32,7 @@ def _track(
     vx: float = 0.2,
     confidence: float = 1.0,
     height: float = 0.04,
+    base_z: float = math.nan,
 ) -> Track:
     return Track(
         track_id=track_id,
@@ -47,6 +49,7 @@ def _track(
         hits=10,
         confirmed=True,
         last_update_s=0.0,
+        base_z_m=base_z,
     )
 
 
@@ -201,3 +204,21 @@ def test_fast_object_far_upstream_is_not_targeted_before_it_can_be_met_in_the_wi
     x_min, x_max = config.belt.pick_window_x_m
     assert x_min <= x_meet <= x_max
     assert x_meet - x_min < 0.6 * 0.02, "targeted as soon as the meeting point enters the window"
+
+
+def test_an_object_lying_on_another_is_grasped_at_its_own_height() -> None:
+    config = ControllerConfig()
+    on_belt = _track(1, -0.1)
+    stacked = _track(2, -0.1, base_z=config.belt.surface_z_m + 0.05)
+    below_surface = _track(3, -0.1, base_z=config.belt.surface_z_m - 0.001)
+    assert grasp_height_m(on_belt, config) == grasp_z_m(0.04, config)
+    assert grasp_height_m(stacked, config) == pytest.approx(grasp_z_m(0.04, config) + 0.05)
+    assert grasp_height_m(below_surface, config) == grasp_z_m(0.04, config)
+    # a low object lying on another reaches the palm of a hand grasping a neighbour
+    sched = config.scheduler
+    fingers = config.robot.gripper_max_opening_m / 2 + sched.finger_depth_m + sched.clearance_m
+    y = 0.5 + fingers + 0.025 + 0.005
+    low = _track(4, -0.1, y=y, height=0.03)
+    raised = _track(5, -0.1, y=y, height=0.03, base_z=config.belt.surface_z_m + 0.05)
+    assert blocked_by(on_belt, [on_belt, low], config) is None
+    assert blocked_by(on_belt, [on_belt, raised], config) == 5

@@ -13,12 +13,14 @@ from twin.perception import Perception, PerceptionConfig, wrap_half_pi
 CLASSES = ("concrete", "brick", "wood", "rubber")
 
 
-def _object(i: int, x: float, *, on_belt: bool = True, yaw: float = 0.3) -> GroundTruth:
+def _object(
+    i: int, x: float, *, on_belt: bool = True, yaw: float = 0.3, z: float = 0.03
+) -> GroundTruth:
     return GroundTruth(
         id=i,
         source_id=f"o{i}",
         class_name=CLASSES[i % 4],
-        position_m=(x, 0.5, 0.03),
+        position_m=(x, 0.5, z),
         orientation_xyzw=(0.0, 0.0, 0.0, 1.0),
         linear_velocity_mps=(0.4, 0.0, 0.0),
         angular_velocity_radps=(0.0, 0.0, 0.0),
@@ -45,6 +47,15 @@ def test_zero_noise_is_exact_and_immediate_and_respects_the_field_of_view() -> N
         (0.0, 0.5, 0.3, "brick")
     ]
     assert perception.released(1.0) == [frame]
+
+
+def test_detections_report_the_underside_of_stacked_objects() -> None:
+    rng = np.random.default_rng(0)
+    perception = Perception(PerceptionConfig.zero_noise(), CLASSES, 0.0, 1 / 240, rng)
+    # 4 cm tall: resting on the belt, pressed 1 mm into it, and lying on a 5 cm object
+    objects = [_object(1, 0.0, z=0.02), _object(2, 0.1, z=0.019), _object(3, 0.2, z=0.07)]
+    frame = perception.capture(1.0, objects)
+    assert [d.z_m for d in frame.detections] == pytest.approx([0.0, 0.0, 0.05])
 
 
 def test_latency_and_rate() -> None:
