@@ -247,16 +247,11 @@ def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) 
     return None
 
 
-def _reason(
-    track: Track,
-    now_s: float,
-    approach_s: float,
-    config: ControllerConfig,
-    excluded_ids: Collection[int],
-    *,
-    others: Sequence[Track] = (),
+def _static_reason(
+    track: Track, config: ControllerConfig, excluded_ids: Collection[int]
 ) -> str | None:
-    belt, sched = config.belt, config.scheduler
+    """The reasons that need no timing: checked first, before any intercept search."""
+    sched = config.scheduler
     if track.class_confidence < sched.min_confidence:
         return "low_confidence"
     if track.class_name not in config.bins:
@@ -269,6 +264,19 @@ def _reason(
         return "too_flat"
     if track.track_id in excluded_ids:
         return "excluded"
+    return None
+
+
+def _timing_reason(
+    track: Track,
+    now_s: float,
+    approach_s: float,
+    config: ControllerConfig,
+    *,
+    others: Sequence[Track] = (),
+) -> str | None:
+    """The reasons that depend on when the arm can meet the track (after :func:`_static_reason`)."""
+    belt, sched = config.belt, config.scheduler
     if not math.isfinite(approach_s):  # cannot be met within the search horizon
         return "too_late" if track.velocity_mps[0] > 0.0 else "out_of_reach"
     intercept_s = approach_s + descend_after_s(config)
@@ -313,8 +321,11 @@ def schedule(
     for track in tracks:
         if not track.confirmed:
             continue
-        approach_s = approach_time_s(track, now_s, tcp_position_m, config)
-        reason = _reason(track, now_s, approach_s, config, excluded_ids, others=tracks)
+        reason = _static_reason(track, config, excluded_ids)
+        approach_s = math.inf
+        if reason is None:  # the intercept search only for tracks that could be picked
+            approach_s = approach_time_s(track, now_s, tcp_position_m, config)
+            reason = _timing_reason(track, now_s, approach_s, config, others=tracks)
         if reason is not None:
             untargeted.append(Untargeted(track_id=track.track_id, reason=reason))
             continue

@@ -113,10 +113,6 @@ def _percentile(values: Sequence[float], q: float) -> float | None:
     return float(np.percentile(values, q))
 
 
-def _mean(values: Sequence[float]) -> float | None:
-    return sum(values) / len(values) if values else None
-
-
 # -- loading ----------------------------------------------------------------------------------
 def find_run_dirs(paths: Sequence[Path]) -> list[Path]:
     """Run folders among ``paths``: each one holding ``run.json``, or a folder of such folders."""
@@ -262,7 +258,7 @@ def episode_rows(data: RunData) -> list[dict[str, Any]]:
                 **counts,
                 "success_rate": counts["placed_correct"] / targeted if targeted else None,
                 "miss_rate": counts["missed"] / processed if processed else None,
-                "tracking_time_4mm_mean_s": _mean(_tracking_times(ep)),
+                "tracking_time_4mm_mean_s": stats.mean_of(_tracking_times(ep)),
                 "rtt_ms_p50": latency.get("rtt_ms_p50", _percentile(rtt, 50)),
                 "rtt_ms_p99": latency.get("rtt_ms_p99", _percentile(rtt, 99)),
                 "step_rate_hz_mean": (ep.summary or {}).get("step_rate_hz_mean"),
@@ -296,10 +292,10 @@ def speed_rows(data: RunData) -> list[dict[str, Any]]:
                 "success_ci95": wilson_interval(total.get("placed_correct", 0), targeted),
                 "miss_rate": total["missed"] / processed if processed else None,
                 "miss_ci95": wilson_interval(total.get("missed", 0), processed),
-                "tracking_time_4mm_mean_s": _mean(times),
-                "rtt_ms_p50": _percentile(rtt, 50) if rtt else _mean(p50s),
-                "rtt_ms_p99": _percentile(rtt, 99) if rtt else _mean(p99s),
-                "real_time_factor": _mean(rtfs),
+                "tracking_time_4mm_mean_s": stats.mean_of(times),
+                "rtt_ms_p50": _percentile(rtt, 50) if rtt else stats.mean_of(p50s),
+                "rtt_ms_p99": _percentile(rtt, 99) if rtt else stats.mean_of(p99s),
+                "real_time_factor": stats.mean_of(rtfs),
             }
         )
     return rows

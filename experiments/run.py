@@ -61,6 +61,7 @@ from pathlib import Path
 from types import FrameType
 from typing import IO, Any, Literal
 
+from experiments.stats import mean_of
 from twin.errors import CdwTwinError
 from twin.fileio import write_atomic
 
@@ -365,15 +366,10 @@ def run_episode(
     return metrics
 
 
-def _mean(values: list[Any]) -> float | None:
-    numbers = [float(v) for v in values if v is not None]
-    return sum(numbers) / len(numbers) if numbers else None
-
-
 def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Means over episodes of every numeric metric."""
     keys = [k for k in METRIC_KEYS if k not in ("mode", "seed", "speed_mps")]
-    return {k: _mean([r.get(k) for r in rows]) for k in keys}
+    return {k: mean_of([r.get(k) for r in rows]) for k in keys}
 
 
 def write_tables(

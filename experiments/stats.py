@@ -3,9 +3,16 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 Z_95 = 1.959963984540054
 """Two-sided 95 % quantile of the standard normal distribution."""
+
+
+def mean_of(values: Iterable[float | None]) -> float | None:
+    """Mean of the values that are not None; None when there are none."""
+    numbers = [float(v) for v in values if v is not None]
+    return sum(numbers) / len(numbers) if numbers else None
 
 
 def wilson_interval(successes: int, trials: int) -> tuple[float | None, float | None]:
