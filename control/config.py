@@ -213,6 +213,12 @@ class IkConfig:
         _require(self.max_iterations >= 1, "ik.max_iterations", self.max_iterations, "must be >= 1")
 
 
+PANDA_MAX_ACCELERATION_RPS2: tuple[float, ...] = (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)
+"""Joint acceleration limits of the Franka Emika Panda (datasheet), joints 1 to 7."""
+PANDA_MAX_JERK_RPS3: tuple[float, ...] = (7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0)
+"""Joint jerk limits of the Franka Emika Panda (datasheet), joints 1 to 7."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class MotionConfig:
     """Cartesian trajectory limits for (x, y, z, yaw) and the feedback on the tracking error.
@@ -220,7 +226,8 @@ class MotionConfig:
     ``feedback_kp`` (1) and ``feedback_ki_per_s`` (1/s) act on setpoint minus measured TCP
     position while following an object; the correction is clipped to ``feedback_max_m``.
     ``transfer_speed_scale`` (0, 1] scales the URDF joint velocity limits for the joint-space
-    carry and return moves, which use ``joint_max_acceleration_rps2`` and ``joint_max_jerk_rps3``.
+    carry and return moves, which use ``joint_max_acceleration_rps2`` and ``joint_max_jerk_rps3``
+    (one value per arm joint, or one for all; the defaults are the Panda's datasheet limits).
     ``command_latency_s`` is the time between computing a command and the measured TCP
     reflecting it; targets are predicted that far ahead and the feedback compares the measured
     TCP with the setpoint of that long ago.
@@ -243,8 +250,12 @@ class MotionConfig:
     feedback_ki_per_s: float = field(default=5.0, metadata=_meta("float"))
     feedback_max_m: float = field(default=0.03, metadata=_meta("float"))
     transfer_speed_scale: float = field(default=0.9, metadata=_meta("float"))
-    joint_max_acceleration_rps2: float = field(default=10.0, metadata=_meta("float"))
-    joint_max_jerk_rps3: float = field(default=100.0, metadata=_meta("float"))
+    joint_max_acceleration_rps2: tuple[float, ...] = field(
+        default=PANDA_MAX_ACCELERATION_RPS2, metadata=_meta("floats")
+    )
+    joint_max_jerk_rps3: tuple[float, ...] = field(
+        default=PANDA_MAX_JERK_RPS3, metadata=_meta("floats")
+    )
     joint_velocity_margin: float = field(default=1.0, metadata=_meta("float"))
 
     def __post_init__(self) -> None:
@@ -276,8 +287,13 @@ class MotionConfig:
             "must be in (0, 1]",
         )
         for name in ("joint_max_acceleration_rps2", "joint_max_jerk_rps3"):
-            scalar = cast(float, getattr(self, name))
-            _require(scalar > 0.0, f"motion.{name}", scalar, "must be > 0")
+            value = cast(tuple[float, ...], getattr(self, name))
+            _require(
+                len(value) > 0 and all(v > 0.0 and math.isfinite(v) for v in value),
+                f"motion.{name}",
+                value,
+                "needs one value for every joint (or one for all), each finite and > 0",
+            )
         for name in ("feedback_kp", "feedback_ki_per_s", "feedback_max_m"):
             scalar = cast(float, getattr(self, name))
             _require(scalar >= 0.0, f"motion.{name}", scalar, "must be >= 0")
@@ -313,7 +329,7 @@ class PickConfig:
 
     approach_height_m: float = field(default=0.06, metadata=_meta("float"))
     ik_failures_to_abort: int = field(default=3, metadata=_meta("int"))
-    schedule_before_ready_s: float = field(default=0.2, metadata=_meta("float"))
+    schedule_before_ready_s: float = field(default=0.4, metadata=_meta("float"))
     grasp_below_top_m: float = field(default=0.02, metadata=_meta("float"))
     grasp_height_fraction: float = field(default=0.5, metadata=_meta("float"))
     min_grasp_height_m: float = field(default=0.01, metadata=_meta("float"))
@@ -321,6 +337,7 @@ class PickConfig:
     dwell_s: float = field(default=0.6, metadata=_meta("float"))
     close_s: float = field(default=0.25, metadata=_meta("float"))
     release_s: float = field(default=0.25, metadata=_meta("float"))
+    drop_tolerance_m: float = field(default=0.05, metadata=_meta("float"))
     arrive_tolerance_m: float = field(default=0.005, metadata=_meta("float"))
     arrive_speed_tolerance_mps: float = field(default=0.1, metadata=_meta("float"))
     yaw_tolerance_rad: float = field(default=0.02, metadata=_meta("float"))

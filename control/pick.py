@@ -309,6 +309,7 @@ class PickController:
             tcp_position_m=self._planner.state.position_m,
             config=self._cfg,
             excluded_ids=self._excluded | self._targeted_ids,
+            tcp_yaw_rad=self._planner.state.position[3],
         )
         for item in result.untargeted:
             if item.track_id not in self._targeted_ids:
@@ -499,30 +500,65 @@ class PickController:
         return bool(np.max(np.abs(self._commander.q - goal.q)) < 1e-4)
 
     def _start_carry(self, t_s: float) -> None:
-        """Solve the drop pose once, seeded by the ready pose turned towards the bin."""
+        """Solve the drop pose once: the current posture turned about the base to the bin.
+
+        The drop point is :meth:`_drop_point`. The IK is seeded by the current joints with the
+        base joint turned by the bearing from the TCP to the drop point, and the tool's yaw
+        turns with it (either of the two yaws a parallel gripper allows, whichever leaves the
+        last joint nearer its current angle): the carry is mostly a turn of the base joint and
+        the wrist hardly moves.
+        """
         robot = self._cfg.robot
         class_name = self._target.class_name if self._target is not None else ""
-        drop = self._cfg.bins.get(class_name, robot.ready_tcp_position_m)
         base = robot.base_position_m
-        ready = robot.ready_tcp_position_m
+        q_now = np.array(self._commander.q)
+        x, y, z, yaw_now = self._planner.state.position
+        drop = self._drop_point(class_name, (x, y, z))
         turn = math.atan2(drop[1] - base[1], drop[0] - base[0]) - math.atan2(
-            ready[1] - base[1], ready[0] - base[0]
+            y - base[1], x - base[0]
         )
         lower, upper = float(self._kin.lower_rad[0]), float(self._kin.upper_rad[0])
         turns = [turn + k * 2 * math.pi for k in (-1, 0, 1)]
-        inside = [a for a in turns if lower <= self.q_ready[0] + a <= upper] or [turn]
+        inside = [a for a in turns if lower <= q_now[0] + a <= upper] or [turn]
         turn = min(inside, key=abs)
-        seed = np.array(self.q_ready)
+        seed = np.array(q_now)
         seed[0] = np.clip(seed[0] + turn, lower, upper)
-        result = self._kin.solve(tool_pose(drop, robot.ready_yaw_rad + turn), seed)
-        if result.success:
-            self._drop_q = np.array(result.q)
+        best: FloatArray | None = None
+        for yaw in (yaw_now + turn, yaw_now + turn + math.pi):
+            result = self._kin.solve(tool_pose(drop, yaw), seed)
+            if result.success and (
+                best is None or abs(result.q[-1] - q_now[-1]) < abs(best[-1] - q_now[-1])
+            ):
+                best = np.array(result.q)
+        if best is not None:
+            self._drop_q = best
         else:
             self._errors["ik_failure"] += 1
             self._aborted["drop_unreachable"] += 1
             self.last_error = f"{self._phase}: no IK solution for the drop point {drop}"
             self._drop_q = self._commander.q
         self._set_phase(Phase.CARRY, t_s)
+
+    def _drop_point(self, class_name: str, tcp_m: Vec3) -> Vec3:
+        """Where to release an object of ``class_name`` carried from ``tcp_m``.
+
+        The class's configured drop point, moved along the line from the base by up to
+        ``pick.drop_tolerance_m`` towards the TCP's distance from the base, and raised to the
+        TCP's height if that is higher: the arm turns without folding or stretching more
+        than it must. Without a bin for the class, the ready position.
+        """
+        configured = self._cfg.bins.get(class_name)
+        if configured is None:
+            return self._cfg.robot.ready_tcp_position_m
+        bx, by, _ = self._cfg.robot.base_position_m
+        dx, dy = configured[0] - bx, configured[1] - by
+        r_drop = math.hypot(dx, dy)
+        if r_drop < 1e-9:
+            return configured
+        tolerance = self._cfg.pick.drop_tolerance_m
+        r_tcp = math.hypot(tcp_m[0] - bx, tcp_m[1] - by)
+        scale = min(max(r_tcp, r_drop - tolerance), r_drop + tolerance) / r_drop
+        return (bx + dx * scale, by + dy * scale, max(configured[2], tcp_m[2]))
 
     def _gripper_width_m(self) -> float:
         opening = self._cfg.robot.gripper_max_opening_m

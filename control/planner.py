@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from ruckig import InputParameter, Result, Ruckig, RuckigError, Synchronization, Trajectory
 
 from control.config import MotionConfig
-from control.errors import IkError, PlanningError
+from control.errors import ControlConfigError, IkError, PlanningError
 from control.ik import IkResult, Kinematics, tool_pose
 
 Vec4 = tuple[float, float, float, float]
@@ -333,6 +333,19 @@ class JointCommander:
         return result
 
 
+def per_joint(values: tuple[float, ...], n: int, key: str) -> list[float]:
+    """``values`` for ``n`` joints: one value for all, or exactly one per joint.
+
+    Raises ``ControlConfigError`` naming ``key`` otherwise.
+    """
+    if len(values) == 1:
+        return [float(values[0])] * n
+    if len(values) != n:
+        msg = f"{key}: {values!r} has {len(values)} values; the arm has {n} joints (or give one)"
+        raise ControlConfigError(msg)
+    return [float(v) for v in values]
+
+
 @dataclass(frozen=True, kw_only=True, eq=False)
 class JointStep:
     """One control period of a joint-space move: ``q`` and ``dq`` are ``(n_arm,) float``."""
@@ -362,8 +375,12 @@ class JointPlanner:
         self._input = InputParameter(n)
         self._trajectory = Trajectory(n)
         self._input.max_velocity = list(kinematics.velocity_limit_rps * motion.transfer_speed_scale)
-        self._input.max_acceleration = [motion.joint_max_acceleration_rps2] * n
-        self._input.max_jerk = [motion.joint_max_jerk_rps3] * n
+        self._input.max_acceleration = per_joint(
+            motion.joint_max_acceleration_rps2, n, "motion.joint_max_acceleration_rps2"
+        )
+        self._input.max_jerk = per_joint(
+            motion.joint_max_jerk_rps3, n, "motion.joint_max_jerk_rps3"
+        )
         self._q = np.zeros(n)
         self._dq = np.zeros(n)
         self._ddq = np.zeros(n)

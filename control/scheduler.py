@@ -113,31 +113,54 @@ _SCAN_STEP_S = 0.1
 _BISECTIONS = 7
 
 
+def yaw_turn_s(track: Track, tcp_yaw_rad: float, config: ControllerConfig) -> float:
+    """Time the tool needs to turn from ``tcp_yaw_rad`` to the nearer of the track's two grasp
+    yaws (a parallel gripper grasps at ``yaw`` and ``yaw + pi``), less the part of the turn the
+    descent may overlap (``pick.descend_yaw_lead_s``)."""
+    motion = config.motion
+    turn_rad = abs(math.remainder(track.yaw_rad - tcp_yaw_rad, math.pi))
+    turn_s = move_time_s(
+        turn_rad, motion.max_velocity[3], motion.max_acceleration[3], motion.max_jerk[3]
+    )
+    return max(0.0, turn_s - config.pick.descend_yaw_lead_s)
+
+
 def approach_time_s(
     track: Track,
     now_s: float,
     tcp_position_m: tuple[float, float, float],
     config: ControllerConfig,
+    *,
+    tcp_yaw_rad: float | None = None,
 ) -> float:
     """Earliest time from ``now_s`` at which the TCP can be above the moving track's grasp point.
 
     The first ``t >= 0`` with ``move_time(|tcp - p(now + t)|) <= t``, ``p`` the track's
     constant-velocity prediction at approach height: a scan in 0.1 s steps, then bisection to
     about 1 ms. (A fixed-point iteration on ``t`` oscillates for fast objects far upstream.)
-    ``math.inf`` when there is no such time within :data:`INTERCEPT_HORIZON_S`.
+    With ``tcp_yaw_rad`` the tool's turn to the grasp yaw bounds ``t`` from below as well
+    (:func:`yaw_turn_s`). ``math.inf`` when there is no such time within
+    :data:`INTERCEPT_HORIZON_S`.
     """
     motion = config.motion
     v, a, j = motion.max_velocity[0], motion.max_acceleration[0], motion.max_jerk[0]
     z = grasp_height_m(track, config) + config.pick.approach_height_m
+    turn_s = 0.0 if tcp_yaw_rad is None else yaw_turn_s(track, tcp_yaw_rad, config)
 
     def late(t_s: float) -> bool:
         x, y = track.position_at(now_s + t_s)
         return move_time_s(math.dist(tcp_position_m, (x, y, z)), v, a, j) <= t_s
 
-    if late(0.0):
+    if turn_s <= 0.0 and late(0.0):
         return 0.0
     lo = 0.0
-    hi = _SCAN_STEP_S
+    if turn_s > 0.0:  # no meeting before the turn is done
+        lo = turn_s
+        if lo > INTERCEPT_HORIZON_S:
+            return math.inf
+        if late(lo):
+            return lo
+    hi = lo + _SCAN_STEP_S
     while not late(hi):
         lo = hi
         hi += _SCAN_STEP_S
@@ -309,10 +332,12 @@ def schedule(
     tcp_position_m: tuple[float, float, float],
     config: ControllerConfig,
     excluded_ids: Collection[int] = (),
+    tcp_yaw_rad: float | None = None,
 ) -> Schedule:
     """Choose the next target among confirmed ``tracks`` (already predicted to ``now_s``).
 
-    ``excluded_ids`` are tracks that must not be chosen again (e.g. a failed pick).
+    ``excluded_ids`` are tracks that must not be chosen again (e.g. a failed pick);
+    ``tcp_yaw_rad``, the tool's yaw now, adds the turn to each grasp yaw to its meeting time.
     """
     x_max = config.belt.pick_window_x_m[1]
     ranked: list[tuple[tuple[float, float, float, int], Track, float, float]] = []
@@ -324,7 +349,9 @@ def schedule(
         reason = _static_reason(track, config, excluded_ids)
         approach_s = math.inf
         if reason is None:  # the intercept search only for tracks that could be picked
-            approach_s = approach_time_s(track, now_s, tcp_position_m, config)
+            approach_s = approach_time_s(
+                track, now_s, tcp_position_m, config, tcp_yaw_rad=tcp_yaw_rad
+            )
             reason = _timing_reason(track, now_s, approach_s, config, others=tracks)
         if reason is not None:
             untargeted.append(Untargeted(track_id=track.track_id, reason=reason))

@@ -62,12 +62,22 @@ class ObjectLevel:
     max_width_m: float | None = None
     """Only objects whose footprint's narrow side is at most this enter (e.g. what fits a
     gripper); None lets every object in."""
+    min_height_m: float | None = None
+    """Only objects at least this tall (after any resampling) enter (e.g. what the finger pads
+    can hold); None lets every object in."""
 
     def __post_init__(self) -> None:
         if self.max_objects is not None:
             _check(self.max_objects >= 1, "objects.max_objects", self.max_objects, "must be >= 1")
         if self.max_width_m is not None:
             _check(self.max_width_m > 0.0, "objects.max_width_m", self.max_width_m, "must be > 0")
+        if self.min_height_m is not None:
+            _check(
+                0.0 < self.min_height_m < 1.0,
+                "objects.min_height_m",
+                self.min_height_m,
+                "must be in (0, 1)",
+            )
         _check(
             0.0 <= self.orientation_jitter_rad <= np.pi,
             "objects.orientation_jitter_rad",

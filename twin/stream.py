@@ -149,6 +149,8 @@ class Stream:
             if objects_cfg.resample_heights and spec.class_name in objects_cfg.height_ranges_m:
                 lo, hi = objects_cfg.height_ranges_m[spec.class_name]
                 height = float(rng.uniform(lo, hi))
+            if objects_cfg.min_height_m is not None and height < objects_cfg.min_height_m:
+                continue
             jitter = 0.0
             if objects_cfg.orientation_jitter_rad > 0:
                 jitter = float(

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from control.config import ControllerConfig, MotionConfig
-from control.errors import IkError, PlanningError
+from control.errors import ControlConfigError, IkError, PlanningError
 from control.ik import Kinematics
 from control.planner import (
     CartesianPlanner,
@@ -17,6 +17,7 @@ from control.planner import (
     FeedbackTerm,
     JointCommander,
     JointPlanner,
+    per_joint,
 )
 
 TOL = 1e-6
@@ -170,3 +171,37 @@ def test_joint_planner_respects_limits() -> None:
     assert np.allclose(step.q, goal)
     with pytest.raises(PlanningError, match="outside the joint limits"):
         planner.step(kin.upper_rad + 0.1)
+
+
+def test_joint_planner_keeps_each_joints_acceleration_limit() -> None:
+    config = ControllerConfig()
+    kin = Kinematics(config.robot, config.ik)
+    planner = JointPlanner(kin, config.motion)
+    amax = np.asarray(config.motion.joint_max_acceleration_rps2)
+    assert len(amax) == kin.nq
+    assert len(set(amax.tolist())) > 1  # one limit per joint (Panda datasheet)
+    q = np.asarray(config.robot.ready_joint_positions_rad)
+    planner.reset(q)
+    goal = np.clip(
+        q + np.array([-2.0, 0.6, 0.5, -0.8, 0.5, 0.5, 1.0]), kin.lower_rad, kin.upper_rad
+    )
+    dt = config.motion.control_period_s
+    previous = np.zeros(kin.nq)
+    peak = np.zeros(kin.nq)
+    for _ in range(600):
+        step = planner.step(goal)
+        peak = np.maximum(peak, np.abs(step.dq - previous) / dt)
+        previous = step.dq
+    assert np.allclose(step.q, goal)
+    assert np.all(peak <= amax * (1 + 1e-6))
+    assert np.any(peak >= 0.9 * amax), "the slowest joints use their own limit"
+
+
+@pytest.mark.parametrize("values", [(10.0,), (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)])
+def test_joint_limits_are_one_for_all_or_one_per_joint(values: tuple[float, ...]) -> None:
+    assert per_joint(values, 7, "motion.joint_max_jerk_rps3") == list(values) * (7 // len(values))
+
+
+def test_a_joint_limit_list_of_the_wrong_length_is_an_error_naming_the_key() -> None:
+    with pytest.raises(ControlConfigError, match=r"motion\.joint_max_jerk_rps3: .* 3 values; .* 7"):
+        per_joint((1.0, 2.0, 3.0), 7, "motion.joint_max_jerk_rps3")

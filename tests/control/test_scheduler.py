@@ -16,6 +16,7 @@ from control.scheduler import (
     grasp_z_m,
     move_time_s,
     schedule,
+    yaw_turn_s,
 )
 from control.tracking import Track
 
@@ -222,3 +223,25 @@ def test_an_object_lying_on_another_is_grasped_at_its_own_height() -> None:
     raised = _track(5, -0.1, y=y, height=0.03, base_z=config.belt.surface_z_m + 0.05)
     assert blocked_by(on_belt, [on_belt, low], config) is None
     assert blocked_by(on_belt, [on_belt, raised], config) == 5
+
+
+def test_the_tool_turn_to_the_grasp_yaw_delays_the_meeting() -> None:
+    config = ControllerConfig()
+    pick, motion = config.pick, config.motion
+    ready = config.robot.ready_tcp_position_m
+    track = _track(1, -0.2, vx=0.3)  # grasp yaws 0 and pi
+    aligned = approach_time_s(track, 0.0, ready, config, tcp_yaw_rad=0.0)
+    assert aligned == approach_time_s(track, 0.0, ready, config)
+    assert approach_time_s(track, 0.0, ready, config, tcp_yaw_rad=math.pi) == aligned
+    # a quarter turn: the descent may begin descend_yaw_lead_s before the turn ends
+    quarter_s = move_time_s(
+        math.pi / 2, motion.max_velocity[3], motion.max_acceleration[3], motion.max_jerk[3]
+    )
+    assert yaw_turn_s(track, math.pi / 2, config) == pytest.approx(
+        quarter_s - pick.descend_yaw_lead_s
+    )
+    turned = approach_time_s(track, 0.0, ready, config, tcp_yaw_rad=math.pi / 2)
+    assert turned >= quarter_s - pick.descend_yaw_lead_s
+    assert turned > aligned
+    # the nearer of the two grasp yaws counts: a turn of 0.1 rad either way is the same
+    assert yaw_turn_s(track, 0.1, config) == pytest.approx(yaw_turn_s(track, math.pi - 0.1, config))

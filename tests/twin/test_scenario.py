@@ -65,6 +65,7 @@ def test_empty_file_gives_the_defaults(tmp_path: Path) -> None:
         ("[1, 2]", r"top level must be a mapping"),
         ("a: [", r"not valid YAML"),
         ("objects: {max_width_m: 0}", r"objects\.max_width_m = 0\.0: must be > 0"),
+        ("objects: {min_height_m: 0}", r"objects\.min_height_m = 0\.0: must be in \(0, 1\)"),
     ],
 )
 def test_bad_scenarios_name_the_key(tmp_path: Path, text: str, pattern: str) -> None:
@@ -139,3 +140,21 @@ def test_max_width_lets_only_narrow_objects_onto_the_belt() -> None:
     widths = [min(p.spec.width_m, p.spec.length_m) for b in stream for p in b.placements]
     assert len(widths) == narrow
     assert max(widths) <= 0.065
+
+
+def test_min_height_lets_only_tall_enough_objects_onto_the_belt() -> None:
+    from twin.builtin import builtin_dataset
+    from twin.config import CellConfig
+    from twin.objects import load_dataset
+    from twin.stream import Stream
+
+    layouts = load_dataset(builtin_dataset(), ("concrete", "brick", "wood", "rubber"))
+    tall = sum(1 for lay in layouts for o in lay.objects if o.height_m >= 0.02)
+    assert 0 < tall < sum(len(lay.objects) for lay in layouts)
+    scenario = Scenario(
+        objects=ObjectLevel(min_height_m=0.02), system=SystemLevel(repeat_images=False)
+    )
+    stream = Stream(layouts, scenario, CellConfig().belt, seed_tree(0))
+    heights = [p.height_m for b in stream for p in b.placements]
+    assert len(heights) == tall
+    assert min(heights) >= 0.02
