@@ -329,7 +329,7 @@ class PickConfig:
 
     approach_height_m: float = field(default=0.06, metadata=_meta("float"))
     ik_failures_to_abort: int = field(default=3, metadata=_meta("int"))
-    schedule_before_ready_s: float = field(default=0.2, metadata=_meta("float"))
+    schedule_before_ready_s: float = field(default=0.1, metadata=_meta("float"))
     grasp_below_top_m: float = field(default=0.02, metadata=_meta("float"))
     grasp_height_fraction: float = field(default=0.5, metadata=_meta("float"))
     min_grasp_height_m: float = field(default=0.01, metadata=_meta("float"))
