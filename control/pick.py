@@ -31,7 +31,7 @@ from control.planner import (
     JointCommander,
     JointPlanner,
 )
-from control.scheduler import Schedule, grasp_height_m, schedule
+from control.scheduler import Schedule, grasp_height_m, nearest_half_turn, schedule
 from control.tracking import Track
 
 FloatArray = NDArray[np.float64]
@@ -111,11 +111,6 @@ class PickStats:
     untargeted: Mapping[str, int]
     errors: Mapping[str, int]
     rate_limited: int = 0
-
-
-def nearest_half_turn(yaw_rad: float, reference_rad: float) -> float:
-    """``yaw_rad + k * pi`` closest to ``reference_rad`` (a parallel gripper is symmetric)."""
-    return yaw_rad + math.pi * round((reference_rad - yaw_rad) / math.pi)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -113,12 +113,17 @@ _SCAN_STEP_S = 0.1
 _BISECTIONS = 7
 
 
+def nearest_half_turn(yaw_rad: float, reference_rad: float) -> float:
+    """``yaw_rad + k * pi`` closest to ``reference_rad`` (a parallel gripper is symmetric)."""
+    return yaw_rad + math.pi * round((reference_rad - yaw_rad) / math.pi)
+
+
 def yaw_turn_s(track: Track, tcp_yaw_rad: float, config: ControllerConfig) -> float:
     """Time the tool needs to turn from ``tcp_yaw_rad`` to the nearer of the track's two grasp
     yaws (a parallel gripper grasps at ``yaw`` and ``yaw + pi``), less the part of the turn the
     descent may overlap (``pick.descend_yaw_lead_s``)."""
     motion = config.motion
-    turn_rad = abs(math.remainder(track.yaw_rad - tcp_yaw_rad, math.pi))
+    turn_rad = abs(nearest_half_turn(track.yaw_rad, tcp_yaw_rad) - tcp_yaw_rad)
     turn_s = move_time_s(
         turn_rad, motion.max_velocity[3], motion.max_acceleration[3], motion.max_jerk[3]
     )
@@ -151,15 +156,11 @@ def approach_time_s(
         x, y = track.position_at(now_s + t_s)
         return move_time_s(math.dist(tcp_position_m, (x, y, z)), v, a, j) <= t_s
 
-    if turn_s <= 0.0 and late(0.0):
-        return 0.0
-    lo = 0.0
-    if turn_s > 0.0:  # no meeting before the turn is done
-        lo = turn_s
-        if lo > INTERCEPT_HORIZON_S:
-            return math.inf
-        if late(lo):
-            return lo
+    lo = turn_s  # no meeting before the turn is done
+    if lo > INTERCEPT_HORIZON_S:
+        return math.inf
+    if late(lo):
+        return lo
     hi = lo + _SCAN_STEP_S
     while not late(hi):
         lo = hi

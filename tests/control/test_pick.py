@@ -10,7 +10,8 @@ import pytest
 
 from control.config import ControllerConfig
 from control.kinematic_sim import run_episode
-from control.pick import Command, Phase, PickController, TcpMeasurement, nearest_half_turn
+from control.pick import Command, Phase, PickController, TcpMeasurement
+from control.scheduler import nearest_half_turn
 from control.tracking import Track
 
 FOLLOW_SEQUENCE = [Phase.IDLE, Phase.APPROACH, Phase.DESCEND, Phase.DWELL, Phase.CLOSE, Phase.LIFT]
