@@ -305,6 +305,10 @@ class MotionConfig:
         )
 
 
+APPROACH_SPACES = ("cartesian", "joint")
+"""Values of ``pick.approach_space``."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class PickConfig:
     """Pick sequence geometry and timing.
@@ -322,6 +326,17 @@ class PickConfig:
     move reaches it (a pursuit starts near the belt, not from the bin).
     ``ik_failures_to_abort`` consecutive IK failures (the last command held meanwhile) abort a
     pick.
+    ``close_overlap_s`` of the gripper's ``close_s`` overlap the end of the dwell: the twin's
+    grasp rule (the reference's) counts the dwell from the TCP's overlap with the object and
+    checks the fingers' grip at its end, so a gripper that starts closing that much earlier holds
+    the object as the dwell ends instead of ``close_s`` later (0: close after the dwell).
+    ``approach_space`` is ``"cartesian"`` (the default: the next target is chosen at the ready
+    pose, or ``schedule_before_ready_s`` before the return reaches it, and approached in a
+    straight Cartesian line) or ``"joint"`` (throughput first: the next target is chosen as soon
+    as the release ends, and the return goes straight to the predicted meeting point above it
+    as one joint-space move that arrives with the object's velocity; the Cartesian approach
+    takes over for the last correction). ``"joint"`` skips the ready pose and shortens the
+    cycle; the pursuit, and so the tracking time, then starts at the bin.
     ``lost_timeout_s`` aborts an approach whose target track vanished for that long (later
     phases extrapolate it with the belt velocity). ``grip_squeeze_m`` is how much narrower than
     the object the gripper is commanded to close.
@@ -336,6 +351,7 @@ class PickConfig:
     lift_height_m: float = field(default=0.2, metadata=_meta("float"))
     dwell_s: float = field(default=0.6, metadata=_meta("float"))
     close_s: float = field(default=0.25, metadata=_meta("float"))
+    close_overlap_s: float = field(default=0.0, metadata=_meta("float"))
     release_s: float = field(default=0.25, metadata=_meta("float"))
     drop_tolerance_m: float = field(default=0.05, metadata=_meta("float"))
     arrive_tolerance_m: float = field(default=0.005, metadata=_meta("float"))
@@ -344,10 +360,19 @@ class PickConfig:
     descend_yaw_lead_s: float = field(default=0.1, metadata=_meta("float"))
     lost_timeout_s: float = field(default=0.3, metadata=_meta("float"))
     grip_squeeze_m: float = field(default=0.01, metadata=_meta("float"))
+    approach_space: str = field(default="cartesian", metadata=_meta("str"))
 
     def __post_init__(self) -> None:
         """Validate every field."""
+        _require(
+            self.approach_space in APPROACH_SPACES,
+            "pick.approach_space",
+            self.approach_space,
+            f"must be one of {', '.join(APPROACH_SPACES)}",
+        )
         for item in fields(self):
+            if item.name == "approach_space":
+                continue
             value = cast(float, getattr(self, item.name))
             _require(value >= 0.0 and math.isfinite(value), f"pick.{item.name}", value, ">= 0")
         _require(
@@ -355,6 +380,12 @@ class PickConfig:
             "pick.grasp_height_fraction",
             self.grasp_height_fraction,
             "must be in [0, 1]",
+        )
+        _require(
+            self.close_overlap_s <= min(self.dwell_s, self.close_s),
+            "pick.close_overlap_s",
+            self.close_overlap_s,
+            f"must not exceed dwell_s ({self.dwell_s}) nor close_s ({self.close_s})",
         )
 
 

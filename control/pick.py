@@ -4,8 +4,11 @@ Sequence per object: ``approach`` (Ruckig to a point above the predicted grasp p
 with the object's velocity), ``descend`` (to the grasp point, still moving with it), ``dwell``
 (track it for ``dwell_s``), ``close`` (gripper closes while tracking), ``lift``, ``carry`` (to the
 drop point above the class bin), ``release``, ``return`` (towards the ready pose; a new target may
-be taken from there). Errors (lost target, Ruckig error, IK failure) abort the pick, are counted,
-and never produce a joint command outside the limits: the last valid joint command is held.
+be taken from there). With ``pick.approach_space: joint`` the next target is chosen as soon as
+the release ends, and the approach begins as one joint-space move, planned once, that arrives
+above the object with its velocity; the Cartesian approach then takes over. Errors (lost
+target, Ruckig error, IK failure) abort the pick, are counted, and never produce a joint command
+outside the limits: the last valid joint command is held.
 """
 
 from __future__ import annotations
@@ -57,6 +60,9 @@ WRIST_MARGIN_RAD = 0.15
 
 FOLLOWING_PHASES = frozenset({Phase.DESCEND, Phase.DWELL, Phase.CLOSE})
 """Phases in which the TCP moves with the object and the feedback term is active."""
+
+JOINT_APPROACH_GUESS_S = 0.6
+"""First guess (s) of a joint-space approach's duration (the fixed point starts there)."""
 
 MAX_APPROACH_LEAD_S = 1.0
 """Cap (s) on the approach's lead: it aims where the object will be that much later.
@@ -115,9 +121,23 @@ class PickStats:
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class JointGoal:
-    """A joint-space goal ``q`` ``(n_arm,) float`` at rest (carry, release, return, idle)."""
+    """A joint-space goal ``q`` ``(n_arm,) float`` (carry, release, return, idle, joint approach).
+
+    Reached at rest, or (the joint-space approach, which meets a moving object) with joint
+    velocities ``dq`` ``(n_arm,)`` at the planned absolute time ``arrive_s``.
+    """
 
     q: FloatArray
+    dq: FloatArray | None = None
+    arrive_s: float = -math.inf
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class JointApproach:
+    """The joint-space approach's goal: above the target at ``arrive_s`` with its velocity."""
+
+    goal: JointGoal
+    yaw_rad: float
 
 
 class PickController:
@@ -162,6 +182,8 @@ class PickController:
         self._joint_remaining_s = 0.0
         self._approach_lead_s = 0.0
         self._approach_waiting = False
+        self._joint_approach: JointApproach | None = None
+        self._meetings: dict[tuple[int, float], JointApproach | None] = {}
         self._yaw_remaining_s = 0.0
         self._drop_q = np.array(self.q_ready)
         self._commander = JointCommander(self._kin, config.motion, q0)
@@ -263,12 +285,107 @@ class PickController:
         self._tracking_start_s = t_s
         self._intercept_estimate_s = intercept_s
         self._feedback.reset()
+        in_joint_move = self._joint_mode
         self._joint_mode = False
         self._grasp_yaw_rad = self._best_grasp_yaw(track, intercept_s)
         self._approach_lead_s = min(decision.approach_s, MAX_APPROACH_LEAD_S)
         self._approach_waiting = False
         self._yaw_remaining_s = math.inf  # until the first Cartesian step of this pick
+        self._joint_approach = None
+        if self._cfg.pick.approach_space == "joint" and in_joint_move:
+            self._joint_mode = True  # the joint planner continues from the current move
+            self._joint_approach = self._plan_joint_approach(track, t_s)
+            if self._joint_approach is not None:
+                self._grasp_yaw_rad = self._joint_approach.yaw_rad
+            self._joint_mode = self._joint_approach is not None
         self._set_phase(Phase.APPROACH, t_s)
+        self._joint_remaining_s = math.inf  # until the new joint move's first step
+
+    def _joint_meeting(self, track: Track, t_s: float) -> JointApproach | None:
+        """Where and when a joint-space move from the current joint state meets ``track``.
+
+        The meeting time is a fixed point: the time-optimal duration of the move (Ruckig, from
+        the current joint state) to the pose above where the object will be then (upstream of
+        the pick window when the object is still too far away: the scheduler then waits). The
+        IK is seeded by the ready posture turned at the base towards the meeting point; of the
+        two grasp yaws the one that moves the joints least is kept. None when no pose or move
+        is found. Cached per track for the tick ``t_s`` (the scheduler's estimate and the
+        chosen move are the same computation).
+        """
+        key = (track.track_id, t_s)
+        if key in self._meetings:
+            return self._meetings[key]
+        self._meetings = {k: v for k, v in self._meetings.items() if k[1] == t_s}
+        meeting = self._solve_meeting(track, t_s)
+        self._meetings[key] = meeting
+        return meeting
+
+    def _solve_meeting(self, track: Track, t_s: float) -> JointApproach | None:
+        kin, cfg = self._kin, self._cfg
+        vx, vy = track.velocity_mps
+        z = grasp_height_m(track, cfg) + cfg.pick.approach_height_m
+        base = cfg.robot.base_position_m
+        ready = cfg.robot.ready_tcp_position_m
+        q_now = np.array(self._commander.q)
+        vmax = np.maximum(kin.velocity_limit_rps, 1e-6)
+        dt_s = JOINT_APPROACH_GUESS_S
+        near = nearest_half_turn(track.yaw_rad, self._planner.state.position[3])
+        yaws: tuple[float, ...] = (near, near + math.pi)
+        q_goal: FloatArray | None = None
+        yaw_goal = near
+        for _ in range(5):
+            x, y = track.position_at(t_s + dt_s)
+            if q_goal is None:
+                turn = math.atan2(y - base[1], x - base[0]) - math.atan2(
+                    ready[1] - base[1], ready[0] - base[0]
+                )
+                seed = np.array(self.q_ready)
+                seed[0] = np.clip(seed[0] + turn, kin.lower_rad[0], kin.upper_rad[0])
+            else:
+                seed = q_goal
+            best: tuple[float, FloatArray, float] | None = None
+            for yaw in yaws:
+                result = kin.solve(tool_pose((x, y, z), yaw), seed)
+                if not result.success:
+                    continue
+                cost = float(np.max(np.abs(np.asarray(result.q) - q_now) / vmax))
+                if best is None or cost < best[0]:
+                    best = (cost, np.array(result.q), yaw)
+            if best is None:
+                return None
+            _, q_goal, yaw_goal = best
+            yaws = (yaw_goal,)
+            dq_goal = kin.joint_velocity(q_goal, np.array([vx, vy, 0.0, 0.0]))
+            try:
+                duration_s = self._joint_planner.duration_s(q_goal, dq_goal)
+            except PlanningError:
+                return None
+            previous_s, dt_s = dt_s, duration_s
+            if abs(dt_s - previous_s) < 0.005:
+                break
+        x, y = track.position_at(t_s + dt_s)
+        if q_goal is None:
+            return None
+        result = kin.solve(tool_pose((x, y, z), yaw_goal), q_goal)
+        if not result.success:
+            return None
+        q_goal = np.array(result.q)
+        dq_goal = kin.joint_velocity(q_goal, np.array([vx, vy, 0.0, 0.0]))
+        goal = JointGoal(q=q_goal, dq=dq_goal, arrive_s=t_s + dt_s)
+        return JointApproach(goal=goal, yaw_rad=yaw_goal)
+
+    def _plan_joint_approach(self, track: Track, t_s: float) -> JointApproach | None:
+        """Start the joint-space move of :meth:`_joint_meeting`; None when there is none."""
+        meeting = self._joint_meeting(track, t_s)
+        if meeting is None:
+            return None
+        goal = meeting.goal
+        assert goal.dq is not None
+        try:
+            self._joint_planner.start_move(goal.q, goal.dq, min_duration_s=goal.arrive_s - t_s)
+        except PlanningError:
+            return None
+        return meeting
 
     def _best_grasp_yaw(self, track: Track, intercept_s: float) -> float:
         """The grasp yaw, of the two a parallel gripper allows, that the wrist can reach.
@@ -298,6 +415,13 @@ class PickController:
         return best
 
     def _schedule(self, t_s: float, tracks: Sequence[Track]) -> None:
+        estimate = None
+        if self._cfg.pick.approach_space == "joint" and self._joint_mode:
+
+            def estimate(track: Track) -> float:
+                meeting = self._joint_meeting(track, t_s)
+                return math.inf if meeting is None else meeting.goal.arrive_s - t_s
+
         result = schedule(
             tracks,
             now_s=t_s,
@@ -305,6 +429,7 @@ class PickController:
             config=self._cfg,
             excluded_ids=self._excluded | self._targeted_ids,
             tcp_yaw_rad=self._planner.state.position[3],
+            approach_estimate=estimate,
         )
         for item in result.untargeted:
             if item.track_id not in self._targeted_ids:
@@ -403,7 +528,11 @@ class PickController:
         period_s = self._cfg.motion.control_period_s
         phase = self._phase
         almost_ready = phase == Phase.RETURN and (
-            self._joint_mode and self._joint_remaining_s <= pick.schedule_before_ready_s
+            self._joint_mode
+            and (
+                self._joint_remaining_s <= pick.schedule_before_ready_s
+                or pick.approach_space == "joint"
+            )
         )
         if phase == Phase.IDLE or almost_ready:
             self._schedule(t_s, tracks)
@@ -419,6 +548,16 @@ class PickController:
             ):
                 self._abort("too_late", t_s)
                 return self._plan(t_s, (), belt_velocity_mps)
+        if phase == Phase.APPROACH and self._joint_approach is not None:
+            plan = self._joint_approach
+            if not (self._joint_mode and self._joint_remaining_s <= period_s):
+                obj = self._object_state(t_s, belt_velocity_mps, now_s=t_s)
+                return plan.goal, obj[0] if obj is not None else None
+            self._joint_approach = None  # above the object, moving with it: Cartesian from here
+            self._approach_lead_s = 0.0
+            self._grasp_yaw_rad = nearest_half_turn(
+                self._grasp_yaw_rad, self._planner.state.position[3]
+            )
         if phase == Phase.APPROACH:
             target, aim = self._following_target(
                 t_s, belt_velocity_mps, pick.approach_height_m, lead_s=self._approach_lead_s
@@ -446,7 +585,8 @@ class PickController:
         if phase == Phase.DWELL:
             target, aim = self._following_target(t_s, belt_velocity_mps, 0.0)
             yaw_error = abs(self._planner.state.position[3] - target.position[3])
-            if t_s - self._phase_start_s >= pick.dwell_s and yaw_error < pick.yaw_tolerance_rad:
+            dwelt = t_s - self._phase_start_s >= pick.dwell_s - pick.close_overlap_s
+            if dwelt and yaw_error < pick.yaw_tolerance_rad:
                 self._set_phase(Phase.CLOSE, t_s)
             return target, aim
         if phase == Phase.CLOSE:
@@ -576,17 +716,24 @@ class PickController:
             )
         )
 
-    def _step_joint(self, goal: JointGoal) -> None:
+    def _step_joint(self, goal: JointGoal, t_s: float) -> None:
         if not self._joint_mode:
             q = self._commander.q
             velocity = np.asarray(self._planner.state.velocity, dtype=np.float64)
             self._joint_planner.reset(q, self._kin.joint_velocity(q, velocity))
             self._joint_mode = True
         try:
-            step = self._joint_planner.step(goal.q)
+            step = (
+                self._joint_planner.step(goal.q)
+                if goal.dq is None
+                else self._joint_planner.follow()
+            )
         except PlanningError as exc:
             self._errors["ruckig_error"] += 1
             self.last_error = f"{self._phase}: {exc}"
+            if self._joint_approach is not None:
+                self._joint_approach = None
+                self._abort("ruckig_error", t_s)
             return
         self._joint_remaining_s = step.remaining_s
         self._commander.reset(step.q)
@@ -610,7 +757,7 @@ class PickController:
                 self._abort("ruckig_error", t_s)
                 goal, _ = self._plan(t_s, (), belt)
                 if isinstance(goal, JointGoal):
-                    self._step_joint(goal)
+                    self._step_joint(goal, t_s)
                 else:
                     with contextlib.suppress(PlanningError):
                         self._planner.step(goal)
@@ -629,7 +776,7 @@ class PickController:
         """
         goal, aim = self._plan(t_s, tracks, belt_velocity_mps)
         if isinstance(goal, JointGoal):
-            self._step_joint(goal)
+            self._step_joint(goal, t_s)
             self._feedback.reset()
             position = self._planner.state.position_m
         else:

@@ -374,6 +374,8 @@ class JointPlanner:
         self._otg = Ruckig(n, motion.control_period_s)
         self._input = InputParameter(n)
         self._trajectory = Trajectory(n)
+        self._move = Trajectory(n)
+        self._move_elapsed_s = 0.0
         self._input.max_velocity = list(kinematics.velocity_limit_rps * motion.transfer_speed_scale)
         self._input.max_acceleration = per_joint(
             motion.joint_max_acceleration_rps2, n, "motion.joint_max_acceleration_rps2"
@@ -393,22 +395,93 @@ class JointPlanner:
         self._dq = np.clip(np.nan_to_num(velocity), -vmax, vmax)
         self._ddq = np.zeros_like(self._q)
 
+    def _calculate(
+        self,
+        q_target: FloatArray,
+        dq_target: FloatArray | None,
+        min_duration_s: float,
+        trajectory: Trajectory,
+    ) -> Result:
+        """Ruckig from the current state to ``q_target`` (at ``dq_target``) into ``trajectory``.
+
+        Raises ``PlanningError`` for a target outside the position or velocity limits.
+        """
+        if not self._kin.within_limits(q_target):
+            msg = f"joint target {q_target} is outside the joint limits"
+            raise PlanningError(msg)
+        inp = self._input
+        velocity = np.zeros_like(q_target) if dq_target is None else np.asarray(dq_target)
+        if not np.all(np.isfinite(velocity)) or np.any(
+            np.abs(velocity) > np.asarray(inp.max_velocity)
+        ):
+            msg = f"joint target velocity {velocity} is outside the velocity limits"
+            raise PlanningError(msg)
+        inp.current_position = list(self._q)
+        inp.current_velocity = list(self._dq)
+        inp.current_acceleration = list(self._ddq)
+        inp.target_position = list(q_target)
+        inp.target_velocity = list(velocity)
+        inp.minimum_duration = min_duration_s if min_duration_s > 0.0 else None
+        return self._otg.calculate(inp, trajectory)
+
+    def _checked(
+        self,
+        q_target: FloatArray,
+        dq_target: FloatArray | None,
+        min_duration_s: float,
+        trajectory: Trajectory,
+    ) -> None:
+        try:
+            result = self._calculate(q_target, dq_target, min_duration_s, trajectory)
+        except RuckigError as exc:
+            msg = f"Ruckig rejected joint target {q_target}: {str(exc).strip()}"
+            raise PlanningError(msg) from exc
+        if result not in (Result.Working, Result.Finished):
+            msg = f"Ruckig returned {result} for joint target {q_target}"
+            raise PlanningError(msg)
+
+    def duration_s(self, q_target: FloatArray, dq_target: FloatArray | None = None) -> float:
+        """Time-optimal duration (s) of a move from the current state, without moving.
+
+        Raises ``PlanningError`` when the target is outside the limits or Ruckig fails.
+        """
+        self._checked(np.asarray(q_target, dtype=np.float64), dq_target, 0.0, self._trajectory)
+        return float(self._trajectory.duration)
+
+    def start_move(
+        self, q_target: FloatArray, dq_target: FloatArray, *, min_duration_s: float = 0.0
+    ) -> float:
+        """Plan one whole move from the current state to ``q_target`` at ``dq_target``.
+
+        The move takes at least ``min_duration_s``; :meth:`follow` then steps along it (a move
+        that ends in motion is planned once and followed, not re-planned every period, so it
+        arrives at the planned time in the planned state). Returns its duration (s). Raises
+        ``PlanningError`` when the target is outside the limits or Ruckig fails.
+        """
+        q_target = np.asarray(q_target, dtype=np.float64)
+        self._checked(q_target, dq_target, min_duration_s, self._move)
+        self._move_elapsed_s = 0.0
+        return float(self._move.duration)
+
+    def follow(self) -> JointStep:
+        """Advance one control period along the move of :meth:`start_move`."""
+        duration_s = float(self._move.duration)
+        self._move_elapsed_s = min(self._move_elapsed_s + self._period_s, duration_s)
+        q, dq, ddq = self._move.at_time(self._move_elapsed_s)
+        self._q = np.clip(np.asarray(q), self._kin.lower_rad, self._kin.upper_rad)
+        self._dq = np.asarray(dq)
+        self._ddq = np.asarray(ddq)
+        remaining_s = duration_s - self._move_elapsed_s
+        return JointStep(q=self._q.copy(), dq=self._dq.copy(), remaining_s=remaining_s)
+
     def step(self, q_target: FloatArray) -> JointStep:
         """Advance one control period towards ``q_target`` ``(n_arm,)`` (at rest).
 
         Raises ``PlanningError`` when the target is outside the limits or Ruckig fails.
         """
         q_target = np.asarray(q_target, dtype=np.float64)
-        if not self._kin.within_limits(q_target):
-            msg = f"joint target {q_target} is outside the joint limits"
-            raise PlanningError(msg)
-        inp = self._input
-        inp.current_position = list(self._q)
-        inp.current_velocity = list(self._dq)
-        inp.current_acceleration = list(self._ddq)
-        inp.target_position = list(q_target)
         try:
-            result = self._otg.calculate(inp, self._trajectory)
+            result = self._calculate(q_target, None, 0.0, self._trajectory)
         except RuckigError as exc:
             # Ruckig's time synchronisation can fail numerically a hair from the target while
             # still moving; there the move is over: hold the target at rest.

@@ -14,7 +14,7 @@ shortest time to intercept.
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 
 from control.config import ControllerConfig
@@ -306,8 +306,9 @@ def _timing_reason(
     intercept_s = approach_s + descend_after_s(config)
     x_min, x_max = belt.pick_window_x_m
     x_meet, y_meet = track.position_at(now_s + intercept_s)
+    pick = config.pick
     x_done, y_done = track.position_at(
-        now_s + intercept_s + config.pick.dwell_s + config.pick.close_s
+        now_s + intercept_s + pick.dwell_s - pick.close_overlap_s + pick.close_s
     )
     x_dwelt, _ = track.position_at(now_s + intercept_s + config.pick.dwell_s)
     if x_dwelt > x_max or track.position_m[0] > x_max:
@@ -334,11 +335,15 @@ def schedule(
     config: ControllerConfig,
     excluded_ids: Collection[int] = (),
     tcp_yaw_rad: float | None = None,
+    approach_estimate: Callable[[Track], float] | None = None,
 ) -> Schedule:
     """Choose the next target among confirmed ``tracks`` (already predicted to ``now_s``).
 
     ``excluded_ids`` are tracks that must not be chosen again (e.g. a failed pick);
     ``tcp_yaw_rad``, the tool's yaw now, adds the turn to each grasp yaw to its meeting time.
+    ``approach_estimate(track)``, when given, replaces :func:`approach_time_s` as the time (s)
+    until the arm can be above the track (``inf`` when it cannot): the joint-space approach
+    estimates its own move.
     """
     x_max = config.belt.pick_window_x_m[1]
     ranked: list[tuple[tuple[float, float, float, int], Track, float, float]] = []
@@ -350,8 +355,10 @@ def schedule(
         reason = _static_reason(track, config, excluded_ids)
         approach_s = math.inf
         if reason is None:  # the intercept search only for tracks that could be picked
-            approach_s = approach_time_s(
-                track, now_s, tcp_position_m, config, tcp_yaw_rad=tcp_yaw_rad
+            approach_s = (
+                approach_time_s(track, now_s, tcp_position_m, config, tcp_yaw_rad=tcp_yaw_rad)
+                if approach_estimate is None
+                else approach_estimate(track)
             )
             reason = _timing_reason(track, now_s, approach_s, config, others=tracks)
         if reason is not None:

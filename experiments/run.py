@@ -117,11 +117,13 @@ class RunOptions:
     """How to run the episodes of one scenario.
 
     ``scenario_path`` is the resolved scenario file (overrides applied, validated); ``dataset``
-    the meshgen output folder; ``restart_at_s`` the controller restart times (sim seconds).
+    the meshgen output folder; ``restart_at_s`` the controller restart times (sim seconds);
+    ``controller_params`` the controller's parameter file (None: its default).
     """
 
     scenario_path: Path
     dataset: Path
+    controller_params: Path | None = None
     mode: Literal["lockstep", "realtime"] = "lockstep"
     duration_s: float = 60.0
     restart_at_s: tuple[float, ...] = ()
@@ -139,6 +141,34 @@ class EpisodeSpec:
 
 Progress = Callable[[float, float], None]
 """Called with (sim seconds, wall seconds) while an episode runs."""
+
+
+def controller_params(value: str, scenario_dir: Path | None) -> Path:
+    """The controller parameter file a scenario's ``controller`` names, loaded once to check it.
+
+    A bare name is a file shipped in ``control/config/``; anything else is a path, relative to
+    the scenario's folder. Errors name the ``controller`` key and what is wrong.
+    """
+    from control.cmd_controller import DEFAULT_PARAMS
+    from control.config import load_config
+    from control.errors import ControlConfigError
+
+    if "/" not in value and not value.endswith((".yaml", ".yml")):
+        path = DEFAULT_PARAMS.parent / f"{value}.yaml"
+        if not path.is_file():
+            known = ", ".join(sorted(p.stem for p in DEFAULT_PARAMS.parent.glob("*.yaml")))
+            msg = f"controller = {value!r}: no parameter file of that name (shipped: {known})"
+            raise CdwTwinError(msg)
+    else:
+        path = Path(value).expanduser()
+        if not path.is_absolute() and scenario_dir is not None:
+            path = scenario_dir / path
+    try:
+        load_config(path)
+    except ControlConfigError as exc:
+        msg = f"controller = {value!r}: {exc}"
+        raise CdwTwinError(msg) from None
+    return path.resolve()
 
 
 def _cli() -> list[str]:
@@ -169,6 +199,8 @@ def controller_command(options: RunOptions, episode: EpisodeSpec, instance: int 
     """The controller's command line; ``instance`` > 0 for a restarted controller."""
     name = "controller.json" if instance == 0 else f"controller_{instance}.json"
     cmd = [*_cli(), "controller", "--stats-out", str(episode.folder / name)]
+    if options.controller_params is not None:
+        cmd += ["--params-file", str(options.controller_params)]
     if options.mode == "lockstep":
         cmd.append("--lockstep")
     return cmd
@@ -426,6 +458,9 @@ def run(args: argparse.Namespace) -> int:
         prefill=None,
     )
     scenario, dataset = build_scenario(node_args)
+    params = controller_params(
+        scenario.controller, args.scenario.parent if args.scenario is not None else None
+    )
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out: Path = args.out or Path("runs") / f"{scenario.name}-{stamp}"
     out.mkdir(parents=True, exist_ok=True)
@@ -434,6 +469,7 @@ def run(args: argparse.Namespace) -> int:
     options = RunOptions(
         scenario_path=scenario_path.resolve(),
         dataset=Path(dataset).resolve(),
+        controller_params=params,
         mode=args.mode,
         duration_s=scenario.duration_s,
         restart_at_s=scenario.faults.controller_restart_at_s,

@@ -302,6 +302,7 @@ def run_sweep(
         EpisodeFailedError,
         EpisodeSpec,
         RunOptions,
+        controller_params,
         raise_interrupt,
         run_episode,
         write_tables,
@@ -313,6 +314,10 @@ def run_sweep(
         raise ConfigError(msg)
     grid = Grid.load(grid_path)
     cells = expand(grid, grid_path.parent)
+    params = {  # checked before anything starts
+        cell.name: controller_params(cell.scenario.controller, cell.scenario_path.parent)
+        for cell in cells
+    }
     out.mkdir(parents=True, exist_ok=True)
     states: list[_CellState] = []
     jobs: list[tuple[_CellState, RunOptions, EpisodeSpec]] = []
@@ -329,6 +334,7 @@ def run_sweep(
         options = RunOptions(
             scenario_path=scenario_file.resolve(),
             dataset=dataset,
+            controller_params=params[cell.name],
             mode=cell.mode,
             duration_s=cell.scenario.duration_s,
             restart_at_s=cell.scenario.faults.controller_restart_at_s,

@@ -4,7 +4,9 @@ Three levels, as in the reference: the *object* level (which images and objects,
 re-sampled within class ranges, orientation jitter), the *system* level (belt speed, stochastic
 perturbation, order and spacing of the stream) and *physics* (friction and restitution ranges per
 class); besides them the camera model (``perception``, a :class:`twin.perception.PerceptionConfig`)
-and injected ``faults`` (detection dropout and belt stall windows, controller restarts). All
+and injected ``faults`` (detection dropout and belt stall windows, controller restarts), and the
+``controller``'s parameter file (the name of one shipped in ``control/config/``, such as
+``default`` or ``throughput``, or a path relative to the scenario file). All
 randomness of an episode comes from one ``numpy.random.SeedSequence(seed)``; see
 :func:`seed_tree`.
 
@@ -225,13 +227,18 @@ class FaultLevel:
 
 @dataclass(frozen=True)
 class Scenario:
-    """One episode's definition. ``dataset`` is a meshgen output folder or ``builtin``."""
+    """One episode's definition. ``dataset`` is a meshgen output folder or ``builtin``.
+
+    ``controller`` names the controller's ROS 2 parameter file (checked by ``cdw-twin run``
+    before anything starts): a file name without ``.yaml`` in ``control/config/``, or a path.
+    """
 
     name: str = "default"
     dataset: str = "builtin"
     seed: int = 0
     duration_s: float = 60.0
     robot: str = "panda"
+    controller: str = "default"
     objects: ObjectLevel = field(default_factory=ObjectLevel)
     system: SystemLevel = field(default_factory=SystemLevel)
     physics: PhysicsLevel = field(default_factory=PhysicsLevel)
@@ -240,6 +247,7 @@ class Scenario:
 
     def __post_init__(self) -> None:
         _check(bool(self.name), "name", self.name, "must not be empty")
+        _check(bool(self.controller), "controller", self.controller, "must not be empty")
         _check(self.seed >= 0, "seed", self.seed, "must be >= 0")
         _check(
             0.0 < self.duration_s <= 86400.0,

@@ -44,6 +44,11 @@ def test_partial_file_keeps_other_defaults(tmp_path: Path) -> None:
         ("    bins:\n      concrete: [0, 0, .nan]\n", r"bins\.concrete\[2\]"),
         ("    robot:\n      urdf_path: 3\n", r"robot\.urdf_path: expected a string"),
         ("    scheduler:\n      class_priorities: {concrete: 1.0}\n", r"no priority for class"),
+        ("    pick:\n      approach_space: diagonal\n", r"pick\.approach_space: 'diagonal'"),
+        (
+            "    pick:\n      close_overlap_s: 0.3\n",
+            r"pick\.close_overlap_s: 0\.3 is invalid, must not exceed dwell_s",
+        ),
     ],
 )
 def test_bad_values_name_file_and_key(tmp_path: Path, body: str, match: str) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -27,6 +28,38 @@ def test_closed_loop_reaches_and_dwells_within_4mm(speed_mps: float) -> None:
     assert result.max_follow_error_m < 0.004
     starts = {phase: t for t, phase in reversed(result.phases)}
     assert starts[Phase.CLOSE] - starts[Phase.DWELL] >= config.pick.dwell_s - 1e-9
+    assert result.max_joint_limit_violation_rad == 0.0
+    assert result.stats.aborted == {}
+    assert result.stats.errors == {}
+
+
+def test_gripper_closes_during_the_end_of_the_dwell_when_configured() -> None:
+    base = ControllerConfig()
+    config = replace(base, pick=replace(base.pick, close_overlap_s=base.pick.close_s))
+    result = run_episode(0.4, seed=1, duration_s=4.0, config=config)
+    starts = {phase: t for t, phase in reversed(result.phases)}
+    # the close starts close_s before the dwell's end, so the lift starts dwell_s after the dwell
+    # did (close_s earlier than with the default sequence), while the TCP still follows
+    assert starts[Phase.CLOSE] - starts[Phase.DWELL] == pytest.approx(
+        config.pick.dwell_s - config.pick.close_s, abs=config.motion.control_period_s + 1e-9
+    )
+    assert starts[Phase.LIFT] - starts[Phase.DWELL] == pytest.approx(
+        config.pick.dwell_s, abs=2 * config.motion.control_period_s + 1e-9
+    )
+    assert result.max_follow_error_m < 0.004
+    assert result.stats.aborted == {}
+
+
+@pytest.mark.parametrize("speed_mps", [0.2, 0.6])
+def test_joint_space_approach_meets_the_object_and_picks_it(speed_mps: float) -> None:
+    base = ControllerConfig()
+    config = replace(base, pick=replace(base.pick, approach_space="joint"))
+    result = run_episode(speed_mps, seed=1, duration_s=6.5, config=config)
+    assert [phase for _, phase in result.phases][: len(FOLLOW_SEQUENCE)] == FOLLOW_SEQUENCE
+    # one joint move to above the object, arriving with its velocity; then within 4 mm
+    assert 0.0 < result.tracking_time_4mm_s < 1.2
+    assert result.max_follow_error_m < 0.004
+    assert sum(result.stats.completed_by_class.values()) == 1
     assert result.max_joint_limit_violation_rad == 0.0
     assert result.stats.aborted == {}
     assert result.stats.errors == {}

@@ -9,7 +9,7 @@ import pytest
 
 from control.config import ControllerConfig, MotionConfig
 from control.errors import ControlConfigError, IkError, PlanningError
-from control.ik import Kinematics
+from control.ik import Kinematics, tool_pose
 from control.planner import (
     CartesianPlanner,
     CartesianState,
@@ -205,3 +205,35 @@ def test_joint_limits_are_one_for_all_or_one_per_joint(values: tuple[float, ...]
 def test_a_joint_limit_list_of_the_wrong_length_is_an_error_naming_the_key() -> None:
     with pytest.raises(ControlConfigError, match=r"motion\.joint_max_jerk_rps3: .* 3 values; .* 7"):
         per_joint((1.0, 2.0, 3.0), 7, "motion.joint_max_jerk_rps3")
+
+
+def test_a_planned_move_arrives_on_time_with_the_target_velocity() -> None:
+    config = ControllerConfig()
+    kin = Kinematics(config.robot, config.ik)
+    planner = JointPlanner(kin, config.motion)
+    q = np.asarray(config.robot.ready_joint_positions_rad)
+    planner.reset(q)
+    goal = kin.solve(tool_pose((0.0, 0.6, 0.08), math.pi / 2), q)
+    assert goal.success
+    dq_goal = kin.joint_velocity(goal.q, np.array([0.3, 0.0, 0.0, 0.0]))  # along the belt
+    fastest_s = planner.duration_s(goal.q, dq_goal)
+    duration_s = planner.start_move(goal.q, dq_goal, min_duration_s=fastest_s + 0.2)
+    assert duration_s == pytest.approx(fastest_s + 0.2)
+    dt = config.motion.control_period_s
+    vmax = kin.velocity_limit_rps * config.motion.transfer_speed_scale
+    amax = np.asarray(config.motion.joint_max_acceleration_rps2)
+    previous, elapsed_s = np.zeros(kin.nq), 0.0
+    while True:
+        step = planner.follow()
+        elapsed_s += dt
+        assert kin.within_limits(step.q)
+        assert np.all(np.abs(step.dq) <= vmax * (1 + TOL))
+        assert np.all(np.abs(step.dq - previous) / dt <= amax * (1 + 1e-6))
+        previous = step.dq
+        if step.remaining_s <= 0.0:
+            break
+    assert elapsed_s == pytest.approx(duration_s, abs=dt)
+    assert np.allclose(step.q, goal.q, atol=1e-9)
+    assert np.allclose(kin.tcp_velocity(step.q, step.dq), [0.3, 0.0, 0.0, 0.0], atol=1e-6)
+    with pytest.raises(PlanningError, match="outside the velocity limits"):
+        planner.start_move(goal.q, 10 * vmax)

@@ -80,6 +80,45 @@ def test_a_bad_scenario_is_rejected_before_anything_starts(tmp_path: Path) -> No
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("fastest", "controller = 'fastest': no parameter file of that name (shipped: default"),
+        ("params.yaml", "controller = 'params.yaml': "),
+    ],
+)
+def test_a_bad_controller_parameter_file_is_rejected_before_anything_starts(
+    tmp_path: Path, value: str, message: str
+) -> None:
+    (tmp_path / "params.yaml").write_text(
+        "controller:\n  ros__parameters:\n    pick: {approach_space: diagonal}\n", encoding="utf-8"
+    )
+    scenario = tmp_path / "bad.yaml"
+    scenario.write_text(f"controller: {value}\n", encoding="utf-8")
+    out = tmp_path / "run"
+    done = subprocess.run(
+        _cli(scenario, "--out", out), capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.returncode == 2
+    assert message in done.stderr
+    if value == "params.yaml":  # the file's own error names the key inside it
+        assert "pick.approach_space" in done.stderr
+    assert not out.exists()
+
+
+def test_shipped_controller_parameter_files_resolve_and_load(tmp_path: Path) -> None:
+    from control.config import load_config
+    from experiments.run import controller_params
+
+    throughput = controller_params("throughput", None)
+    assert throughput.name == "throughput.yaml"
+    assert load_config(throughput).pick.approach_space == "joint"
+    assert load_config(controller_params("default", None)).pick.approach_space == "cartesian"
+    own = tmp_path / "mine.yaml"
+    own.write_text("controller:\n  ros__parameters:\n    pick: {dwell_s: 0.5}\n", encoding="utf-8")
+    assert controller_params("mine.yaml", tmp_path) == own.resolve()
+
+
 def test_interrupt_keeps_the_finished_episodes_and_says_incomplete(
     builtin_meshes: Path, tmp_path: Path
 ) -> None:

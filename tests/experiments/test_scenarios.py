@@ -45,6 +45,8 @@ def test_every_scenario_file_loads_and_round_trips(tmp_path: Path) -> None:
     assert Scenario.load(SCENARIOS / "fault_dropout.yaml").faults.detection_dropout
     assert Scenario.load(SCENARIOS / "fault_belt_stall.yaml").faults.belt_stall
     assert Scenario.load(SCENARIOS / "fault_controller_restart.yaml").faults.controller_restart_at_s
+    assert Scenario.load(SCENARIOS / "throughput.yaml").controller == "throughput"
+    assert Scenario.load(SCENARIOS / "default.yaml").controller == "default"
 
 
 def test_belt_stall_stops_the_belt_and_dropout_silences_the_camera(builtin_meshes: Path) -> None:
