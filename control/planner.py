@@ -481,22 +481,15 @@ class JointPlanner:
         """
         q_target = np.asarray(q_target, dtype=np.float64)
         try:
-            result = self._calculate(q_target, None, 0.0, self._trajectory)
-        except RuckigError as exc:
+            self._checked(q_target, None, 0.0, self._trajectory)
+        except PlanningError as exc:
             # Ruckig's time synchronisation can fail numerically a hair from the target while
             # still moving; there the move is over: hold the target at rest.
-            if float(np.max(np.abs(q_target - self._q))) < SNAP_RAD:
-                self._q, self._dq, self._ddq = (
-                    q_target.copy(),
-                    np.zeros_like(q_target),
-                    0 * q_target,
-                )
-                return JointStep(q=self._q.copy(), dq=self._dq.copy(), remaining_s=0.0)
-            msg = f"Ruckig rejected joint target {q_target}: {str(exc).strip()}"
-            raise PlanningError(msg) from exc
-        if result not in (Result.Working, Result.Finished):
-            msg = f"Ruckig returned {result} for joint target {q_target}"
-            raise PlanningError(msg)
+            near = float(np.max(np.abs(q_target - self._q))) < SNAP_RAD
+            if not (near and isinstance(exc.__cause__, RuckigError)):
+                raise
+            self._q, self._dq, self._ddq = (q_target.copy(), np.zeros_like(q_target), 0 * q_target)
+            return JointStep(q=self._q.copy(), dq=self._dq.copy(), remaining_s=0.0)
         dt_s = min(self._period_s, float(self._trajectory.duration))
         q, dq, ddq = self._trajectory.at_time(dt_s)
         self._q = np.clip(np.asarray(q), self._kin.lower_rad, self._kin.upper_rad)
