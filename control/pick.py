@@ -183,7 +183,8 @@ class PickController:
         self._approach_lead_s = 0.0
         self._approach_waiting = False
         self._joint_approach: JointApproach | None = None
-        self._meetings: dict[tuple[int, float], JointApproach | None] = {}
+        self._meetings: dict[int, JointApproach | None] = {}
+        self._meetings_t_s = math.nan
         self._yaw_remaining_s = 0.0
         self._drop_q = np.array(self.q_ready)
         self._commander = JointCommander(self._kin, config.motion, q0)
@@ -285,19 +286,19 @@ class PickController:
         self._tracking_start_s = t_s
         self._intercept_estimate_s = intercept_s
         self._feedback.reset()
-        in_joint_move = self._joint_mode
-        self._joint_mode = False
-        self._grasp_yaw_rad = self._best_grasp_yaw(track, intercept_s)
+        self._joint_approach = None
+        if self._cfg.pick.approach_space == "joint" and self._joint_mode:
+            # the joint planner continues from the current joint move
+            self._joint_approach = self._plan_joint_approach(track, t_s)
+        self._joint_mode = self._joint_approach is not None
+        self._grasp_yaw_rad = (
+            self._joint_approach.yaw_rad
+            if self._joint_approach is not None
+            else self._best_grasp_yaw(track, intercept_s)
+        )
         self._approach_lead_s = min(decision.approach_s, MAX_APPROACH_LEAD_S)
         self._approach_waiting = False
         self._yaw_remaining_s = math.inf  # until the first Cartesian step of this pick
-        self._joint_approach = None
-        if self._cfg.pick.approach_space == "joint" and in_joint_move:
-            self._joint_mode = True  # the joint planner continues from the current move
-            self._joint_approach = self._plan_joint_approach(track, t_s)
-            if self._joint_approach is not None:
-                self._grasp_yaw_rad = self._joint_approach.yaw_rad
-            self._joint_mode = self._joint_approach is not None
         self._set_phase(Phase.APPROACH, t_s)
         self._joint_remaining_s = math.inf  # until the new joint move's first step
 
@@ -312,13 +313,12 @@ class PickController:
         is found. Cached per track for the tick ``t_s`` (the scheduler's estimate and the
         chosen move are the same computation).
         """
-        key = (track.track_id, t_s)
-        if key in self._meetings:
-            return self._meetings[key]
-        self._meetings = {k: v for k, v in self._meetings.items() if k[1] == t_s}
-        meeting = self._solve_meeting(track, t_s)
-        self._meetings[key] = meeting
-        return meeting
+        if t_s != self._meetings_t_s:
+            self._meetings.clear()
+            self._meetings_t_s = t_s
+        if track.track_id not in self._meetings:
+            self._meetings[track.track_id] = self._solve_meeting(track, t_s)
+        return self._meetings[track.track_id]
 
     def _solve_meeting(self, track: Track, t_s: float) -> JointApproach | None:
         kin, cfg = self._kin, self._cfg
@@ -363,9 +363,8 @@ class PickController:
             previous_s, dt_s = dt_s, duration_s
             if abs(dt_s - previous_s) < 0.005:
                 break
+        assert q_goal is not None  # the first iteration returned or set it
         x, y = track.position_at(t_s + dt_s)
-        if q_goal is None:
-            return None
         result = kin.solve(tool_pose((x, y, z), yaw_goal), q_goal)
         if not result.success:
             return None
@@ -716,7 +715,7 @@ class PickController:
             )
         )
 
-    def _step_joint(self, goal: JointGoal, t_s: float) -> None:
+    def _step_joint(self, goal: JointGoal) -> None:
         if not self._joint_mode:
             q = self._commander.q
             velocity = np.asarray(self._planner.state.velocity, dtype=np.float64)
@@ -726,14 +725,11 @@ class PickController:
             step = (
                 self._joint_planner.step(goal.q)
                 if goal.dq is None
-                else self._joint_planner.follow()
+                else self._joint_planner.follow()  # a move planned at its start; cannot fail
             )
         except PlanningError as exc:
             self._errors["ruckig_error"] += 1
             self.last_error = f"{self._phase}: {exc}"
-            if self._joint_approach is not None:
-                self._joint_approach = None
-                self._abort("ruckig_error", t_s)
             return
         self._joint_remaining_s = step.remaining_s
         self._commander.reset(step.q)
@@ -757,7 +753,7 @@ class PickController:
                 self._abort("ruckig_error", t_s)
                 goal, _ = self._plan(t_s, (), belt)
                 if isinstance(goal, JointGoal):
-                    self._step_joint(goal, t_s)
+                    self._step_joint(goal)
                 else:
                     with contextlib.suppress(PlanningError):
                         self._planner.step(goal)
@@ -776,7 +772,7 @@ class PickController:
         """
         goal, aim = self._plan(t_s, tracks, belt_velocity_mps)
         if isinstance(goal, JointGoal):
-            self._step_joint(goal, t_s)
+            self._step_joint(goal)
             self._feedback.reset()
             position = self._planner.state.position_m
         else:

@@ -310,7 +310,7 @@ def _timing_reason(
     x_done, y_done = track.position_at(
         now_s + intercept_s + pick.dwell_s - pick.close_overlap_s + pick.close_s
     )
-    x_dwelt, _ = track.position_at(now_s + intercept_s + config.pick.dwell_s)
+    x_dwelt, _ = track.position_at(now_s + intercept_s + pick.dwell_s)
     if x_dwelt > x_max or track.position_m[0] > x_max:
         return "too_late"
     x_above, _ = track.position_at(now_s + approach_s)

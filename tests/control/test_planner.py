@@ -156,12 +156,18 @@ def test_joint_commander_approaches_far_solutions_at_the_velocity_limit() -> Non
     assert np.linalg.norm(kin.fk(commander.q).translation - np.asarray(goal)) < 1e-6
 
 
-def test_joint_planner_respects_limits() -> None:
+def _joint_planner_at_ready() -> tuple[ControllerConfig, Kinematics, JointPlanner, np.ndarray]:
+    """A joint planner at rest in the ready posture, with its config and kinematics."""
     config = ControllerConfig()
     kin = Kinematics(config.robot, config.ik)
     planner = JointPlanner(kin, config.motion)
     q = np.asarray(config.robot.ready_joint_positions_rad)
     planner.reset(q)
+    return config, kin, planner, q
+
+
+def test_joint_planner_respects_limits() -> None:
+    config, kin, planner, q = _joint_planner_at_ready()
     goal = np.clip(q + np.array([-3.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]), kin.lower_rad, kin.upper_rad)
     vmax = kin.velocity_limit_rps * config.motion.transfer_speed_scale
     for _ in range(2000):
@@ -174,14 +180,10 @@ def test_joint_planner_respects_limits() -> None:
 
 
 def test_joint_planner_keeps_each_joints_acceleration_limit() -> None:
-    config = ControllerConfig()
-    kin = Kinematics(config.robot, config.ik)
-    planner = JointPlanner(kin, config.motion)
+    config, kin, planner, q = _joint_planner_at_ready()
     amax = np.asarray(config.motion.joint_max_acceleration_rps2)
     assert len(amax) == kin.nq
     assert len(set(amax.tolist())) > 1  # one limit per joint (Panda datasheet)
-    q = np.asarray(config.robot.ready_joint_positions_rad)
-    planner.reset(q)
     goal = np.clip(
         q + np.array([-2.0, 0.6, 0.5, -0.8, 0.5, 0.5, 1.0]), kin.lower_rad, kin.upper_rad
     )
@@ -208,11 +210,7 @@ def test_a_joint_limit_list_of_the_wrong_length_is_an_error_naming_the_key() -> 
 
 
 def test_a_planned_move_arrives_on_time_with_the_target_velocity() -> None:
-    config = ControllerConfig()
-    kin = Kinematics(config.robot, config.ik)
-    planner = JointPlanner(kin, config.motion)
-    q = np.asarray(config.robot.ready_joint_positions_rad)
-    planner.reset(q)
+    config, kin, planner, q = _joint_planner_at_ready()
     goal = kin.solve(tool_pose((0.0, 0.6, 0.08), math.pi / 2), q)
     assert goal.success
     dq_goal = kin.joint_velocity(goal.q, np.array([0.3, 0.0, 0.0, 0.0]))  # along the belt
