@@ -12,10 +12,18 @@ When the control update runs:
 - lockstep: on ``/lockstep/tick`` k, once the messages the tick counts have all arrived; every
   ``steps_per_update``-th tick at the tick's sim time. Every tick is acknowledged with the
   number of command messages published for that tick (per-tick counts survive restarts).
-  No tick is handled before every command publisher and the ack publisher has matched a
-  subscriber: a volatile message sent before DDS discovery completes on the writer side is
-  lost, and the cell would then wait for a command that never comes. Ticks that arrive earlier
-  wait in the queue; a steady-clock timer re-checks the match every 5 ms.
+  Discovery is checked from both sides before the first tick, because a volatile message
+  sent before both its writer and its reader have matched can be lost, and the other side
+  would then wait for a message that never comes:
+
+  - the ack publisher is created only once this node's subscriptions to the tick and the
+    three counted topics have each matched a publisher (reader side). The twin does not
+    publish tick 0 before it sees that publisher, so the twin's first tick and its messages
+    reach readers that already know their writer;
+  - no tick is handled before every command publisher and the ack publisher has matched a
+    subscriber (writer side).
+
+  Ticks that arrive earlier wait in the queue; a steady-clock timer re-checks every 5 ms.
 
 Incoming messages are queued with their arrival index and applied in a fixed order (belt,
 detections, joint states) up to the counts of the tick, so the same inputs give the same
@@ -46,6 +54,7 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -214,31 +223,38 @@ class ControllerNode(Node):
         )
         self.pub_gripper = self.create_publisher(Float64, "/gripper/command", STATE_QOS)
         self.pub_target = self.create_publisher(PickTarget, "/controller/target", STATE_QOS)
-        self.pub_ack = self.create_publisher(StepAck, "/lockstep/ack", STREAM_QOS)
-        self.create_subscription(JointState, "/joint_states", self._on_joint_state, STATE_QOS)
-        self.create_subscription(BeltState, "/conveyor/state", self._on_belt, STATE_QOS)
-        self.create_subscription(
-            DetectionArray, "/objects/detections", self._on_detections, STATE_QOS
-        )
+        self.pub_ack: Publisher | None = None
+        self._counted_subs = [
+            self.create_subscription(JointState, "/joint_states", self._on_joint_state, STATE_QOS),
+            self.create_subscription(BeltState, "/conveyor/state", self._on_belt, STATE_QOS),
+            self.create_subscription(
+                DetectionArray, "/objects/detections", self._on_detections, STATE_QOS
+            ),
+        ]
         self.create_subscription(
             SortingPriorities, "/sorting/priorities", self._on_priorities, LATCHED_QOS
         )
         self._outputs_matched = False
         if lockstep:
-            self.create_subscription(LockstepTick, "/lockstep/tick", self._on_tick, STREAM_QOS)
+            self._counted_subs.append(
+                self.create_subscription(LockstepTick, "/lockstep/tick", self._on_tick, STREAM_QOS)
+            )
             self._match_timer = self.create_timer(
                 0.005, self._on_match_timer, clock=Clock(clock_type=ClockType.STEADY_TIME)
             )
 
     def _on_match_timer(self) -> None:
+        if self.pub_ack is None and all(s.get_publisher_count() > 0 for s in self._counted_subs):
+            self.pub_ack = self.create_publisher(StepAck, "/lockstep/ack", STREAM_QOS)
         if self._ticks:
             self._drain_ticks()
         if self._outputs_matched:
             self._match_timer.cancel()
 
     def outputs_matched(self) -> bool:
-        """Whether every command topic and the ack topic has a matched subscriber (sticky)."""
-        if not self._outputs_matched:
+        """Whether the ack publisher exists and it and every command topic has a matched
+        subscriber (sticky)."""
+        if not self._outputs_matched and self.pub_ack is not None:
             pubs = (self.pub_traj, self.pub_gripper, self.pub_target, self.pub_ack)
             self._outputs_matched = all(p.get_subscription_count() > 0 for p in pubs)
         return self._outputs_matched
@@ -303,7 +319,8 @@ class ControllerNode(Node):
 
     def _drain_ticks(self) -> None:
         """Handle every queued tick whose counted messages have all arrived, in order."""
-        if not self.outputs_matched():
+        pub_ack = self.pub_ack
+        if pub_ack is None or not self.outputs_matched():
             return
         while self._ticks:
             tick, arrived_wall_s = self._ticks[0]
@@ -334,7 +351,7 @@ class ControllerNode(Node):
                 self._control(stamp_to_s(tick.stamp))
             sent = self.n_commands - self._acked_commands
             self._acked_commands = self.n_commands
-            self.pub_ack.publish(StepAck(tick=k, n_commands=sent))
+            pub_ack.publish(StepAck(tick=k, n_commands=sent))
             self.ticks_acked += 1
             self.tick_to_ack_wall_s.append(time.perf_counter() - arrived_wall_s)
 

@@ -224,9 +224,11 @@ class TwinNode(Node):
         """Whether a controller is there and every subscriber of a counted topic has matched.
 
         The controller is whoever publishes ``/lockstep/ack`` (a recorder or ``ros2 topic echo``
-        subscribes too, but acknowledges nothing). A volatile message sent before the writer
-        has matched its reader is lost, and the controller would then wait for a counted
-        message that never comes.
+        subscribes too, but acknowledges nothing). A volatile message sent before both its
+        writer and its reader have matched can be lost, and the controller would then wait for
+        a counted message that never comes. This checks the writer side here; the controller
+        creates its ack publisher only once its own readers of the tick and the counted topics
+        have matched (see :mod:`control.node`), so seeing that publisher covers the reader side.
         """
         if self.sub_ack.get_publisher_count() == 0:
             return False
@@ -445,7 +447,7 @@ def _lockstep(
                 node.publish_event(
                     twin.record_fault(
                         "controller_timeout",
-                        f"no acknowledgement of tick {tick} within {ack_timeout_s} s",
+                        f"no acknowledgement of tick {tick} within {wait_s} s",
                     )
                 )
             controller_alive = ok
