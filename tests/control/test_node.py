@@ -241,3 +241,75 @@ def test_lockstep_node_against_fake_cell(tmp_path: Path) -> None:
     tcp = kin.fk(np.array(command["q"])).translation
     ahead = (truth[0] + SPEED_MPS * config.motion.command_latency_s, truth[1], truth[2])
     assert math.dist(tuple(float(v) for v in tcp), ahead) < 0.004
+
+
+PROBE_CELL = r"""
+import json, sys, time
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from cdw_interfaces.msg import BeltState, DetectionArray, LockstepTick
+from sensor_msgs.msg import JointState
+
+qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                 durability=DurabilityPolicy.VOLATILE)
+rclpy.init()
+node = Node("probe_cell")
+rec = {}
+
+def spin_until(done, timeout_s):
+    end = time.monotonic() + timeout_s
+    while not done() and time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.02)
+    return done()
+
+rec["controller_seen"] = spin_until(lambda: node.count_subscribers("/lockstep/tick") > 0, 30.0)
+node.create_publisher(JointState, "/joint_states", qos)
+node.create_publisher(BeltState, "/conveyor/state", qos)
+node.create_publisher(DetectionArray, "/objects/detections", qos)
+spin_until(lambda: False, 1.5)
+rec["ack_publishers_without_tick"] = node.count_publishers("/lockstep/ack")
+tick = node.create_publisher(LockstepTick, "/lockstep/tick", qos)
+rec["ack_publisher_appeared"] = spin_until(lambda: node.count_publishers("/lockstep/ack") > 0, 20.0)
+rec["tick_matched"] = tick.get_subscription_count()
+print(json.dumps(rec), flush=True)
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+def test_ack_publisher_waits_for_the_readers_to_match(tmp_path: Path) -> None:
+    """The controller announces itself (its /lockstep/ack publisher) only once its readers of
+    the tick and of every counted topic have matched a writer: the twin's tick 0 cannot reach a
+    reader that does not yet know its writer, where a volatile message may be lost."""
+    probe_py = tmp_path / "probe_cell.py"
+    probe_py.write_text(PROBE_CELL, encoding="utf-8")
+    with ros_domain() as domain:
+        controller = subprocess.Popen(
+            [sys.executable, "-m", "control", "--lockstep"],
+            env=domain.env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        try:
+            probe = subprocess.run(
+                [sys.executable, str(probe_py)],
+                env=domain.env,
+                capture_output=True,
+                text=True,
+                timeout=90,
+                check=False,
+            )
+        finally:
+            controller.send_signal(signal.SIGINT)
+            log, _ = controller.communicate(timeout=20)
+    assert probe.returncode == 0, probe.stderr
+    assert controller.returncode == 0, log
+    record = json.loads(probe.stdout.strip().splitlines()[-1])
+    assert record == {
+        "controller_seen": True,
+        "ack_publishers_without_tick": 0,
+        "ack_publisher_appeared": True,
+        "tick_matched": 1,
+    }
