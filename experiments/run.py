@@ -6,7 +6,11 @@ Example::
     cdw-twin run experiments/scenarios/default.yaml --episodes 3 --mode realtime --out runs/a
 
 The scenario (with the command-line overrides applied) is validated before anything starts and
-written to the run folder as ``scenario.yaml``; every process of the run reads that file. Each
+written to the run folder as ``scenario.yaml``; every process of the run reads that file. The
+controller's parameter file (the scenario's ``controller``) is copied next to it as
+``controller.yaml``, and the written scenario names that copy and the dataset's absolute path
+(unless it is the built-in one): ``cdw-twin run RUN/scenario.yaml`` reruns it as it ran, from
+any folder, whatever the shipped parameter files become. Each
 episode gets its own ROS domain (claimed with a lock, LOCALHOST discovery). The run folder holds
 one folder per episode (the twin's ``twin/events.jsonl`` and ``twin/summary.json``, the
 controller's stats ``controller.json``, every process's log), ``episodes.json`` and
@@ -59,11 +63,14 @@ from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
-from typing import IO, Any, Literal
+from typing import IO, TYPE_CHECKING, Any, Literal
 
 from experiments.stats import mean_of
 from twin.errors import CdwTwinError
 from twin.fileio import write_atomic
+
+if TYPE_CHECKING:
+    from twin.scenario import Scenario
 
 METRIC_KEYS = (
     "speed_mps",
@@ -169,6 +176,30 @@ def controller_params(value: str, scenario_dir: Path | None) -> Path:
         msg = f"controller = {value!r}: {exc}"
         raise CdwTwinError(msg) from None
     return path.resolve()
+
+
+CONTROLLER_COPY = "controller.yaml"
+"""Name of the controller parameter file's copy in a run folder, next to ``scenario.yaml``."""
+
+
+def write_run_scenario(
+    scenario: Scenario, params: Path, folder: Path, dataset: Path | None
+) -> tuple[Path, Path]:
+    """Write ``scenario`` to ``folder/scenario.yaml`` naming a copy of ``params`` beside it.
+
+    ``dataset``, when given, replaces the scenario's ``dataset`` by its absolute path (None: the
+    built-in dataset). Returns the paths of the written scenario and of the parameter file's copy.
+    """
+    from dataclasses import replace
+
+    copy = folder / CONTROLLER_COPY
+    write_atomic(copy, params.read_text(encoding="utf-8"))
+    scenario = replace(scenario, controller=CONTROLLER_COPY)
+    if dataset is not None:
+        scenario = replace(scenario, dataset=str(dataset.resolve()))
+    scenario_path = folder / "scenario.yaml"
+    write_atomic(scenario_path, scenario.to_yaml())
+    return scenario_path, copy
 
 
 def _cli() -> list[str]:
@@ -464,12 +495,14 @@ def run(args: argparse.Namespace) -> int:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out: Path = args.out or Path("runs") / f"{scenario.name}-{stamp}"
     out.mkdir(parents=True, exist_ok=True)
-    scenario_path = out / "scenario.yaml"
-    write_atomic(scenario_path, scenario.to_yaml())
+    own_dataset = args.dataset is not None or scenario.dataset != "builtin"
+    scenario_path, params = write_run_scenario(
+        scenario, params, out, Path(dataset) if own_dataset else None
+    )
     options = RunOptions(
         scenario_path=scenario_path.resolve(),
         dataset=Path(dataset).resolve(),
-        controller_params=params,
+        controller_params=params.resolve(),
         mode=args.mode,
         duration_s=scenario.duration_s,
         restart_at_s=scenario.faults.controller_restart_at_s,

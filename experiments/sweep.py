@@ -305,6 +305,7 @@ def run_sweep(
         controller_params,
         raise_interrupt,
         run_episode,
+        write_run_scenario,
         write_tables,
     )
     from twin.builtin import builtin_dataset
@@ -322,19 +323,20 @@ def run_sweep(
     states: list[_CellState] = []
     jobs: list[tuple[_CellState, RunOptions, EpisodeSpec]] = []
     for cell in cells:
+        own_dataset: Path | None = None
         if grid.dataset is not None:
-            dataset = (grid_path.parent / grid.dataset).resolve()
+            own_dataset = (grid_path.parent / grid.dataset).resolve()
         elif cell.scenario.dataset != "builtin":
-            dataset = (cell.scenario_path.parent / cell.scenario.dataset).resolve()
-        else:
-            dataset = builtin_dataset()
+            own_dataset = (cell.scenario_path.parent / cell.scenario.dataset).resolve()
+        dataset = own_dataset if own_dataset is not None else builtin_dataset()
         folder = out / cell.name
-        scenario_file = folder / "scenario.yaml"
-        write_atomic(scenario_file, cell.scenario.to_yaml())
+        scenario_file, cell_params = write_run_scenario(
+            cell.scenario, params[cell.name], folder, own_dataset
+        )
         options = RunOptions(
             scenario_path=scenario_file.resolve(),
             dataset=dataset,
-            controller_params=params[cell.name],
+            controller_params=cell_params.resolve(),
             mode=cell.mode,
             duration_s=cell.scenario.duration_s,
             restart_at_s=cell.scenario.faults.controller_restart_at_s,

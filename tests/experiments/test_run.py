@@ -59,7 +59,17 @@ def test_two_episodes_end_to_end(builtin_meshes: Path, tmp_path: Path) -> None:
     assert all(r["processed"] >= r["missed"] >= 0 for r in rows)
     with (out / "episodes.csv").open(encoding="utf-8") as handle:
         assert [row["seed"] for row in csv.DictReader(handle)] == ["5", "6"]
-    assert Scenario.load(out / "scenario.yaml").duration_s == 3.0
+    written = Scenario.load(out / "scenario.yaml")
+    assert written.duration_s == 3.0
+    # the run folder reruns as it ran: its own copy of the parameter file, the absolute dataset
+    from control.cmd_controller import DEFAULT_PARAMS
+    from experiments.run import controller_params
+
+    assert written.controller == "controller.yaml"
+    assert written.dataset == str(builtin_meshes.resolve())
+    copy = controller_params(written.controller, out)
+    assert copy == (out / "controller.yaml").resolve()
+    assert copy.read_bytes() == DEFAULT_PARAMS.read_bytes()
     for i in range(2):
         summary = _json(out / f"ep00{i}" / "twin" / "summary.json")
         assert summary["sim_seconds"] == pytest.approx(3.0)
