@@ -117,15 +117,19 @@ class TwinNode(Node):
         self.pub_echo = self.create_publisher(Ping, "/ping/echo", STREAM_QOS)
         self.pub_tick = self.create_publisher(LockstepTick, "/lockstep/tick", STREAM_QOS)
         self.pub_faults = self.create_publisher(String, "/twin/faults", STREAM_QOS)
-        self.create_subscription(
-            JointTrajectory, "/arm_controller/joint_trajectory", self._on_trajectory, STATE_QOS
+        self._command_subs = (
+            self.create_subscription(
+                JointTrajectory, "/arm_controller/joint_trajectory", self._on_trajectory, STATE_QOS
+            ),
+            self.create_subscription(Float64, "/gripper/command", self._on_gripper, STATE_QOS),
+            self.create_subscription(
+                Float64, "/conveyor/speed_setpoint", self._on_setpoint, STATE_QOS
+            ),
+            self.create_subscription(PickTarget, "/controller/target", self._on_target, STATE_QOS),
         )
-        self.create_subscription(Float64, "/gripper/command", self._on_gripper, STATE_QOS)
-        self.create_subscription(Float64, "/conveyor/speed_setpoint", self._on_setpoint, STATE_QOS)
         self.create_subscription(
             SortingPriorities, "/sorting/priorities", self._on_priorities, LATCHED_QOS
         )
-        self.create_subscription(PickTarget, "/controller/target", self._on_target, STATE_QOS)
         self.create_subscription(Ping, "/ping", self._on_ping, STREAM_QOS)
         self.sub_ack = self.create_subscription(StepAck, "/lockstep/ack", self._on_ack, STREAM_QOS)
         assert twin.robot is not None
@@ -226,11 +230,19 @@ class TwinNode(Node):
         The controller is whoever publishes ``/lockstep/ack`` (a recorder or ``ros2 topic echo``
         subscribes too, but acknowledges nothing). A volatile message sent before both its
         writer and its reader have matched can be lost, and the controller would then wait for
-        a counted message that never comes. This checks the writer side here; the controller
-        creates its ack publisher only once its own readers of the tick and the counted topics
-        have matched (see :mod:`control.node`), so seeing that publisher covers the reader side.
+        a counted message that never comes. This checks the writer side of the twin's counted
+        topics, and the reader side of its command subscriptions (every publisher the graph
+        shows has matched; the controller announced them before its ack publisher). The
+        controller creates its ack publisher only once its own readers of the tick and the
+        counted topics have matched (see :mod:`control.node`), so seeing that publisher covers
+        the reader side of the counted topics.
         """
         if self.sub_ack.get_publisher_count() == 0:
+            return False
+        if any(
+            s.get_publisher_count() < self.count_publishers(s.topic_name)
+            for s in self._command_subs
+        ):
             return False
         pubs = (self.pub_tick, self.pub_joints, self.pub_belt, self.pub_det)
         return all(

@@ -92,7 +92,7 @@ def on_ack(msg):
 node.create_subscription(JointTrajectory, "/arm_controller/joint_trajectory", on_traj, qos(10))
 node.create_subscription(Float64, "/gripper/command", on_gripper, qos(10))
 node.create_subscription(PickTarget, "/controller/target", on_target, qos(10))
-node.create_subscription(StepAck, "/lockstep/ack", on_ack, qos(100))
+ack_sub = node.create_subscription(StepAck, "/lockstep/ack", on_ack, qos(100))
 pubs = {
     "/joint_states": node.create_publisher(JointState, "/joint_states", qos(10)),
     "/conveyor/state": node.create_publisher(BeltState, "/conveyor/state", qos(10)),
@@ -141,9 +141,13 @@ def publish(k):
         n_belt_states=per_tick["/conveyor/state"], n_detections=per_tick["/objects/detections"]))
 
 deadline = time.monotonic() + 30.0
-# like the twin: wait until both sides have matched, then publish tick 0 once and wait for it
-while (any(p.get_subscription_count() == 0 for p in pubs.values())
-       and time.monotonic() < deadline):
+# like the twin: wait until both sides have matched (the controller's ack publisher appears once
+# its readers have matched), then publish tick 0 once and wait for it
+def matched():
+    writers = all(p.get_subscription_count() > 0 for p in pubs.values())
+    return writers and ack_sub.get_publisher_count() > 0
+
+while not matched() and time.monotonic() < deadline:
     executor.spin_once(timeout_sec=0.05)
 publish(0)
 while state["ack"] < 0 and time.monotonic() < deadline:
@@ -271,7 +275,7 @@ spin_until(lambda: False, 1.5)
 rec["ack_publishers_without_tick"] = node.count_publishers("/lockstep/ack")
 tick = node.create_publisher(LockstepTick, "/lockstep/tick", qos)
 rec["ack_publisher_appeared"] = spin_until(lambda: node.count_publishers("/lockstep/ack") > 0, 20.0)
-rec["tick_matched"] = tick.get_subscription_count()
+rec["tick_matched"] = spin_until(lambda: tick.get_subscription_count() == 1, 10.0)
 print(json.dumps(rec), flush=True)
 node.destroy_node()
 rclpy.shutdown()
@@ -311,5 +315,5 @@ def test_ack_publisher_waits_for_the_readers_to_match(tmp_path: Path) -> None:
         "controller_seen": True,
         "ack_publishers_without_tick": 0,
         "ack_publisher_appeared": True,
-        "tick_matched": 1,
+        "tick_matched": True,
     }
