@@ -467,11 +467,15 @@ class JointPlanner:
         """Advance one control period along the move of :meth:`start_move`."""
         duration_s = float(self._move.duration)
         self._move_elapsed_s = min(self._move_elapsed_s + self._period_s, duration_s)
-        q, dq, ddq = self._move.at_time(self._move_elapsed_s)
+        return self._sample(self._move, self._move_elapsed_s)
+
+    def _sample(self, trajectory: Trajectory, t_s: float) -> JointStep:
+        """Make ``trajectory``'s state at ``t_s`` (clipped to the joint limits) the current one."""
+        q, dq, ddq = trajectory.at_time(t_s)
         self._q = np.clip(np.asarray(q), self._kin.lower_rad, self._kin.upper_rad)
         self._dq = np.asarray(dq)
         self._ddq = np.asarray(ddq)
-        remaining_s = duration_s - self._move_elapsed_s
+        remaining_s = max(float(trajectory.duration) - t_s, 0.0)
         return JointStep(q=self._q.copy(), dq=self._dq.copy(), remaining_s=remaining_s)
 
     def step(self, q_target: FloatArray) -> JointStep:
@@ -490,10 +494,4 @@ class JointPlanner:
                 raise
             self._q, self._dq, self._ddq = (q_target.copy(), np.zeros_like(q_target), 0 * q_target)
             return JointStep(q=self._q.copy(), dq=self._dq.copy(), remaining_s=0.0)
-        dt_s = min(self._period_s, float(self._trajectory.duration))
-        q, dq, ddq = self._trajectory.at_time(dt_s)
-        self._q = np.clip(np.asarray(q), self._kin.lower_rad, self._kin.upper_rad)
-        self._dq = np.asarray(dq)
-        self._ddq = np.asarray(ddq)
-        remaining_s = max(float(self._trajectory.duration) - dt_s, 0.0)
-        return JointStep(q=self._q.copy(), dq=self._dq.copy(), remaining_s=remaining_s)
+        return self._sample(self._trajectory, min(self._period_s, float(self._trajectory.duration)))

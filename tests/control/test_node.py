@@ -173,39 +173,53 @@ rclpy.shutdown()
 """
 
 
-def test_lockstep_node_against_fake_cell(tmp_path: Path) -> None:
-    """Acks every tick with exact counts, commands stay in limits, bad detections are counted."""
-    cell_py = tmp_path / "fake_cell.py"
-    cell_py.write_text(FAKE_CELL, encoding="utf-8")
-    record_path = tmp_path / "cell.json"
-    stats_path = tmp_path / "stats.json"
+def _against_controller(
+    controller_args: list[str], peer_args: list[str], *, timeout_s: float
+) -> subprocess.CompletedProcess[str]:
+    """Run the Python script ``peer_args`` against a lockstep controller on a domain of their own.
+
+    Asserts that both exit cleanly (the controller on SIGINT once the peer is done).
+    """
     with ros_domain() as domain:
         controller = subprocess.Popen(
-            [sys.executable, "-m", "control", "--lockstep", "--stats-out", str(stats_path)],
+            [sys.executable, "-m", "control", "--lockstep", *controller_args],
             env=domain.env,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
         )
         try:
-            cell = subprocess.run(
-                [
-                    sys.executable,
-                    str(cell_py),
-                    str(record_path),
-                    *map(str, (N_TICKS, SPEED_MPS, X0_M, OBJECT_Y_M, HEIGHT_M)),
-                ],
+            peer = subprocess.run(
+                [sys.executable, *peer_args],
                 env=domain.env,
                 capture_output=True,
                 text=True,
-                timeout=60,
+                timeout=timeout_s,
                 check=False,
             )
-            assert cell.returncode == 0, cell.stderr
+            assert peer.returncode == 0, peer.stderr
         finally:
             controller.send_signal(signal.SIGINT)
             log, _ = controller.communicate(timeout=20)
     assert controller.returncode == 0, log
+    return peer
+
+
+def test_lockstep_node_against_fake_cell(tmp_path: Path) -> None:
+    """Acks every tick with exact counts, commands stay in limits, bad detections are counted."""
+    cell_py = tmp_path / "fake_cell.py"
+    cell_py.write_text(FAKE_CELL, encoding="utf-8")
+    record_path = tmp_path / "cell.json"
+    stats_path = tmp_path / "stats.json"
+    cell = _against_controller(
+        ["--stats-out", str(stats_path)],
+        [
+            str(cell_py),
+            str(record_path),
+            *map(str, (N_TICKS, SPEED_MPS, X0_M, OBJECT_Y_M, HEIGHT_M)),
+        ],
+        timeout_s=60,
+    )
     record = json.loads(record_path.read_text(encoding="utf-8"))
     stats = json.loads(stats_path.read_text(encoding="utf-8"))
 
@@ -288,28 +302,7 @@ def test_ack_publisher_waits_for_the_readers_to_match(tmp_path: Path) -> None:
     reader that does not yet know its writer, where a volatile message may be lost."""
     probe_py = tmp_path / "probe_cell.py"
     probe_py.write_text(PROBE_CELL, encoding="utf-8")
-    with ros_domain() as domain:
-        controller = subprocess.Popen(
-            [sys.executable, "-m", "control", "--lockstep"],
-            env=domain.env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        try:
-            probe = subprocess.run(
-                [sys.executable, str(probe_py)],
-                env=domain.env,
-                capture_output=True,
-                text=True,
-                timeout=90,
-                check=False,
-            )
-        finally:
-            controller.send_signal(signal.SIGINT)
-            log, _ = controller.communicate(timeout=20)
-    assert probe.returncode == 0, probe.stderr
-    assert controller.returncode == 0, log
+    probe = _against_controller([], [str(probe_py)], timeout_s=90)
     record = json.loads(probe.stdout.strip().splitlines()[-1])
     assert record == {
         "controller_seen": True,
