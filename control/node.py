@@ -9,9 +9,11 @@ When the control update runs:
 - realtime: on every ``steps_per_update``-th ``/joint_states`` message (every 2nd at 120 Hz
   control and 240 Hz state), at the sim time of that message. The update runs as soon as a
   fresh state is there, so no timer phase adds latency, and no wall clock is involved.
-- lockstep: on ``/lockstep/tick`` k, once the messages the tick counts have all arrived; every
-  ``steps_per_update``-th tick at the tick's sim time. Every tick is acknowledged with the
-  number of command messages published for that tick (per-tick counts survive restarts).
+- lockstep: on ``/lockstep/tick`` k, once the messages the tick covers have all arrived; every
+  ``steps_per_update``-th tick at the tick's sim time. The tick names, per counted topic, the
+  newest stamp published up to it; messages are attributed to ticks by their stamps, so a
+  restarted controller, or one whose reader dropped messages, finds its place in the stream.
+  Every tick is acknowledged with the number of command messages published for that tick.
   Discovery is checked from both sides before the first tick, because a volatile message
   sent before both its writer and its reader have matched can be lost, and the other side
   would then wait for a message that never comes:
@@ -25,9 +27,9 @@ When the control update runs:
 
   Ticks that arrive earlier wait in the queue; a steady-clock timer re-checks every 5 ms.
 
-Incoming messages are queued with their arrival index and applied in a fixed order (belt,
-detections, joint states) up to the counts of the tick, so the same inputs give the same
-outputs regardless of the DDS delivery order across topics.
+Incoming messages are queued with their stamps and applied in a fixed order (belt, detections,
+joint states) up to the stamps the tick names, so the same inputs give the same outputs
+regardless of the DDS delivery order across topics.
 """
 
 from __future__ import annotations
@@ -63,6 +65,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from control.config import ControllerConfig
 from control.errors import ControlError
 from control.ik import Kinematics, yaw_of
+from control.inbox import StampedInbox
 from control.pick import FOLLOWING_PHASES, Command, Phase, PickController, TcpMeasurement
 from control.tracking import Detection, Track, Tracker
 
@@ -82,6 +85,8 @@ def _qos(depth: int, *, latched: bool = False) -> QoSProfile:
 
 
 STATE_QOS = _qos(10)
+# the topics a lockstep tick covers, in the order of LockstepTick's last_*_ns fields
+COUNTED_TOPICS = ("/joint_states", "/conveyor/state", "/objects/detections")
 STREAM_QOS = _qos(100)
 LATCHED_QOS = _qos(1, latched=True)
 
@@ -199,11 +204,8 @@ class ControllerNode(Node):
         self._belt_velocity_mps: tuple[float, float] = (0.0, 0.0)
         self._joint: JointSample | None = None
         self._received: Counter[str] = Counter()
-        self._joint_inbox: deque[tuple[int, JointState]] = deque()
-        self._belt_inbox: deque[tuple[int, BeltState]] = deque()
-        self._det_inbox: deque[tuple[int, DetectionArray]] = deque()
+        self._inbox: StampedInbox[Any] = StampedInbox(COUNTED_TOPICS)
         self._ticks: deque[tuple[LockstepTick, float]] = deque()
-        self._consumed: tuple[int, int, int] | None = None
         self._acked_commands = 0
         self._last_control_tick = -1
         self._last_update_s = -math.inf
@@ -260,10 +262,15 @@ class ControllerNode(Node):
         return self._outputs_matched
 
     # -- inputs -----------------------------------------------------------------------------
+    def _arrived(self, topic: str, msg: Any) -> None:
+        """Count and queue a message of a counted topic."""
+        self._received[topic] += 1
+        stamp = msg.header.stamp
+        self._inbox.add(topic, int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), msg)
+
     def _on_joint_state(self, msg: JointState) -> None:
-        self._received["/joint_states"] += 1
+        self._arrived("/joint_states", msg)
         count = self._received["/joint_states"]
-        self._joint_inbox.append((count, msg))
         if self.lockstep:
             self._drain_ticks()
         elif count % self._steps_per_update == 0:
@@ -272,14 +279,12 @@ class ControllerNode(Node):
                 self._control(self._joint.stamp_s)
 
     def _on_belt(self, msg: BeltState) -> None:
-        self._received["/conveyor/state"] += 1
-        self._belt_inbox.append((self._received["/conveyor/state"], msg))
+        self._arrived("/conveyor/state", msg)
         if self.lockstep:
             self._drain_ticks()
 
     def _on_detections(self, msg: DetectionArray) -> None:
-        self._received["/objects/detections"] += 1
-        self._det_inbox.append((self._received["/objects/detections"], msg))
+        self._arrived("/objects/detections", msg)
         if self.lockstep:
             self._drain_ticks()
 
@@ -297,20 +302,20 @@ class ControllerNode(Node):
         self._ticks.append((msg, time.perf_counter()))
         self._drain_ticks()
 
-    def _consume(self, counts: tuple[int, int, int] | None) -> None:
-        """Apply queued messages up to ``counts`` (joint, belt, detections; None: all)."""
-        n_joint, n_belt, n_det = counts if counts is not None else (None, None, None)
-        while self._belt_inbox and (n_belt is None or self._belt_inbox[0][0] <= n_belt):
-            belt = self._belt_inbox.popleft()[1]
+    def _consume(self, limits_ns: Sequence[int] | None) -> None:
+        """Apply queued messages stamped at or before ``limits_ns`` (per ``COUNTED_TOPICS``;
+        None: all), belt first, then detections, then joint states."""
+        limit = {} if limits_ns is None else dict(zip(COUNTED_TOPICS, limits_ns, strict=True))
+        for belt in self._inbox.take("/conveyor/state", limit.get("/conveyor/state")):
             if math.isfinite(belt.speed_mps):
                 self._belt_velocity_mps = (float(belt.speed_mps), 0.0)
             else:
                 self.skipped["bad_belt_state"] += 1
-        while self._det_inbox and (n_det is None or self._det_inbox[0][0] <= n_det):
-            stamp_s, detections = detections_of(self._det_inbox.popleft()[1])
+        for frame in self._inbox.take("/objects/detections", limit.get("/objects/detections")):
+            stamp_s, detections = detections_of(frame)
             self._tracker.update(stamp_s, detections, self._belt_velocity_mps)
-        while self._joint_inbox and (n_joint is None or self._joint_inbox[0][0] <= n_joint):
-            sample = joint_sample(self._joint_inbox.popleft()[1], self._arm_names)
+        for joints in self._inbox.take("/joint_states", limit.get("/joint_states")):
+            sample = joint_sample(joints, self._arm_names)
             if sample is None:
                 self.skipped["bad_joint_state"] += 1
                 self._warn("joints", "/joint_states: arm joints missing or not finite, ignored")
@@ -318,33 +323,21 @@ class ControllerNode(Node):
                 self._joint = sample
 
     def _drain_ticks(self) -> None:
-        """Handle every queued tick whose counted messages have all arrived, in order."""
+        """Handle every queued tick whose messages have all arrived, in order."""
         pub_ack = self.pub_ack
         if pub_ack is None or not self.outputs_matched():
             return
         while self._ticks:
             tick, arrived_wall_s = self._ticks[0]
-            counted = (int(tick.n_joint_states), int(tick.n_belt_states), int(tick.n_detections))
-            received = (
-                self._received["/joint_states"],
-                self._received["/conveyor/state"],
-                self._received["/objects/detections"],
+            limits_ns = (
+                int(tick.last_joint_state_ns),
+                int(tick.last_belt_state_ns),
+                int(tick.last_detections_ns),
             )
-            if self._consumed is None:
-                # Started after the cell (a restart, or discovery missed messages): whatever
-                # arrived before this tick's own messages belongs to earlier ticks.
-                self._consumed = (
-                    max(received[0] - counted[0], 0),
-                    max(received[1] - counted[1], 0),
-                    max(received[2] - counted[2], 0),
-                )
-            done = self._consumed
-            need = (done[0] + counted[0], done[1] + counted[1], done[2] + counted[2])
-            if any(r < n for r, n in zip(received, need, strict=True)):
+            if not self._inbox.complete(limits_ns):
                 return
             self._ticks.popleft()
-            self._consume(need)
-            self._consumed = need
+            self._consume(limits_ns)
             k = int(tick.tick)
             if k > self._last_control_tick and k % self._steps_per_update == 0:
                 self._last_control_tick = k

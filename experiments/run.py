@@ -28,11 +28,12 @@ twin's ``/clock`` with a tiny best-effort subscriber of its own, in the episode'
 when sim time passes a restart time it stops the controller (SIGTERM, so its counters are
 saved as ``controller.json``, ``controller_1.json``, ...) and starts a new one. The lockstep twin
 waits ``--ack-timeout`` (2 s) for the lost controller, logs a ``controller_timeout`` fault, steps
-on without it and resynchronises when the new controller acknowledges ticks. The restart happens
-at the first ``/clock`` sample at or after the restart time that the runner sees (it polls every
-0.1 s wall), so its exact sim time is not reproducible; the twin's events record when the
-controller was lost and when it came back. The watcher also feeds the progress line when the
-output is a terminal.
+on without it at the wall-clock pace (so the outage costs about the sim time it lasts) and
+resynchronises when the new controller acknowledges ticks (a ``controller_resumed`` event). The
+restart happens at the first ``/clock`` sample at or after the restart time that the runner sees
+(it polls every 0.1 s wall), so its exact sim time is not reproducible; the twin's events record
+when the controller was lost and when it came back. The watcher also feeds the progress line
+when the output is a terminal.
 
 Metrics per episode:
 

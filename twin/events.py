@@ -28,6 +28,7 @@ class EventType(StrEnum):
     UNINTENDED_CONTACT = "unintended_contact"
     MISSED = "missed"
     FAULT = "fault"
+    CONTROLLER_RESUMED = "controller_resumed"
 
 
 @dataclass(frozen=True)

@@ -74,9 +74,12 @@ LATCHED_QOS = _qos(1, latched=True)
 
 
 def to_time(t_s: float) -> TimeMsg:
-    """A ROS time from seconds."""
+    """A ROS time from seconds (``t_s >= 0``); a fraction that rounds up to 1 s carries."""
     sec = int(t_s)
-    return TimeMsg(sec=sec, nanosec=round((t_s - sec) * 1e9) % 1_000_000_000)
+    nanosec = round((t_s - sec) * 1e9)
+    if nanosec >= 1_000_000_000:
+        sec, nanosec = sec + 1, nanosec - 1_000_000_000
+    return TimeMsg(sec=sec, nanosec=nanosec)
 
 
 @dataclass
@@ -107,6 +110,7 @@ class TwinNode(Node):
         self.acks: dict[int, int] = {}
         self.last_ack_tick = -1
         self._tick_counts: Counter[str] = Counter()
+        self._last_stamp_ns: dict[str, int] = {}
         self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
         self.pub_joints = self.create_publisher(JointState, "/joint_states", STATE_QOS)
         self.pub_tcp = self.create_publisher(PoseStamped, "/tcp_pose", STATE_QOS)
@@ -219,8 +223,13 @@ class TwinNode(Node):
         return n is not None and self.counters.pending_commands >= n
 
     def consume_tick(self, tick: int) -> None:
-        """Lockstep: the commands of ``tick`` are applied; forget it and older acks."""
-        self.counters.pending_commands -= self.acks.pop(tick, 0)
+        """Lockstep: the commands of ``tick`` are applied; forget it and older acks.
+
+        The pending count never goes below zero: a command lost at a controller's start must
+        not make every later tick wait for one more command than it announces.
+        """
+        pending = self.counters.pending_commands - self.acks.pop(tick, 0)
+        self.counters.pending_commands = max(pending, 0)
         for old in [t for t in self.acks if t < tick]:
             del self.acks[old]
 
@@ -250,9 +259,11 @@ class TwinNode(Node):
         )
 
     # -- publishing -------------------------------------------------------------------------
-    def _count(self, topic: str) -> None:
+    def _count(self, topic: str, stamp: TimeMsg) -> None:
         self.counters.published[topic] += 1
         self._tick_counts[topic] += 1
+        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        self._last_stamp_ns[topic] = max(self._last_stamp_ns.get(topic, -1), stamp_ns)
 
     def publish_step(self, events: list[Event]) -> None:
         """Publish everything due after a physics step."""
@@ -274,7 +285,7 @@ class TwinNode(Node):
         self.telemetry.on_step(twin.time_s, wall_s)
         self.telemetry.on_state_published(twin.time_s, wall_s)
         self.pub_joints.publish(joints)
-        self._count("/joint_states")
+        self._count("/joint_states", stamp)
         pos, orn = twin.tcp_pose
         pose = PoseStamped()
         pose.header.stamp = stamp
@@ -292,7 +303,7 @@ class TwinNode(Node):
         for event in events:
             self.publish_event(event)
         if self.lockstep:
-            counts = self._tick_counts
+            counts, last = self._tick_counts, self._last_stamp_ns
             self.pub_tick.publish(
                 LockstepTick(
                     tick=step,
@@ -300,6 +311,9 @@ class TwinNode(Node):
                     n_joint_states=counts["/joint_states"],
                     n_belt_states=counts["/conveyor/state"],
                     n_detections=counts["/objects/detections"],
+                    last_joint_state_ns=last.get("/joint_states", -1),
+                    last_belt_state_ns=last.get("/conveyor/state", -1),
+                    last_detections_ns=last.get("/objects/detections", -1),
                 )
             )
         self._tick_counts = Counter()
@@ -320,7 +334,7 @@ class TwinNode(Node):
         msg.header.frame_id = "world"
         self.pub_belt.publish(msg)
         self.telemetry.on_belt(twin.time_s, twin.setpoint_mps, belt.belt_speed_mps)
-        self._count("/conveyor/state")
+        self._count("/conveyor/state", stamp)
 
     def publish_detections(self, frame: DetectionFrame) -> None:
         """``/objects/detections``: one released frame, stamped with its capture time."""
@@ -339,7 +353,7 @@ class TwinNode(Node):
             det.position.x, det.position.y, det.position.z = d.x_m, d.y_m, d.z_m
             msg.detections.append(det)
         self.pub_det.publish(msg)
-        self._count("/objects/detections")
+        self._count("/objects/detections", msg.header.stamp)
 
     def publish_ground_truth(self, stamp: TimeMsg) -> None:
         """``/objects/ground_truth`` (evaluation only)."""
@@ -427,6 +441,14 @@ def _lockstep(
     ack_timeout_s: float,
     start_timeout_s: float,
 ) -> None:
+    """Step tick k+1 once tick k is acknowledged with all its commands.
+
+    A controller that does not answer within ``ack_timeout_s`` is lost: a
+    ``controller_timeout`` fault is logged and the cell goes on at the wall-clock pace, as a
+    real cell would while its controller restarts, so an outage costs about the sim time it
+    lasts. When acks come again (a restarted controller), the twin waits up to
+    ``RESYNC_WAIT_S`` for it to catch up, logs ``controller_resumed`` and is in lockstep again.
+    """
     twin = node.twin
     deadline = time.monotonic() + start_timeout_s
     while not node.peers_matched() and time.monotonic() < deadline:
@@ -436,17 +458,17 @@ def _lockstep(
         node.publish_event(
             twin.record_fault("controller_timeout", "no controller subscribed before the start")
         )
-    first_wait = start_timeout_s
     node.publish_step([])
     acks_at_loss = -1
+    lost_at_s: float | None = None if controller_alive else 0.0
+    next_wall = time.perf_counter()
     while twin.time_s < duration - 1e-9:
         tick = twin.step_count
         resync = not controller_alive and node.last_ack_tick > acks_at_loss
-        if resync:
-            # a (restarted) controller acknowledges ticks again: wait for it to catch up
-            controller_alive = True
-        if controller_alive:
-            wait_s = first_wait if tick == 0 else (RESYNC_WAIT_S if resync else ack_timeout_s)
+        if controller_alive or resync:
+            wait_s = ack_timeout_s
+            if tick == 0 or resync:
+                wait_s = start_timeout_s if tick == 0 else RESYNC_WAIT_S
             wait_until = time.monotonic() + wait_s
             while not node.tick_ready(tick):
                 remaining = wait_until - time.monotonic()
@@ -454,7 +476,10 @@ def _lockstep(
                     break
                 spin_once(timeout_sec=min(remaining, 0.05))
             ok = node.tick_ready(tick)
-            if controller_alive and not ok:
+            if ok and lost_at_s is not None:
+                node.publish_event(twin.record_controller_resumed(twin.time_s - lost_at_s))
+                lost_at_s = None
+            if not ok and controller_alive:
                 node.counters.lockstep_timeouts += 1
                 node.publish_event(
                     twin.record_fault(
@@ -462,11 +487,19 @@ def _lockstep(
                         f"no acknowledgement of tick {tick} within {wait_s} s",
                     )
                 )
-            controller_alive = ok
+                lost_at_s = twin.time_s
             if not ok:
+                # every command received so far has been applied; a restarted controller's
+                # acks count only its own commands
                 acks_at_loss = node.last_ack_tick
+                node.counters.pending_commands = 0
+                next_wall = time.perf_counter()
+            controller_alive = ok
             node.consume_tick(tick)
         else:
+            next_wall += twin.dt_s
+            while (remaining := next_wall - time.perf_counter()) > 0:
+                spin_once(timeout_sec=remaining)
             spin_once(timeout_sec=0.0)
         events = twin.advance()
         node.publish_step(events)

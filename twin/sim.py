@@ -409,6 +409,19 @@ class Twin:
         self._events.append(event)
         return event
 
+    def record_controller_resumed(self, outage_s: float) -> Event:
+        """Log that a controller acknowledges ticks again after ``outage_s`` of sim time without
+        one (lockstep)."""
+        event = Event(
+            time_s=self.time_s,
+            step=self.step_count,
+            type=EventType.CONTROLLER_RESUMED,
+            object_id=0,
+            data={"outage_s": outage_s},
+        )
+        self._events.append(event)
+        return event
+
     def scores(self) -> Scores:
         """Scores from the events so far."""
         return compute_scores(self._events, self.time_s)

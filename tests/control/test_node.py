@@ -103,6 +103,13 @@ clock = node.create_publisher(Clock, "/clock", qos(1))
 prio = node.create_publisher(SortingPriorities, "/sorting/priorities", qos(1, latched=True))
 prio.publish(SortingPriorities(classes=["brick", "wood", "concrete", "rubber", "gypsum"]))
 count = dict.fromkeys(pubs, 0)
+last_ns = dict.fromkeys(pubs, -1)  # newest stamp published per topic, as the twin tells it
+
+def sent(topic, msg):
+    pubs[topic].publish(msg)
+    count[topic] += 1
+    s = msg.header.stamp
+    last_ns[topic] = max(last_ns[topic], s.sec * 1_000_000_000 + s.nanosec)
 executor = EventsExecutor()
 executor.add_node(node)
 
@@ -119,13 +126,11 @@ def publish(k):
     js = JointState(name=arm + ["panda_finger_joint1", "panda_finger_joint2"],
                     position=list(q) + [0.04, 0.04], velocity=[0.0] * 9)
     js.header.stamp = stamp(t)
-    pubs["/joint_states"].publish(js)
-    count["/joint_states"] += 1
+    sent("/joint_states", js)
     if k % 4 == 0:
         belt = BeltState(setpoint_mps=speed, speed_mps=speed, position_m=speed * t)
         belt.header.stamp = stamp(t)
-        pubs["/conveyor/state"].publish(belt)
-        count["/conveyor/state"] += 1
+        sent("/conveyor/state", belt)
     if k > 0 and k % 8 == 0:
         capture = t - 0.03 if k != 240 else 0.05  # the frame at k = 240 is out of order
         frame = DetectionArray()
@@ -133,12 +138,13 @@ def publish(k):
         frame.detections = [det("brick", x0 + speed * capture, y0),
                             det("brick", float("nan"), 0.4),
                             det("gypsum", x0 + speed * capture - 0.2, 0.6)]
-        pubs["/objects/detections"].publish(frame)
-        count["/objects/detections"] += 1
+        sent("/objects/detections", frame)
     per_tick = {topic: count[topic] - before[topic] for topic in count}
     pubs["/lockstep/tick"].publish(LockstepTick(
         tick=k, stamp=stamp(t), n_joint_states=per_tick["/joint_states"],
-        n_belt_states=per_tick["/conveyor/state"], n_detections=per_tick["/objects/detections"]))
+        n_belt_states=per_tick["/conveyor/state"], n_detections=per_tick["/objects/detections"],
+        last_joint_state_ns=last_ns["/joint_states"], last_belt_state_ns=last_ns["/conveyor/state"],
+        last_detections_ns=last_ns["/objects/detections"]))
 
 deadline = time.monotonic() + 30.0
 # like the twin: wait until both sides have matched (the controller's ack publisher appears once

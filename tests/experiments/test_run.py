@@ -163,3 +163,58 @@ def test_interrupt_keeps_the_finished_episodes_and_says_incomplete(
     assert [r["seed"] for r in rows] == [0]
     assert _json(out / "ep000" / "twin" / "summary.json")["complete"] is True
     assert not (out / "ep002").exists()
+
+
+RESTART_SCENARIO = """\
+name: restarts
+duration_s: 16.0
+objects: {max_width_m: 0.065, min_height_m: 0.02}
+system: {belt_speed_mps: 0.3, object_order: shuffled, image_gap_m: 0.0, prefill_m: 0.5}
+faults: {controller_restart_at_s: [4.0, 8.0]}
+"""
+
+
+def test_a_controller_restarted_twice_mid_episode_recovers(
+    builtin_meshes: Path, tmp_path: Path
+) -> None:
+    """Each restart costs one ack timeout, the new controller brings the twin back to lockstep
+    (no further waits), and the last one picks objects after it took over."""
+    _needs_ros()
+    scenario = tmp_path / "restarts.yaml"
+    scenario.write_text(RESTART_SCENARIO, encoding="utf-8")
+    out = tmp_path / "run"
+    done = subprocess.run(
+        _cli(scenario, "--dataset", builtin_meshes, "--out", out, "--mode", "lockstep"),
+        capture_output=True,
+        text=True,
+        timeout=240,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    row = _json(out / "episodes.json")[0]
+    assert row["complete"] is True
+    assert row["controller_restarts"] == 2
+    episode = out / "ep000"
+    summary = _json(episode / "twin" / "summary.json")
+    assert summary["sim_seconds"] == pytest.approx(16.0)
+    assert summary["lockstep_timeouts"] == 2
+    events = [
+        json.loads(line)
+        for line in (episode / "twin" / "events.jsonl").read_text(encoding="utf-8").splitlines()
+    ]
+    lost = [e for e in events if e["type"] == "fault"]
+    back = [e for e in events if e["type"] == "controller_resumed"]
+    assert [e["data"]["kind"] for e in lost] == ["controller_timeout"] * 2
+    assert len(back) == 2
+    for fault, resumed in zip(lost, back, strict=True):
+        assert fault["time_s"] <= resumed["time_s"] < fault["time_s"] + 3.0
+        assert resumed["data"]["outage_s"] == pytest.approx(resumed["time_s"] - fault["time_s"])
+    assert 4.0 <= lost[0]["time_s"] < lost[1]["time_s"]
+    # the last controller acknowledged every tick from its resumption to the end
+    last = _json(episode / "controller_2.json")
+    end_step = round(16.0 * 240)
+    assert last["ticks_acked"] >= end_step - back[1]["step"]
+    picks_after = [
+        e for e in events if e["type"] == "pick_success" and e["time_s"] > back[1]["time_s"]
+    ]
+    assert picks_after, [e["type"] for e in events if e["time_s"] > back[1]["time_s"]]
