@@ -4,8 +4,10 @@ Grasp approximation (as the reference defines it): finger contacts come from the
 on each finger link; a small box around the TCP is the overlap volume. A pick succeeds when the
 TCP volume has overlapped the object continuously for the dwell time (0.6 s default) *and* the
 fingers touch it from opposite sides (contact normals pointing against each other) while the
-gripper is commanded closed (less than half open). The object is
-then held by a fixed constraint to the TCP link; opening the gripper releases it.
+gripper presses: its commanded opening is narrower than its measured one (by more than
+``GRIP_TOLERANCE_M``; the fingers stop on the object while the target lies inside it, whatever
+the object's width). The object is then held by a fixed constraint to the TCP link; commanding
+the gripper wider than it is releases it.
 
 Fates and events:
 
@@ -35,6 +37,10 @@ from twin.stream import Placement
 from twin.world import SpawnedBody, World
 
 _NEAR_TCP_M = 0.25
+
+GRIP_TOLERANCE_M = 0.0005
+"""How much narrower (wider) than the measured opening the gripper must be commanded to count
+as pressing (letting go)."""
 
 _MAX_SINKING_SPEED_MPS = 1.0
 """Bound on how fast the centre of mass of an object riding the belt can sink towards it."""
@@ -220,7 +226,11 @@ class Monitor:
                 arm.setdefault(record.id, set()).add(cp[3])
         self.tcp_pose = self.robot.tcp_pose()
         tcp_pos, tcp_orn = self.tcp_pose
-        gripper_open = self.robot.gripper_width_target_m >= 0.5 * self.robot.config.max_opening_m
+        # the fingers press (or close) when told narrower than they are, and let go when told
+        # wider: a grip on an object wider than half the opening is a grip too
+        target_w, measured_w = self.robot.gripper_width_target_m, self.robot.gripper_width_m()
+        gripper_closing = target_w < measured_w - GRIP_TOLERANCE_M
+        gripper_opening = target_w > measured_w + GRIP_TOLERANCE_M
         load = 0.0
 
         def emit(kind: EventType, record: _Record, **data: object) -> None:
@@ -287,7 +297,7 @@ class Monitor:
                 record.next_poll_step = step + max(1, int(margin_m / reach_m))
                 continue
             # -- release of a held object
-            if record.held and gripper_open:
+            if record.held and gripper_opening:
                 self._release(record)
                 if not any(b.contains_xy(x, y) for b in self.cell.bins):
                     emit(EventType.PICK_DROPPED, record, position_m=list(pos))
@@ -373,7 +383,7 @@ class Monitor:
             # -- pick success
             if (
                 self._held is None
-                and not gripper_open
+                and gripper_closing
                 and record.overlap_since is not None
                 and time_s - record.overlap_since >= self.cell.grasp.dwell_s - 1e-9
                 and self._opposite(touching)

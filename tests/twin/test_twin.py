@@ -19,6 +19,7 @@ from twin.scenario import ObjectLevel, Scenario, SystemLevel
 from twin.sim import ArmCommand, Twin
 
 ONE_BOX = {"img": [(1, box_px(500, 500, 100, 50))]}  # brick, 60 x 30 mm footprint
+WIDE_BOX = {"img": [(1, box_px(500, 500, 117, 92))]}  # brick, 70 x 55 mm footprint
 
 
 def _still(prefill_m: float = 1.7) -> Scenario:
@@ -52,16 +53,27 @@ def _hold(twin: Twin, command: ArmCommand, seconds: float) -> None:
         twin.advance()
 
 
+@pytest.mark.parametrize(
+    ("polygons", "closed_w"),
+    [
+        (ONE_BOX, 0.0),  # closed all the way
+        # closed to 1 cm inside the object, more than half open: the fingers press all the same
+        (WIDE_BOX, 0.045),
+    ],
+    ids=["closed", "wide-object-squeezed"],
+)
 def test_scripted_pick_yields_overlap_contact_pick_and_correct_bin(
     mesh_polygons: Callable[..., Path],
+    polygons: dict[str, list[tuple[int, list[float]]]],
+    closed_w: float,
 ) -> None:
-    meshes = mesh_polygons(ONE_BOX)
+    meshes = mesh_polygons(polygons)
     with Twin(_still(), dataset_dir=meshes) as twin:
         obs, _ = twin.reset(seed=0)
         (obj,) = obs.objects
         x, y, z = obj.position_m
         z = z + 0.5 * obj.height_m - 0.02  # grasp 2 cm below the top: the palm stays clear
-        open_w, closed_w = 0.08, 0.0
+        open_w = 0.08
         _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.3)), gripper_width_m=open_w), 2.0)
         _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.1)), gripper_width_m=open_w), 1.0)
         _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=open_w), 1.0)
