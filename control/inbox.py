@@ -38,11 +38,6 @@ class StampedInbox(Generic[Msg]):
             raise ValueError(f"StampedInbox: topics repeat: {list(topics)}")
         self._streams: dict[str, _Stream[Msg]] = {t: _Stream() for t in topics}
 
-    @property
-    def topics(self) -> tuple[str, ...]:
-        """The topics, in the order given."""
-        return tuple(self._streams)
-
     def add(self, topic: str, stamp_ns: int, msg: Msg) -> None:
         """Queue a message as it arrives."""
         stream = self._stream(topic)
@@ -63,7 +58,7 @@ class StampedInbox(Generic[Msg]):
         return stream.newest_ns >= last_ns or stream.first_ns > last_ns
 
     def complete(self, last_ns: Sequence[int]) -> bool:
-        """:meth:`has_through` on every topic, ``last_ns`` in the order of :attr:`topics`."""
+        """:meth:`has_through` on every topic, ``last_ns`` in the order the topics were given."""
         if len(last_ns) != len(self._streams):
             raise ValueError(f"StampedInbox: {len(last_ns)} stamps for {len(self._streams)} topics")
         return all(self.has_through(t, n) for t, n in zip(self._streams, last_ns, strict=True))
@@ -76,10 +71,6 @@ class StampedInbox(Generic[Msg]):
         while queue and (last_ns is None or queue[0][0] <= last_ns):
             out.append(queue.popleft()[1])
         return out
-
-    def queued(self, topic: str) -> int:
-        """How many messages wait on ``topic``."""
-        return len(self._stream(topic).queue)
 
     def _stream(self, topic: str) -> _Stream[Msg]:
         try:

@@ -226,11 +226,6 @@ class Monitor:
                 arm.setdefault(record.id, set()).add(cp[3])
         self.tcp_pose = self.robot.tcp_pose()
         tcp_pos, tcp_orn = self.tcp_pose
-        # the fingers press (or close) when told narrower than they are, and let go when told
-        # wider: a grip on an object wider than half the opening is a grip too
-        target_w, measured_w = self.robot.gripper_width_target_m, self.robot.gripper_width_m()
-        gripper_closing = target_w < measured_w - GRIP_TOLERANCE_M
-        gripper_opening = target_w > measured_w + GRIP_TOLERANCE_M
         load = 0.0
 
         def emit(kind: EventType, record: _Record, **data: object) -> None:
@@ -297,7 +292,7 @@ class Monitor:
                 record.next_poll_step = step + max(1, int(margin_m / reach_m))
                 continue
             # -- release of a held object
-            if record.held and gripper_opening:
+            if record.held and self._grip_gap_m() > GRIP_TOLERANCE_M:
                 self._release(record)
                 if not any(b.contains_xy(x, y) for b in self.cell.bins):
                     emit(EventType.PICK_DROPPED, record, position_m=list(pos))
@@ -383,10 +378,10 @@ class Monitor:
             # -- pick success
             if (
                 self._held is None
-                and gripper_closing
                 and record.overlap_since is not None
                 and time_s - record.overlap_since >= self.cell.grasp.dwell_s - 1e-9
                 and self._opposite(touching)
+                and self._grip_gap_m() < -GRIP_TOLERANCE_M
             ):
                 self._attach(record, tcp_pos, tcp_orn)
                 emit(
@@ -412,6 +407,12 @@ class Monitor:
         if direction == "downstream" and not record.picked and not record.missed:
             record.missed = True
             emit(EventType.MISSED, record)
+
+    def _grip_gap_m(self) -> float:
+        """Commanded minus measured gripper opening: below zero the fingers press (or close),
+        above zero they let go; a grip on an object wider than half the opening is a grip too.
+        Read only where a grasp is decided, not on every step."""
+        return self.robot.gripper_width_target_m - self.robot.gripper_width_m()
 
     def _opposite(self, touching: dict[int, tuple[float, float, float]]) -> bool:
         if len(self.robot.finger_links) < 2 or len(touching) < len(self.robot.finger_links):

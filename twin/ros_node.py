@@ -418,17 +418,19 @@ def run_loop(
     next_wall = time.perf_counter()
     while twin.time_s < duration - 1e-9:
         spin_once(timeout_sec=0.0)
-        while True:
-            remaining = next_wall - time.perf_counter()
-            if remaining <= 0:
-                break
-            spin_once(timeout_sec=remaining)
+        _serve_until(spin_once, next_wall)
         events = twin.advance()
         spin_once(timeout_sec=0.0)
         node.publish_step(events)
         next_wall += period
         if next_wall < time.perf_counter() - 0.25:
             next_wall = time.perf_counter()
+
+
+def _serve_until(spin_once: Callable[..., None], wall_s: float) -> None:
+    """Serve callbacks until the ``time.perf_counter()`` time ``wall_s``."""
+    while (remaining := wall_s - time.perf_counter()) > 0:
+        spin_once(timeout_sec=remaining)
 
 
 RESYNC_WAIT_S = 10.0
@@ -498,8 +500,7 @@ def _lockstep(
             node.consume_tick(tick)
         else:
             next_wall += twin.dt_s
-            while (remaining := next_wall - time.perf_counter()) > 0:
-                spin_once(timeout_sec=remaining)
+            _serve_until(spin_once, next_wall)
             spin_once(timeout_sec=0.0)
         events = twin.advance()
         node.publish_step(events)

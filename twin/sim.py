@@ -399,26 +399,16 @@ class Twin:
 
     def record_fault(self, kind: str, detail: str) -> Event:
         """Log a fault (bad command, controller crash) as an event; scores stay honest."""
-        event = Event(
-            time_s=self.time_s,
-            step=self.step_count,
-            type=EventType.FAULT,
-            object_id=0,
-            data={"kind": kind, "detail": detail},
-        )
-        self._events.append(event)
-        return event
+        return self._record(EventType.FAULT, {"kind": kind, "detail": detail})
 
     def record_controller_resumed(self, outage_s: float) -> Event:
         """Log that a controller acknowledges ticks again after ``outage_s`` of sim time without
         one (lockstep)."""
-        event = Event(
-            time_s=self.time_s,
-            step=self.step_count,
-            type=EventType.CONTROLLER_RESUMED,
-            object_id=0,
-            data={"outage_s": outage_s},
-        )
+        return self._record(EventType.CONTROLLER_RESUMED, {"outage_s": outage_s})
+
+    def _record(self, kind: EventType, data: dict[str, object]) -> Event:
+        """Log an event about no object, now."""
+        event = Event(time_s=self.time_s, step=self.step_count, type=kind, object_id=0, data=data)
         self._events.append(event)
         return event
 
