@@ -112,3 +112,25 @@ def test_bench_prints_figures(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     ):
         assert key in result
     assert result["images"] == 2
+
+
+def test_bench_measures_in_ram_and_on_disk_by_default(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from meshgen.cmd_bench import _ram_dir
+
+    assert main(["sample", "--out", str(tmp_path / "s"), "--images", "2"]) == 0
+    capsys.readouterr()
+    assert main(["bench", "meshgen", str(tmp_path / "s"), "--json", "--repeats", "1"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    ram = _ram_dir()
+    if ram is None:
+        assert "disk" not in result
+        return
+    assert result["tmp_dir"] == str(ram)
+    assert result["file_system"] == "tmpfs"
+    disk = result["disk"]
+    assert disk["tmp_dir"] != str(ram)
+    assert disk["ms_per_object"] > 0
+    assert disk["baseline_ms_per_object"] > 0
+    assert disk["file_create_us"] > 0
