@@ -6,8 +6,10 @@ TCP volume has overlapped the object continuously for the dwell time (0.6 s defa
 fingers touch it from opposite sides (contact normals pointing against each other) while the
 gripper presses: its commanded opening is narrower than its measured one (by more than
 ``GRIP_TOLERANCE_M``; the fingers stop on the object while the target lies inside it, whatever
-the object's width). The object is then held by a fixed constraint to the TCP link; commanding
-the gripper wider than it is releases it.
+the object's width). The object is then held by a fixed constraint to the TCP link; it is
+released once the gripper no longer presses: commanded no narrower than measured, within half
+the tolerance (so a jaw-wide object, which holds the fingers at full opening where commanding
+"open" cannot exceed the measured opening, is let go too).
 
 Fates and events:
 
@@ -292,7 +294,7 @@ class Monitor:
                 record.next_poll_step = step + max(1, int(margin_m / reach_m))
                 continue
             # -- release of a held object
-            if record.held and self._grip_gap_m() > GRIP_TOLERANCE_M:
+            if record.held and self._grip_gap_m() > -0.5 * GRIP_TOLERANCE_M:
                 self._release(record)
                 if not any(b.contains_xy(x, y) for b in self.cell.bins):
                     emit(EventType.PICK_DROPPED, record, position_m=list(pos))
@@ -409,8 +411,9 @@ class Monitor:
             emit(EventType.MISSED, record)
 
     def _grip_gap_m(self) -> float:
-        """Commanded minus measured gripper opening: below zero the fingers press (or close),
-        above zero they let go; a grip on an object wider than half the opening is a grip too.
+        """Commanded minus measured gripper opening: below ``-GRIP_TOLERANCE_M`` the fingers press
+        (a grip on an object wider than half the opening is a grip too), above half that they
+        let go (the band between keeps a grip from flickering).
         Read only where a grasp is decided, not on every step."""
         return self.robot.gripper_width_target_m - self.robot.gripper_width_m()
 

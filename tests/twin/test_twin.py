@@ -20,6 +20,7 @@ from twin.sim import ArmCommand, Twin
 
 ONE_BOX = {"img": [(1, box_px(500, 500, 100, 50))]}  # brick, 60 x 30 mm footprint
 WIDE_BOX = {"img": [(1, box_px(500, 500, 117, 92))]}  # brick, 70 x 55 mm footprint
+FULL_BOX = {"img": [(1, box_px(500, 500, 70, 133))]}  # brick, 42 x 79.8 mm: fills the open jaw
 
 
 def _still(prefill_m: float = 1.7) -> Scenario:
@@ -115,6 +116,33 @@ def test_scripted_pick_yields_overlap_contact_pick_and_correct_bin(
     assert scores.picked == 1
     assert scores.success_rate == 1.0
     assert scores.correct_bin_ratio == 1.0
+
+
+def test_opening_fully_lets_go_of_an_object_that_fills_the_jaw(
+    mesh_polygons: Callable[..., Path],
+) -> None:
+    """An object as wide as the open gripper holds the fingers at full opening, so commanding
+    "open" cannot exceed the measured opening: the twin must still stop holding it (it used to
+    keep the object fixed to the hand for the rest of the episode)."""
+    meshes = mesh_polygons(FULL_BOX)
+    with Twin(_still(), dataset_dir=meshes) as twin:
+        obs, _ = twin.reset(seed=0)
+        (obj,) = obs.objects
+        x, y, z = obj.position_m
+        z = z + 0.5 * obj.height_m - 0.02
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.3)), gripper_width_m=0.08), 2.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.1)), gripper_width_m=0.08), 1.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=0.08), 1.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=0.07), 0.5)
+        assert twin.robot is not None
+        assert twin.robot.gripper_width_m() > 0.0795  # the object keeps the jaw open
+        _hold(twin, ArmCommand(_ik(twin, (x, y, 0.3)), gripper_width_m=0.07), 1.0)
+        held = [g.id for g in twin.observe_objects() if g.held]
+        assert held == [obj.id]
+        _hold(twin, ArmCommand(_ik(twin, (x, y, 0.3)), gripper_width_m=0.08), 0.5)
+        assert not [g.id for g in twin.observe_objects() if g.held]
+    kinds = [e.type for e in twin.events if e.object_id == obj.id]
+    assert EventType.PICK_SUCCESS in kinds
 
 
 def test_closing_without_dwell_does_not_pick(mesh_polygons: Callable[..., Path]) -> None:
