@@ -644,10 +644,11 @@ class PickController:
         """
         robot = self._cfg.robot
         class_name = self._target.class_name if self._target is not None else ""
+        length_m = self._target.length_m if self._target is not None else 0.0
         base = robot.base_position_m
         q_now = np.array(self._commander.q)
         x, y, z, yaw_now = self._planner.state.position
-        drop = self._drop_point(class_name, (x, y, z))
+        drop = self._drop_point(class_name, (x, y, z), length_m)
         turn = math.atan2(drop[1] - base[1], drop[0] - base[0]) - math.atan2(
             y - base[1], x - base[0]
         )
@@ -673,11 +674,13 @@ class PickController:
             self._drop_q = self._commander.q
         self._set_phase(Phase.CARRY, t_s)
 
-    def _drop_point(self, class_name: str, tcp_m: Vec3) -> Vec3:
-        """Where to release an object of ``class_name`` carried from ``tcp_m``.
+    def _drop_point(self, class_name: str, tcp_m: Vec3, length_m: float = 0.0) -> Vec3:
+        """Where to release an object of ``class_name``, ``length_m`` long, carried from ``tcp_m``.
 
         The class's configured drop point, moved along the line from the base by up to
-        ``pick.drop_tolerance_m`` towards the TCP's distance from the base, and raised to the
+        ``pick.drop_tolerance_m`` less half the object's length (so no part of a long object
+        ends up further than the tolerance from the drop point, over a bin's wall) towards the
+        TCP's distance from the base, and raised to the
         TCP's height if that is higher: the arm turns without folding or stretching more
         than it must. Without a bin for the class, the ready position.
         """
@@ -689,7 +692,7 @@ class PickController:
         r_drop = math.hypot(dx, dy)
         if r_drop < 1e-9:
             return configured
-        tolerance = self._cfg.pick.drop_tolerance_m
+        tolerance = max(0.0, self._cfg.pick.drop_tolerance_m - 0.5 * length_m)
         r_tcp = math.hypot(tcp_m[0] - bx, tcp_m[1] - by)
         scale = min(max(r_tcp, r_drop - tolerance), r_drop + tolerance) / r_drop
         return (bx + dx * scale, by + dy * scale, max(configured[2], tcp_m[2]))

@@ -81,6 +81,22 @@ def test_full_pick_drops_into_the_class_bin() -> None:
     assert result.max_joint_limit_violation_rad == 0.0
 
 
+def test_the_drop_point_moves_towards_the_pick_less_for_long_objects() -> None:
+    """The release point may move ``drop_tolerance_m`` towards the TCP's reach, less half the
+    object's length: a long object released off-centre would land on the bin's wall."""
+    config = ControllerConfig()
+    controller = PickController(config)
+    bx, by, bz = config.bins["brick"]
+    r_bin = math.hypot(bx, by)  # the base is at the origin
+    far = (3.0 * bx, 3.0 * by, bz)  # a TCP further out than the bin: the point moves outwards
+    tolerance = config.pick.drop_tolerance_m
+    for length_m, moved_m in ((0.0, tolerance), (0.06, tolerance - 0.03), (0.12, 0.0)):
+        x, y, z = controller._drop_point("brick", far, length_m)
+        assert math.hypot(x, y) - r_bin == pytest.approx(moved_m, abs=1e-12)
+        assert abs(x * by - y * bx) < 1e-12  # on the line from the base through the bin
+        assert z == bz
+
+
 def _track(x0: float, t_s: float = 0.0, *, vx: float = 0.4, y: float = 0.5) -> Track:
     """The track of an object that was at ``x0`` at t = 0, as estimated at ``t_s``."""
     return Track(
