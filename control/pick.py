@@ -643,8 +643,8 @@ class PickController:
         the wrist hardly moves.
         """
         robot = self._cfg.robot
-        class_name = self._target.class_name if self._target is not None else ""
-        length_m = self._target.length_m if self._target is not None else 0.0
+        target = self._target
+        class_name, length_m = ("", 0.0) if target is None else (target.class_name, target.length_m)
         base = robot.base_position_m
         q_now = np.array(self._commander.q)
         x, y, z, yaw_now = self._planner.state.position
@@ -674,15 +674,15 @@ class PickController:
             self._drop_q = self._commander.q
         self._set_phase(Phase.CARRY, t_s)
 
-    def _drop_point(self, class_name: str, tcp_m: Vec3, length_m: float = 0.0) -> Vec3:
+    def _drop_point(self, class_name: str, tcp_m: Vec3, length_m: float) -> Vec3:
         """Where to release an object of ``class_name``, ``length_m`` long, carried from ``tcp_m``.
 
-        The class's configured drop point, moved along the line from the base by up to
-        ``pick.drop_tolerance_m`` less half the object's length (so no part of a long object
-        ends up further than the tolerance from the drop point, over a bin's wall) towards the
-        TCP's distance from the base, and raised to the
-        TCP's height if that is higher: the arm turns without folding or stretching more
-        than it must. Without a bin for the class, the ready position.
+        The class's configured drop point, moved along the line from the base towards the TCP's
+        distance from the base by up to ``pick.drop_tolerance_m`` less half the object's length
+        (no part of a long object ends up further than the tolerance from the drop point, over
+        a bin's wall), and raised to the TCP's height if that is higher: the arm turns without
+        folding or stretching more than it must. Without a bin for the class, the ready
+        position.
         """
         configured = self._cfg.bins.get(class_name)
         if configured is None:

@@ -80,22 +80,6 @@ def _spread(times_s: list[float]) -> dict[str, float]:
     }
 
 
-def _ram_dir() -> Path | None:
-    """``/dev/shm`` when it is a writable RAM file system (tmpfs), else None."""
-    import os
-
-    shm = Path("/dev/shm")
-    try:
-        mounts = Path("/proc/mounts").read_text(encoding="utf-8").splitlines()
-    except OSError:
-        return None
-    for line in mounts:
-        fields = line.split()
-        if len(fields) > 2 and fields[1] == str(shm) and fields[2] == "tmpfs":
-            return shm if os.access(shm, os.W_OK | os.X_OK) else None
-    return None
-
-
 def _file_system(folder: Path) -> str:
     """The type of the file system holding ``folder`` (from ``/proc/mounts``; "" if unknown)."""
     try:
@@ -113,6 +97,16 @@ def _file_system(folder: Path) -> str:
         if inside and len(point) > len(best):
             best, kind = point, fields[2]
     return kind
+
+
+def _ram_dir() -> Path | None:
+    """``/dev/shm`` when it is a writable RAM file system (tmpfs), else None."""
+    import os
+
+    shm = Path("/dev/shm")
+    if shm.is_dir() and _file_system(shm) == "tmpfs" and os.access(shm, os.W_OK | os.X_OK):
+        return shm
+    return None
 
 
 def _measure(dataset: Path | None, parent: Path | None, repeats: int) -> dict[str, Any]:
@@ -187,22 +181,7 @@ def run(args: argparse.Namespace) -> int:
         **primary,
     }
     if ram is not None:
-        disk = _measure(args.dataset, Path(tempfile.gettempdir()), args.repeats)
-        result["disk"] = {
-            key: disk[key]
-            for key in (
-                "ms_per_image",
-                "ms_per_object",
-                "baseline_ms_per_image",
-                "baseline_ms_per_object",
-                "speedup",
-                "spread_ms",
-                "file_create_us",
-                "file_create_us_before_after",
-                "tmp_dir",
-                "file_system",
-            )
-        }
+        result["disk"] = _measure(args.dataset, Path(tempfile.gettempdir()), args.repeats)
     if args.json:
         print(json.dumps(result, sort_keys=True))
     else:

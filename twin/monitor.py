@@ -41,8 +41,12 @@ from twin.world import SpawnedBody, World
 _NEAR_TCP_M = 0.25
 
 GRIP_TOLERANCE_M = 0.0005
-"""How much narrower (wider) than the measured opening the gripper must be commanded to count
-as pressing (letting go)."""
+"""How much narrower than the measured opening the gripper must be commanded to count as
+pressing (a grip starts)."""
+
+RELEASE_GAP_M = -0.5 * GRIP_TOLERANCE_M
+"""Commanded minus measured opening above which a held object is let go: the gripper no longer
+presses. Between this and ``-GRIP_TOLERANCE_M`` a grip neither starts nor ends (no flicker)."""
 
 _MAX_SINKING_SPEED_MPS = 1.0
 """Bound on how fast the centre of mass of an object riding the belt can sink towards it."""
@@ -294,7 +298,7 @@ class Monitor:
                 record.next_poll_step = step + max(1, int(margin_m / reach_m))
                 continue
             # -- release of a held object
-            if record.held and self._grip_gap_m() > -0.5 * GRIP_TOLERANCE_M:
+            if record.held and self._grip_gap_m() > RELEASE_GAP_M:
                 self._release(record)
                 if not any(b.contains_xy(x, y) for b in self.cell.bins):
                     emit(EventType.PICK_DROPPED, record, position_m=list(pos))
@@ -412,9 +416,8 @@ class Monitor:
 
     def _grip_gap_m(self) -> float:
         """Commanded minus measured gripper opening: below ``-GRIP_TOLERANCE_M`` the fingers press
-        (a grip on an object wider than half the opening is a grip too), above half that they
-        let go (the band between keeps a grip from flickering).
-        Read only where a grasp is decided, not on every step."""
+        (a grip on an object wider than half the opening is a grip too), above
+        ``RELEASE_GAP_M`` they let go. Read only where a grasp or release is decided."""
         return self.robot.gripper_width_target_m - self.robot.gripper_width_m()
 
     def _opposite(self, touching: dict[int, tuple[float, float, float]]) -> bool:
