@@ -36,6 +36,7 @@ from twin.config import CellConfig
 from twin.events import Event, EventType
 from twin.robot import Robot
 from twin.stream import Placement
+from twin.top_view import TopView, top_view
 from twin.world import SpawnedBody, World
 
 _NEAR_TCP_M = 0.25
@@ -65,8 +66,9 @@ poses asked for (ground truth, the target metric) are always read fresh."""
 class GroundTruth:
     """The true state of one object (world frame, SI units).
 
-    ``orientation_xyzw`` is the object (mesh) frame's; ``footprint_yaw_rad`` is the world yaw of
-    the footprint's long axis (length along it, width across it).
+    ``orientation_xyzw`` is the object (mesh) frame's; ``length_m``, ``width_m`` and ``height_m``
+    are the object's own extents (footprint and extrusion, whatever way it lies); ``top_view`` is
+    what a camera above sees: the heading and extents of the face turned up.
     """
 
     id: int
@@ -76,7 +78,7 @@ class GroundTruth:
     orientation_xyzw: tuple[float, float, float, float]
     linear_velocity_mps: tuple[float, float, float]
     angular_velocity_radps: tuple[float, float, float]
-    footprint_yaw_rad: float
+    top_view: TopView
     length_m: float
     width_m: float
     area_m2: float
@@ -507,7 +509,9 @@ class Monitor:
                     orientation_xyzw=tuple(orientation),
                     linear_velocity_mps=tuple(lin),
                     angular_velocity_radps=tuple(ang),
-                    footprint_yaw_rad=yaw_of(orientation) + spec.yaw_rad,
+                    top_view=top_view(
+                        orientation, spec.yaw_rad, spec.length_m, spec.width_m, record.height_m
+                    ),
                     length_m=spec.length_m,
                     width_m=spec.width_m,
                     area_m2=spec.area_m2,
@@ -521,9 +525,3 @@ class Monitor:
                 )
             )
         return tuple(out)
-
-
-def yaw_of(quat_xyzw: tuple[float, float, float, float]) -> float:
-    """Yaw (rotation about z) of an xyzw quaternion."""
-    x, y, z, w = quat_xyzw
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

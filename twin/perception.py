@@ -3,12 +3,12 @@
 Every ``1 / rate_hz`` seconds a frame is captured from the ground truth: objects lying on the belt
 inside the camera's field of view (an x interval over the belt's width). Each detection carries
 the footprint centroid (its z at the object's underside: the belt surface, or the top of the
-object it lies on), the long-axis yaw (modulo pi), length, width and height, with Gaussian
-position and yaw noise, a per-object drop probability and a
-misclassification probability (a uniformly chosen other class). The frame is released
-``latency_s`` after capture, stamped with its capture time. ``PerceptionConfig.zero_noise()``
-gives the exact ground truth with no delay, drop or confusion. All randomness comes from the
-generator passed in (the scenario's seed tree).
+object it lies on), the long-axis yaw (modulo pi), length, width and height as seen from above
+(``twin.top_view``: an object that has tipped over shows a side), with Gaussian position and yaw
+noise, a per-object drop probability and a misclassification probability (a uniformly chosen
+other class). The frame is released ``latency_s`` after capture, stamped with its capture time.
+``PerceptionConfig.zero_noise()`` gives the exact ground truth with no delay, drop or confusion.
+All randomness comes from the generator passed in (the scenario's seed tree).
 
 Detection dropout (an injected fault): a frame captured inside a ``[start_s, end_s)`` dropout
 window is never released. Its random numbers are drawn all the same, so the frames outside the
@@ -153,7 +153,7 @@ class Perception:
             noise = self.rng.standard_normal(3)
             if drop < cfg.drop_rate:
                 continue
-            name = obj.class_name
+            name, seen = obj.class_name, obj.top_view
             if confuse < cfg.misclassification_rate and len(self.classes) > 1:
                 others = [c for c in self.classes if c != name]
                 name = others[int(pick * len(others))]
@@ -163,13 +163,11 @@ class Perception:
                     confidence=1.0,
                     x_m=x + cfg.position_noise_m * float(noise[0]),
                     y_m=y + cfg.position_noise_m * float(noise[1]),
-                    z_m=max(self.surface_z_m, obj.position_m[2] - 0.5 * obj.height_m),
-                    yaw_rad=wrap_half_pi(
-                        obj.footprint_yaw_rad + cfg.yaw_noise_rad * float(noise[2])
-                    ),
-                    length_m=obj.length_m,
-                    width_m=obj.width_m,
-                    height_m=obj.height_m,
+                    z_m=max(self.surface_z_m, obj.position_m[2] - 0.5 * seen.height_m),
+                    yaw_rad=wrap_half_pi(seen.yaw_rad + cfg.yaw_noise_rad * float(noise[2])),
+                    length_m=seen.length_m,
+                    width_m=seen.width_m,
+                    height_m=seen.height_m,
                 )
             )
         frame = DetectionFrame(

@@ -9,6 +9,7 @@ import pytest
 
 from twin.monitor import GroundTruth
 from twin.perception import Perception, PerceptionConfig, wrap_half_pi
+from twin.top_view import TopView
 
 CLASSES = ("concrete", "brick", "wood", "rubber")
 
@@ -24,7 +25,7 @@ def _object(
         orientation_xyzw=(0.0, 0.0, 0.0, 1.0),
         linear_velocity_mps=(0.4, 0.0, 0.0),
         angular_velocity_radps=(0.0, 0.0, 0.0),
-        footprint_yaw_rad=yaw,
+        top_view=TopView(yaw_rad=yaw, length_m=0.1, width_m=0.05, height_m=0.04),
         length_m=0.1,
         width_m=0.05,
         area_m2=0.005,
@@ -87,7 +88,7 @@ def test_noise_drop_and_confusion_statistics_match_the_configuration() -> None:
             obj = min(objects, key=lambda o: abs(o.position_m[0] - det.x_m))
             dx.append(det.x_m - obj.position_m[0])
             dy.append(det.y_m - obj.position_m[1])
-            dyaw.append(wrap_half_pi(det.yaw_rad - obj.footprint_yaw_rad))
+            dyaw.append(wrap_half_pi(det.yaw_rad - obj.top_view.yaw_rad))
             kept += 1
             confused += det.class_name != obj.class_name
     n = kept

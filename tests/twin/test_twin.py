@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -143,6 +144,47 @@ def test_opening_fully_lets_go_of_an_object_that_fills_the_jaw(
         assert not [g.id for g in twin.observe_objects() if g.held]
     kinds = [e.type for e in twin.events if e.object_id == obj.id]
     assert EventType.PICK_SUCCESS in kinds
+
+
+def test_an_object_tipped_onto_its_side_is_seen_by_its_side(
+    mesh_polygons: Callable[..., Path],
+) -> None:
+    """The camera sees the face turned up: a 60 x 30 mm brick rolled about its long axis (x)
+    shows its length and its height as its footprint and its 30 mm width as height (the detector
+    used to report the upright footprint at the body's Euler yaw)."""
+    meshes = mesh_polygons(ONE_BOX)
+    with Twin(_still(prefill_m=1.0), dataset_dir=meshes) as twin:
+        obs, _ = twin.reset(seed=0)
+        (obj,) = obs.objects
+        (upright,) = twin.observe_objects()
+        assert twin._monitor is not None
+        body = twin._monitor.body_of(obj.id)
+        assert body is not None
+        position, orientation = pb.getBasePositionAndOrientation(body, physicsClientId=twin.client)
+        roll = pb.getQuaternionFromEuler([np.pi / 2, 0.0, 0.0])
+        _, tipped = pb.multiplyTransforms((0, 0, 0), roll, (0, 0, 0), orientation)
+        lying_z = 0.5 * upright.width_m + 0.001
+        pb.resetBasePositionAndOrientation(
+            body, (position[0], position[1], lying_z), tipped, physicsClientId=twin.client
+        )
+        while twin.time_s < 1.0:
+            twin.advance()
+        (gt,) = twin.observe_objects()
+        seen = gt.top_view
+        assert (gt.length_m, gt.width_m, gt.height_m) == (
+            upright.length_m,
+            upright.width_m,
+            upright.height_m,
+        )
+        # the footprint is now the length (along x) by the height (across): its long side is
+        # whichever of the two is longer
+        along_x = upright.length_m >= upright.height_m
+        assert abs(math.sin(seen.yaw_rad) if along_x else math.cos(seen.yaw_rad)) < 0.02
+        assert (seen.length_m, seen.width_m) == pytest.approx(
+            sorted((upright.length_m, upright.height_m), reverse=True), abs=1e-3
+        )
+        assert seen.height_m == pytest.approx(upright.width_m, abs=1e-3)
+        assert gt.position_m[2] == pytest.approx(0.5 * upright.width_m, abs=2e-3)
 
 
 def test_closing_without_dwell_does_not_pick(mesh_polygons: Callable[..., Path]) -> None:
