@@ -353,7 +353,7 @@ class PickConfig:
     close_s: float = field(default=0.25, metadata=_meta("float"))
     close_overlap_s: float = field(default=0.0, metadata=_meta("float"))
     release_s: float = field(default=0.25, metadata=_meta("float"))
-    drop_tolerance_m: float = field(default=0.05, metadata=_meta("float"))
+    drop_tolerance_m: float = field(default=0.08, metadata=_meta("float"))
     arrive_tolerance_m: float = field(default=0.005, metadata=_meta("float"))
     arrive_speed_tolerance_mps: float = field(default=0.1, metadata=_meta("float"))
     yaw_tolerance_rad: float = field(default=0.02, metadata=_meta("float"))

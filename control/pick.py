@@ -677,25 +677,22 @@ class PickController:
     def _drop_point(self, class_name: str, tcp_m: Vec3, length_m: float) -> Vec3:
         """Where to release an object of ``class_name``, ``length_m`` long, carried from ``tcp_m``.
 
-        The class's configured drop point, moved along the line from the base towards the TCP's
-        distance from the base by up to ``pick.drop_tolerance_m`` less half the object's length
-        (no part of a long object ends up further than the tolerance from the drop point, over
-        a bin's wall), and raised to the TCP's height if that is higher: the arm turns without
-        folding or stretching more than it must. Without a bin for the class, the ready
-        position.
+        Anywhere over the square of half-width ``pick.drop_tolerance_m`` less half the object's
+        length around the class's configured drop point (the bins are axis-aligned squares, so
+        no part of the object ends up over a wall): the point of it nearest the TCP, so the base
+        turns and the arm folds no more than it must. Raised to the TCP's height if that is
+        higher. Without a bin for the class, the ready position.
         """
         configured = self._cfg.bins.get(class_name)
         if configured is None:
             return self._cfg.robot.ready_tcp_position_m
-        bx, by, _ = self._cfg.robot.base_position_m
-        dx, dy = configured[0] - bx, configured[1] - by
-        r_drop = math.hypot(dx, dy)
-        if r_drop < 1e-9:
-            return configured
-        tolerance = max(0.0, self._cfg.pick.drop_tolerance_m - 0.5 * length_m)
-        r_tcp = math.hypot(tcp_m[0] - bx, tcp_m[1] - by)
-        scale = min(max(r_tcp, r_drop - tolerance), r_drop + tolerance) / r_drop
-        return (bx + dx * scale, by + dy * scale, max(configured[2], tcp_m[2]))
+        bx, by, bz = configured
+        half = max(0.0, self._cfg.pick.drop_tolerance_m - 0.5 * length_m)
+        return (
+            min(max(tcp_m[0], bx - half), bx + half),
+            min(max(tcp_m[1], by - half), by + half),
+            max(bz, tcp_m[2]),
+        )
 
     def _gripper_width_m(self) -> float:
         opening = self._cfg.robot.gripper_max_opening_m
