@@ -33,6 +33,7 @@ import argparse
 import contextlib
 import importlib
 import json
+import math
 import os
 import re
 import signal
@@ -225,9 +226,20 @@ def partial_path(out: Path) -> Path:
 
 
 class McapRecording:
-    """An open ROS 2 MCAP file taking raw CDR messages; :meth:`close` renames it into place."""
+    """An open ROS 2 MCAP file taking raw CDR messages; :meth:`close` renames it into place.
 
-    def __init__(self, out: Path, topics: Iterable[TopicSpec], dirs: Sequence[Path] | None = None):
+    With ``flush_interval_s``, :meth:`write` also flushes once that long has passed since the
+    last flush (for a writer with no loop of its own, such as the twin node's tap).
+    """
+
+    def __init__(
+        self,
+        out: Path,
+        topics: Iterable[TopicSpec],
+        dirs: Sequence[Path] | None = None,
+        *,
+        flush_interval_s: float | None = None,
+    ):
         from mcap.writer import CompressionType, Writer
 
         if out.suffix != ".mcap":
@@ -256,6 +268,8 @@ class McapRecording:
                 metadata={"offered_qos_profiles": offered_qos_yaml(spec)},
             )
             self.counts[spec.name] = 0
+        self._flush_interval_s = flush_interval_s
+        self._next_flush = math.inf
         self.flush()
 
     def write(self, topic: str, data: bytes, log_time_ns: int) -> None:
@@ -265,10 +279,14 @@ class McapRecording:
         )
         self.counts[topic] += 1
         self.n_bytes += len(data)
+        if time.monotonic() >= self._next_flush:
+            self.flush()
 
     def flush(self) -> None:
         """Close the chunk in progress and hand everything to the operating system."""
         self._writer.flush()
+        if self._flush_interval_s is not None:
+            self._next_flush = time.monotonic() + self._flush_interval_s
 
     def close(self) -> Path:
         """Write the summary and footer, close, rename ``OUT.partial`` to ``OUT``; returns OUT."""

@@ -13,7 +13,10 @@ controller's parameter file (the scenario's ``controller``) is copied next to it
 any folder, whatever the shipped parameter files become. Each
 episode gets its own ROS domain (claimed with a lock, LOCALHOST discovery). The run folder holds
 one folder per episode (the twin's ``twin/events.jsonl`` and ``twin/summary.json``, the
-controller's stats ``controller.json``, every process's log), ``episodes.json`` and
+recording of every topic ``recording.mcap``, written by the twin node itself from the bytes it
+sends and receives (``recording.mcap.partial`` while it runs, or after a crash; see
+:mod:`experiments.record`), the controller's stats ``controller.json``, every process's log),
+``episodes.json`` and
 ``episodes.csv`` with the per-episode metrics, and ``run.json`` with their means, the dataset
 and the scenario path.
 
@@ -224,6 +227,8 @@ def twin_command(options: RunOptions, episode: EpisodeSpec) -> list[str]:
         str(options.ack_timeout_s),
         "--out",
         str(episode.folder / "twin"),
+        "--record",
+        str(episode.folder / "recording.mcap"),
     ]
 
 
@@ -236,20 +241,6 @@ def controller_command(options: RunOptions, episode: EpisodeSpec, instance: int 
     if options.mode == "lockstep":
         cmd.append("--lockstep")
     return cmd
-
-
-def side_processes(options: RunOptions, episode: EpisodeSpec) -> dict[str, list[str]]:
-    """Extra processes of an episode besides the twin and the controller, by log name.
-
-    They start after the twin and the controller and are stopped (SIGTERM) when the twin ends.
-    The MCAP recorder of every topic writes ``recording.mcap`` (``recording.mcap.partial``
-    while it runs, and after a crash; see :mod:`experiments.record`). It joins late enough to
-    miss the first few ticks; ``/events`` is transient local, so it still gets every event.
-    """
-    from experiments.record import recorder_command
-
-    del options
-    return {"recorder": recorder_command(episode.folder / "recording.mcap")}
 
 
 def _controller_stats(folder: Path) -> list[dict[str, Any]]:
@@ -391,7 +382,6 @@ def run_episode(
 
         twin = start("twin", twin_command(options, episode))
         controller = start("controller", controller_command(options, episode))
-        others = [start(n, c) for n, c in side_processes(options, episode).items()]
         watch = ClockWatch(domain.domain_id) if restarts or progress else None
         wall0 = time.monotonic()
         try:
@@ -414,7 +404,7 @@ def run_episode(
         finally:
             if watch is not None:
                 watch.close()
-            _stop([controller, *others, twin])
+            _stop([controller, twin])
     summary = episode.folder / "twin" / "summary.json"
     if code != 0 or not summary.is_file():
         log = (episode.folder / "twin.log").read_text(errors="replace")[-2000:]

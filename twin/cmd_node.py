@@ -8,6 +8,10 @@ Example (two shells, same ``ROS_DOMAIN_ID``)::
 The episode log (``events.jsonl``, ``summary.json``) and the node's telemetry
 (``telemetry.json``: round-trip latency, step rate, belt setpoint and speed; see
 :mod:`twin.telemetry`) go to ``--out`` when the episode ends, also when it is interrupted.
+``--record OUT.mcap`` writes every message the node publishes or receives (every topic of
+``docs/interfaces.md``) as the bytes on the wire, from inside the node: no recorder process to
+start, match and feed (``cdw-twin run`` records its episodes this way; ``cdw-twin record`` is
+the stand-alone recorder for a cell the twin does not run).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from types import FrameType
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from experiments.record import McapRecording
     from twin.scenario import Scenario
     from twin.sim import Twin
 
@@ -44,6 +49,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--perception", choices=("default", "zero"), default="default")
     parser.add_argument("--ack-timeout", type=float, default=2.0, help="lockstep wait (s)")
     parser.add_argument("--out", type=Path, default=None, help="episode log folder")
+    parser.add_argument(
+        "--record",
+        type=Path,
+        default=None,
+        metavar="MCAP",
+        help="record every message the node sends or receives to this MCAP file",
+    )
 
 
 def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path]:
@@ -89,6 +101,19 @@ def _final_state(twin: Twin) -> dict[str, object]:
     }
 
 
+def _open_recording(out: Path | None) -> McapRecording | None:
+    """The episode's MCAP of every topic, written as ``OUT.partial`` until it is closed.
+
+    Chunks are flushed every 0.5 s, so a killed twin leaves a readable ``OUT.partial`` (see
+    :mod:`experiments.record`).
+    """
+    if out is None:
+        return None
+    from experiments.record import DEFAULT_FLUSH_INTERVAL_S, TOPICS, McapRecording
+
+    return McapRecording(out, TOPICS, flush_interval_s=DEFAULT_FLUSH_INTERVAL_S)
+
+
 def run(args: argparse.Namespace) -> int:
     """Run one episode as a ROS 2 node."""
     import rclpy
@@ -114,8 +139,13 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     with Twin(scenario, dataset_dir=dataset, perception=perception) as twin:
         twin.reset()
+        recording = _open_recording(args.record)
         rclpy.init()
-        node = TwinNode(twin, lockstep=args.mode == "lockstep")
+        node = TwinNode(
+            twin,
+            lockstep=args.mode == "lockstep",
+            tap=None if recording is None else recording.write,
+        )
         executor = make_executor()
         executor.add_node(node)
         wall0 = time.perf_counter()
@@ -125,6 +155,8 @@ def run(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             interrupted = True
         wall = time.perf_counter() - wall0
+        if recording is not None:
+            recording.close()
         twin.targets.finish(twin.time_s)
         scores = twin.scores()
         summary = {

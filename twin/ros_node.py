@@ -5,6 +5,10 @@ here. Topics, types, rates and QoS are documented in ``docs/interfaces.md``. The
 thread: it serves callbacks (commands, pings) while waiting for the next physics step, so a ping
 is echoed at once, from inside the step loop.
 
+With a tap (:data:`Tap`), every message the node publishes is serialized once, published as
+those bytes and handed to the tap; every message it subscribes to arrives as bytes, goes to the
+tap and is deserialized for its callback. The tap sees the whole contract, both directions.
+
 Modes: ``realtime`` paces the physics to the wall clock; ``lockstep`` steps tick k+1 only when the
 controller has acknowledged tick k (see the LockstepTick/StepAck handshake in the docs).
 """
@@ -37,6 +41,7 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
@@ -54,6 +59,11 @@ from twin.events import Event
 from twin.perception import DetectionFrame
 from twin.sim import ArmCommand, Twin
 from twin.telemetry import TelemetryRecorder
+
+Tap = Callable[[str, bytes, int], None]
+"""Takes every message the node sends or receives: topic, serialized CDR bytes, wall time (ns
+since the Unix epoch) of the send or receipt. ``cdw-twin run`` records the episode's MCAP this
+way, in the twin's process (see ``twin-node --record``)."""
 
 
 def _qos(depth: int, *, reliable: bool = True, latched: bool = False) -> QoSProfile:
@@ -97,10 +107,17 @@ class TwinNode(Node):
     """Publishes the twin's state and takes commands; :func:`run_loop` drives it."""
 
     def __init__(
-        self, twin: Twin, *, lockstep: bool, state_every: int = 4, ground_truth_every: int = 8
+        self,
+        twin: Twin,
+        *,
+        lockstep: bool,
+        state_every: int = 4,
+        ground_truth_every: int = 8,
+        tap: Tap | None = None,
     ) -> None:
         super().__init__("cdw_twin")
         self.twin = twin
+        self._tap = tap
         self.lockstep = lockstep
         self.state_every = state_every
         self.ground_truth_every = ground_truth_every
@@ -122,25 +139,46 @@ class TwinNode(Node):
         self.pub_tick = self.create_publisher(LockstepTick, "/lockstep/tick", STREAM_QOS)
         self.pub_faults = self.create_publisher(String, "/twin/faults", STREAM_QOS)
         self._command_subs = (
-            self.create_subscription(
+            self._subscribe(
                 JointTrajectory, "/arm_controller/joint_trajectory", self._on_trajectory, STATE_QOS
             ),
-            self.create_subscription(Float64, "/gripper/command", self._on_gripper, STATE_QOS),
-            self.create_subscription(
-                Float64, "/conveyor/speed_setpoint", self._on_setpoint, STATE_QOS
-            ),
-            self.create_subscription(PickTarget, "/controller/target", self._on_target, STATE_QOS),
+            self._subscribe(Float64, "/gripper/command", self._on_gripper, STATE_QOS),
+            self._subscribe(Float64, "/conveyor/speed_setpoint", self._on_setpoint, STATE_QOS),
+            self._subscribe(PickTarget, "/controller/target", self._on_target, STATE_QOS),
         )
-        self.create_subscription(
-            SortingPriorities, "/sorting/priorities", self._on_priorities, LATCHED_QOS
-        )
-        self.create_subscription(Ping, "/ping", self._on_ping, STREAM_QOS)
-        self.sub_ack = self.create_subscription(StepAck, "/lockstep/ack", self._on_ack, STREAM_QOS)
+        self._subscribe(SortingPriorities, "/sorting/priorities", self._on_priorities, LATCHED_QOS)
+        self._subscribe(Ping, "/ping", self._on_ping, STREAM_QOS)
+        self.sub_ack = self._subscribe(StepAck, "/lockstep/ack", self._on_ack, STREAM_QOS)
         assert twin.robot is not None
         robot = twin.robot
         self._arm_names = list(twin.cell.robot.arm_joints)
         self._joint_names = self._arm_names + list(twin.cell.robot.finger_joints)
         self._limits = robot.limits
+
+    # -- the wire: every message in or out also goes to the tap (the episode's recording) ---
+    def _send(self, publisher: Any, msg: Any) -> None:
+        """Publish ``msg``; with a tap, serialize it once and hand the same bytes to both."""
+        if self._tap is None:
+            publisher.publish(msg)
+            return
+        data = serialize_message(msg)
+        publisher.publish(data)
+        self._tap(publisher.topic_name, data, time.time_ns())
+
+    def _subscribe(
+        self, msg_type: Any, topic: str, callback: Callable[[Any], None], qos: QoSProfile
+    ) -> Any:
+        """Subscribe ``callback``; with a tap, take the serialized bytes and record them too."""
+        tap = self._tap
+        if tap is None:
+            return self.create_subscription(msg_type, topic, callback, qos)
+
+        def on_bytes(data: bytes) -> None:
+            received_ns = time.time_ns()
+            callback(deserialize_message(data, msg_type))  # first: a ping's echo waits for nothing
+            tap(topic, data, received_ns)
+
+        return self.create_subscription(msg_type, topic, on_bytes, qos, raw=True)
 
     # -- commands ---------------------------------------------------------------------------
     def _received(self) -> None:
@@ -152,7 +190,7 @@ class TwinNode(Node):
         self.counters.rejected[rejected.reason] += 1
         text = f"{topic}: rejected ({rejected.reason}): {rejected.detail}"
         self.get_logger().error(text)
-        self.pub_faults.publish(String(data=text))
+        self._send(self.pub_faults, String(data=text))
         self.publish_event(self.twin.record_fault(rejected.reason, text))
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
@@ -210,7 +248,7 @@ class TwinNode(Node):
     def _on_ping(self, msg: Ping) -> None:
         msg.sim_step = self.twin.step_count
         msg.echo_ns = time.monotonic_ns()
-        self.pub_echo.publish(msg)
+        self._send(self.pub_echo, msg)
 
     def _on_ack(self, msg: StepAck) -> None:
         tick = int(msg.tick)
@@ -270,7 +308,7 @@ class TwinNode(Node):
         twin = self.twin
         step = twin.step_count
         stamp = to_time(twin.time_s)
-        self.pub_clock.publish(Clock(clock=stamp))
+        self._send(self.pub_clock, Clock(clock=stamp))
         robot = twin.robot
         assert robot is not None
         q, qd = robot.joint_state()
@@ -284,7 +322,7 @@ class TwinNode(Node):
         wall_s = time.perf_counter()
         self.telemetry.on_step(twin.time_s, wall_s)
         self.telemetry.on_state_published(twin.time_s, wall_s)
-        self.pub_joints.publish(joints)
+        self._send(self.pub_joints, joints)
         self._count("/joint_states", stamp)
         pos, orn = twin.tcp_pose
         pose = PoseStamped()
@@ -293,18 +331,21 @@ class TwinNode(Node):
         pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = pos
         o = pose.pose.orientation
         o.x, o.y, o.z, o.w = orn
-        self.pub_tcp.publish(pose)
+        self._send(self.pub_tcp, pose)
         if step % self.state_every == 0:
             self.publish_belt(stamp)
         for frame in twin.take_detections():
             self.publish_detections(frame)
-        if step % self.ground_truth_every == 0 and self.pub_gt.get_subscription_count() > 0:
+        if step % self.ground_truth_every == 0 and (
+            self._tap is not None or self.pub_gt.get_subscription_count() > 0
+        ):
             self.publish_ground_truth(stamp)
         for event in events:
             self.publish_event(event)
         if self.lockstep:
             counts, last = self._tick_counts, self._last_stamp_ns
-            self.pub_tick.publish(
+            self._send(
+                self.pub_tick,
                 LockstepTick(
                     tick=step,
                     stamp=stamp,
@@ -314,7 +355,7 @@ class TwinNode(Node):
                     last_joint_state_ns=last.get("/joint_states", -1),
                     last_belt_state_ns=last.get("/conveyor/state", -1),
                     last_detections_ns=last.get("/objects/detections", -1),
-                )
+                ),
             )
         self._tick_counts = Counter()
 
@@ -332,7 +373,7 @@ class TwinNode(Node):
         )
         msg.header.stamp = stamp
         msg.header.frame_id = "world"
-        self.pub_belt.publish(msg)
+        self._send(self.pub_belt, msg)
         self.telemetry.on_belt(twin.time_s, twin.setpoint_mps, belt.belt_speed_mps)
         self._count("/conveyor/state", stamp)
 
@@ -352,7 +393,7 @@ class TwinNode(Node):
             )
             det.position.x, det.position.y, det.position.z = d.x_m, d.y_m, d.z_m
             msg.detections.append(det)
-        self.pub_det.publish(msg)
+        self._send(self.pub_det, msg)
         self._count("/objects/detections", msg.header.stamp)
 
     def publish_ground_truth(self, stamp: TimeMsg) -> None:
@@ -382,7 +423,7 @@ class TwinNode(Node):
             lin.x, lin.y, lin.z = gt.linear_velocity_mps
             ang.x, ang.y, ang.z = gt.angular_velocity_radps
             msg.objects.append(state)
-        self.pub_gt.publish(msg)
+        self._send(self.pub_gt, msg)
 
     def publish_event(self, event: Event) -> None:
         """``/events``."""
@@ -393,7 +434,7 @@ class TwinNode(Node):
             detail=json.dumps(event.data),
         )
         msg.header.stamp = to_time(event.time_s)
-        self.pub_events.publish(msg)
+        self._send(self.pub_events, msg)
 
 
 def run_loop(

@@ -70,11 +70,25 @@ def test_two_episodes_end_to_end(builtin_meshes: Path, tmp_path: Path) -> None:
     copy = controller_params(written.controller, out)
     assert copy == (out / "controller.yaml").resolve()
     assert copy.read_bytes() == DEFAULT_PARAMS.read_bytes()
+    from experiments.offline import offline_metrics
+
     for i in range(2):
         summary = _json(out / f"ep00{i}" / "twin" / "summary.json")
         assert summary["sim_seconds"] == pytest.approx(3.0)
         assert summary["lockstep_timeouts"] == 0
         assert (out / f"ep00{i}" / "controller.json").is_file()
+        # the twin recorded every message it sent and received, from its first tick to its last
+        recording = out / f"ep00{i}" / "recording.mcap"
+        assert not recording.with_name("recording.mcap.partial").exists()
+        offline = offline_metrics(recording)
+        assert offline["complete"] is True
+        assert offline["scores"] == summary["scores"]
+        counts = offline["message_counts"]
+        for topic, n in summary["published"].items():
+            assert counts[topic] == n, topic
+        assert counts["/lockstep/tick"] == counts["/clock"] == counts["/joint_states"]
+        commands = ("/arm_controller/joint_trajectory", "/gripper/command", "/controller/target")
+        assert sum(counts.get(t, 0) for t in commands) == summary["received_commands"] > 0
 
 
 def test_a_bad_scenario_is_rejected_before_anything_starts(tmp_path: Path) -> None:
