@@ -66,8 +66,9 @@ def _rel(path: Path, root: Path) -> str:
 
 def _image_index(dataset: Path) -> dict[str, Path]:
     images: dict[str, Path] = {}
-    for path in sorted(dataset.rglob("*")):
-        if path.suffix.lower() in IMAGE_SUFFIXES and path.is_file():
+    named = sorted(p for p in dataset.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
+    for path in named:
+        if path.is_file():
             images.setdefault(path.stem, path)
     return images
 
@@ -158,16 +159,18 @@ def _labelme_size(path: Path) -> tuple[int, int] | None:
     return None
 
 
-def _detect(dataset: Path) -> str:
+def _detect(dataset: Path) -> tuple[str, list[Path]]:
+    """The format ``auto`` resolves to, with the labelme files when that format is labelme."""
     if _coco_files(dataset):
-        return "coco"
+        return "coco", []
     yolo = _yolo_label_files(dataset) if (dataset / "data.yaml").is_file() else []
     if yolo and _image_index(dataset):
-        return "yolo"
-    if _labelme_files(dataset):
-        return "labelme"
+        return "yolo", []
+    labelme = _labelme_files(dataset)
+    if labelme:
+        return "labelme", labelme
     if yolo:
-        return "yolo"
+        return "yolo", []
     msg = (
         f"{dataset}: no annotations found (looked for COCO JSON, data.yaml + labels/*.txt, "
         "labelme/*.json)"
@@ -185,7 +188,7 @@ def discover(
     if fmt not in FORMATS:
         msg = f"--format: unknown format {fmt!r}, expected one of {', '.join(FORMATS)}"
         raise DatasetError(msg)
-    resolved = _detect(dataset) if fmt == "auto" else fmt
+    resolved, labelme_files = _detect(dataset) if fmt == "auto" else (fmt, [])
     skips: list[Skip] = []
     sources: list[ImageSource] = []
     if resolved == "yolo":
@@ -208,7 +211,7 @@ def discover(
     elif resolved == "labelme":
         sources = [
             ImageSource(fmt="labelme", stem=p.stem, path=p, size_px=image_size)
-            for p in _labelme_files(dataset)
+            for p in labelme_files or _labelme_files(dataset)
         ]
     else:
         files = _coco_files(dataset)
@@ -415,11 +418,13 @@ def _checked_points(
     if live.any():
         at = starts[live]
         if points.dtype.kind == "f":
-            finite[live] = np.logical_and.reduceat(np.isfinite(points).all(axis=1), at)
+            both = np.isfinite(points[:, 0]) & np.isfinite(points[:, 1])
+            finite[live] = np.logical_and.reduceat(both, at)
         margin = np.array([OUT_OF_RANGE_FRACTION * width, OUT_OF_RANGE_FRACTION * height])
         low = np.minimum.reduceat(points, at) >= -margin
         high = np.maximum.reduceat(points, at) <= np.array([width, height]) + margin
-        inside[live] = (low & high).all(axis=1)
+        within = low & high
+        inside[live] = within[:, 0] & within[:, 1]
     as_float = points.astype(np.float64)
     out: list[tuple[np.ndarray | None, str, str]] = []
     for start, end, size, ok, within in zip(

@@ -14,7 +14,8 @@ OBJ text is built from strings, not per line: the ring's vertex lines are format
 one ``%``-format and shared by the mesh and the convex pieces (a piece's vertices are ring
 vertices); face index text for the side quads of an ``n``-prism and for a convex ``k``-piece
 at a given vertex offset depends only on those integers and is cached for the run
-(:func:`clear_text_caches` empties the caches; the pipeline calls it at the start of each run).
+(:func:`clear_text_caches` empties the caches; the pipeline calls it at the start of each run);
+the caps of a batch of prisms are numbered in one array operation (:func:`caps_texts`).
 """
 
 from __future__ import annotations
@@ -53,7 +54,8 @@ def triangulate_many(rings: list[FloatArray]) -> list[IntArray]:
 
     Gives exactly what :func:`triangulate` gives for each ring (same triangles, same order, each
     triangle with a clockwise result reversed); only the orientation check, which costs more
-    than earcut itself on small rings, is vectorised over all rings together.
+    than earcut itself on small rings, is vectorised over all rings together, on coordinate
+    columns (same products as :func:`triangulate`; a reversed ``(a, b, c)`` is ``(c, b, a)``).
     """
     if not rings:
         return []
@@ -68,11 +70,11 @@ def triangulate_many(rings: list[FloatArray]) -> list[IntArray]:
     sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=len(rings))
     shift = np.repeat(np.cumsum(sizes) - sizes, counts)[:, None]
     faces = np.concatenate(raw).reshape(-1, 3) + shift
-    corners = np.concatenate(rings)[faces]
-    d1 = corners[:, 1] - corners[:, 0]
-    d2 = corners[:, 2] - corners[:, 0]
-    flip = d1[:, 0] * d2[:, 1] < d1[:, 1] * d2[:, 0]
-    faces[flip] = faces[flip][:, ::-1]
+    pts = np.concatenate(rings)
+    x, y = pts[:, 0], pts[:, 1]
+    a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
+    flip = (x[b] - x[a]) * (y[c] - y[a]) < (y[b] - y[a]) * (x[c] - x[a])
+    faces[:, 0], faces[:, 2] = np.where(flip, c, a), np.where(flip, a, c)
     faces -= shift
     return split_rows(faces, counts)
 
@@ -140,13 +142,13 @@ def diagonals_many(tris_list: list[IntArray], sizes: list[int]) -> list[tuple[In
     found = sorted_keys[at] == twin_keys
     first, second = candidates[found], order[at[found]]
     edge_ends = np.cumsum(counts)
-    per_ring = np.searchsorted(first, edge_ends).tolist()
+    ring_ends = np.searchsorted(first, edge_ends)
+    found_per_ring = np.diff(ring_ends, prepend=0)
+    local = np.repeat(edge_ends - counts, found_per_ring)
+    first, second = first - local, second - local
+    per_ring = ring_ends.tolist()
     starts = [0, *per_ring[:-1]]
-    offsets = (edge_ends - counts).tolist()
-    return [
-        (first[a:b] - off, second[a:b] - off)
-        for a, b, off in zip(starts, per_ring, offsets, strict=True)
-    ]
+    return [(first[a:b], second[a:b]) for a, b in zip(starts, per_ring, strict=True)]
 
 
 _NEXT_IN_TRIANGLE: list[int] = []
@@ -265,23 +267,54 @@ def vertex_blocks(ring: FloatArray, half_m: float, up: str) -> tuple[str, str]:
     return text.replace("|", f" {-half_m:.6f} "), text.replace("|", f" {half_m:.6f} ")
 
 
+def sides_text(n: int) -> str:
+    """OBJ ``f`` lines of the side walls of an ``n``-prism (as :func:`extrude`, 1-based).
+
+    Per ring edge ``i -> j``: ``(i, j, j + n)`` and ``(i, j + n, i + n)``. Cached per ``n`` for
+    the run; built from a plain list, which for rings this small beats building it in numpy.
+    """
+    sides = _SIDES_TEXT.get(n)
+    if sides is None:
+        flat: list[int] = []
+        for i in range(1, n + 1):
+            j = i % n + 1
+            flat += (i, j, j + n, i, j + n, i + n)
+        sides = ("f %d %d %d\n" * (2 * n)) % tuple(flat)
+        if len(_SIDES_TEXT) < _CACHE_LIMIT:
+            _SIDES_TEXT[n] = sides
+    return sides
+
+
 def prism_faces_text(tris: IntArray, n: int) -> str:
     """OBJ ``f`` lines of the prism :func:`extrude` builds (same faces, same order, 1-based)."""
     caps = np.empty((2 * len(tris), 3), dtype=np.int64)
     caps[: len(tris)] = tris[:, ::-1]
     caps[len(tris) :] = tris + n
     caps += 1
-    sides = _SIDES_TEXT.get(n)
-    if sides is None:
-        i = np.arange(n, dtype=np.int64)
-        j = np.concatenate((i[1:], i[:1]))
-        quads = np.empty((2 * n, 3), dtype=np.int64)
-        quads[0::2] = np.stack((i, j, j + n), axis=1)
-        quads[1::2] = np.stack((i, j + n, i + n), axis=1)
-        sides = _faces_text(quads + 1)
-        if len(_SIDES_TEXT) < _CACHE_LIMIT:
-            _SIDES_TEXT[n] = sides
-    return _faces_text(caps) + sides
+    return _faces_text(caps) + sides_text(n)
+
+
+def caps_texts(tris_list: list[IntArray], sizes: list[int]) -> list[str]:
+    """OBJ ``f`` lines of both caps of many prisms: what :func:`prism_faces_text` writes first.
+
+    Per prism over ``sizes[k]`` points: the bottom cap (``tris`` reversed, facing down), then
+    the top cap (``tris + n``), 1-based. The index arithmetic is done once for all prisms and
+    converted to Python ints in one go; each prism's text is then one ``%`` of its slices.
+    """
+    if not tris_list:
+        return []
+    counts = [len(t) for t in tris_list]
+    faces = np.concatenate(tris_list)
+    bottom: list[int] = (faces[:, ::-1] + 1).ravel().tolist()
+    shift = np.repeat(np.array(sizes, dtype=np.int64) + 1, counts)
+    top: list[int] = (faces + shift[:, None]).ravel().tolist()
+    texts: list[str] = []
+    start = 0
+    for m in counts:
+        stop = start + 3 * m
+        texts.append(("f %d %d %d\n" * (2 * m)) % (*bottom[start:stop], *top[start:stop]))
+        start = stop
+    return texts
 
 
 def _piece_pattern(k: int) -> IntArray:

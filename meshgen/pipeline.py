@@ -55,11 +55,12 @@ from meshgen.footprint import (
 from meshgen.loaders import ImageSource, discover, load_source
 from meshgen.mesh import (
     IntArray,
+    caps_texts,
     clear_text_caches,
     diagonals_many,
     hertel_mehlhorn,
     pieces_text,
-    prism_faces_text,
+    sides_text,
     triangulate_many,
     vertex_blocks,
 )
@@ -177,6 +178,7 @@ def _mesh_object(
     height: float,
     ring: FloatArray,
     tris: IntArray,
+    caps: str,
     diagonals: tuple[IntArray, IntArray] | None,
     whole_px: bool,
     config: MeshgenConfig,
@@ -187,7 +189,8 @@ def _mesh_object(
 
     The caller computes in batches: ``height`` (:func:`object_heights_m`), ``ring``, the
     ``(n, 2)`` footprint relative to its centroid, ``tris``, its earcut triangles
-    (:func:`meshgen.mesh.triangulate_many`), and for a concave footprint the ``diagonals`` of
+    (:func:`meshgen.mesh.triangulate_many`), ``caps``, the face lines of both caps
+    (:func:`meshgen.mesh.caps_texts`), and for a concave footprint the ``diagonals`` of
     that triangulation (:func:`meshgen.mesh.diagonals_many`); ``whole_px`` tells whether its
     pixel polygon holds whole numbers only (:func:`meshgen.records.whole_pixels`).
     """
@@ -201,7 +204,7 @@ def _mesh_object(
     header = f"# cdw-twin meshgen {object_id}\nmtllib ../materials.mtl\nusemtl {spec.name}\n"
     sink.write(
         f"{folder}/{object_id}.obj",
-        f"{header}o {object_id}\n{bottom}{top}{prism_faces_text(tris, n)}",
+        f"{header}o {object_id}\n{bottom}{top}{caps}{sides_text(n)}",
     )
     convex_path = ""
     n_pieces = 1
@@ -298,6 +301,16 @@ def _select(
     return skips, kept, kept_rings
 
 
+def _local_rings(footprints: list[Footprint]) -> list[FloatArray]:
+    """Each footprint's ring relative to its centroid (the mesh frame), in one subtraction."""
+    if not footprints:
+        return []
+    sizes = np.fromiter((len(fp.ring_m) for fp in footprints), dtype=np.int64)
+    centroids = np.array([fp.centroid_m for fp in footprints], dtype=np.float64)
+    points = np.concatenate([fp.ring_m for fp in footprints])
+    return split_rows(points - np.repeat(centroids, sizes, axis=0), sizes)
+
+
 def _scene_json(
     ann: ImageAnnotation, config: MeshgenConfig, skips: list[Skip], metas: list[str]
 ) -> str:
@@ -356,21 +369,22 @@ def mesh_images(
     heights = iter(
         object_heights_m(config.seed, [(anns[t[0]].stem, t[2].index, t[4]) for t, _ in good])
     )
-    local_rings = [fp.ring_m - np.array(fp.centroid_m) for _, fp in good]
+    local_rings = _local_rings([fp for _, fp in good])
     triangles = triangulate_many(local_rings)
+    caps = caps_texts(triangles, [len(r) for r in local_rings])
     concave = [k for k, (_, fp) in enumerate(good) if not fp.convex]
     found = diagonals_many([triangles[k] for k in concave], [len(local_rings[k]) for k in concave])
     diagonals: list[tuple[IntArray, IntArray] | None] = [None] * len(good)
     for k, pair in zip(concave, found, strict=True):
         diagonals[k] = pair
     wholes = whole_pixels([t[2].points_px for t, _ in good])
-    shapes = iter(zip(local_rings, triangles, diagonals, wholes, strict=True))
+    shapes = iter(zip(local_rings, triangles, caps, diagonals, wholes, strict=True))
     for (img, pos, poly, class_id, spec), fp in zip(kept, footprints, strict=True):
         ann = anns[img]
         try:
             if isinstance(fp, FootprintRejected):
                 raise fp
-            ring, tris, diags, whole = next(shapes)
+            ring, tris, cap_faces, diags, whole = next(shapes)
             record, meta = _mesh_object(
                 ann,
                 poly,
@@ -380,6 +394,7 @@ def mesh_images(
                 height=next(heights),
                 ring=ring,
                 tris=tris,
+                caps=cap_faces,
                 diagonals=diags,
                 whole_px=whole,
                 config=config,
@@ -416,8 +431,14 @@ def mesh_image(ann: ImageAnnotation, config: MeshgenConfig, out: Path) -> ImageR
     return mesh_images([ann], config, out)[0]
 
 
-CHUNK_IMAGES = 16
-"""Images meshed together (one batch of vectorised footprint work) per job."""
+CHUNK_IMAGES = 32
+"""Images meshed together (one batch of vectorised footprint work) per job.
+
+Each batch pays a fixed cost (a few hundred numpy and GEOS calls), so larger batches are
+cheaper per object; the batches after the first are parsed while the writer thread is still
+creating the files of the earlier ones (which matters on a slow file system). On the 60-image
+real sample 32 (two batches) measured about as fast as one batch and clearly faster than 16.
+"""
 
 
 def _process(

@@ -7,8 +7,17 @@ from typing import Any
 import numpy as np
 import pytest
 
+from meshgen import footprint
+from meshgen.footprint import _min_area_rectangles, _ragged_polygons, min_area_rectangle
 from meshgen.loaders import _checked_points, points_one_by_one
-from meshgen.mesh import diagonals_many, triangulate
+from meshgen.mesh import (
+    caps_texts,
+    diagonals_many,
+    extrude,
+    prism_faces_text,
+    sides_text,
+    triangulate,
+)
 from meshgen.ragged import split_rows
 
 
@@ -37,6 +46,37 @@ def test_diagonals_many_matches_one_ring_at_a_time() -> None:
         assert list(zip(first.tolist(), second.tolist(), strict=True)) == want
         assert len(want) == len(ring) - 3  # a triangulated n-gon has n - 3 diagonals
     assert diagonals_many([], []) == []
+
+
+def test_prism_face_texts_match_extrude() -> None:
+    rings = [_star(n, seed) for seed, n in enumerate((3, 4, 7, 12, 30, 5, 64))]
+    tris = [triangulate(r) for r in rings]
+    caps = caps_texts(tris, [len(r) for r in rings])
+    assert len(caps) == len(rings)
+    for ring, t, cap in zip(rings, tris, caps, strict=True):
+        _, faces = extrude(ring, t, 1.0)
+        want = "".join(f"f {a} {b} {c}\n" for a, b, c in (faces + 1).tolist())
+        assert cap + sides_text(len(ring)) == want
+        assert prism_faces_text(t, len(ring)) == want
+    assert caps_texts([], []) == []
+
+
+def test_min_area_rectangles_match_one_ring_at_a_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    # more rings than one caliper group, hulls of very different sizes
+    rings = [
+        (0.01 + seed % 7) * _star(n, seed)
+        for seed, n in enumerate([3, 4, 5, 8, 13, 21, 34, 55, 80] * 20)
+    ]
+    polys = _ragged_polygons(rings)
+    grouped = _min_area_rectangles(rings, polys)
+    assert len(rings) > footprint.CALIPER_GROUP
+    monkeypatch.setattr(footprint, "CALIPER_GROUP", len(rings))
+    assert _min_area_rectangles(rings, polys) == grouped  # padding never changes a result
+    for ring, (yaw, length, width) in zip(rings, grouped, strict=True):
+        want_yaw, want_length, want_width = min_area_rectangle(ring)
+        assert length * width == pytest.approx(want_length * want_width, rel=1e-9)
+        if len(ring) > 3:  # a triangle's rectangles on its three sides all tie in area
+            assert (yaw, length, width) == pytest.approx((want_yaw, want_length, want_width))
 
 
 def test_split_rows_matches_numpy_split() -> None:
