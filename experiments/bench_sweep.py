@@ -1,7 +1,7 @@
 """``cdw-twin bench sweep --json``: the sweep's speed-up with 2 workers against 1.
 
-Runs the same small grid (the default scenario, ``--episodes`` lockstep episodes of
-``--duration`` simulated seconds, built-in dataset) once with 1 worker and once with 2, and
+Runs the same grid (the default scenario, ``--episodes`` lockstep episodes of ``--duration``
+simulated seconds, built-in dataset) once with 1 worker and once with 2, and
 prints ``{"speedup": wall_s_1 / wall_s_2, "wall_s_1": ..., "wall_s_2": ..., "episodes": ...}``
 plus the episode processes' CPU seconds per pass (``cpu_s_*``), the machine's core count and
 the 1-minute load average at the start of each pass: the speed-up can only reach 2 when the two
@@ -9,6 +9,12 @@ cores are free for this benchmark. ``machine_speedup`` calibrates the machine in
 the speed-up of ``--workers`` copies of a fixed pure-Python CPU loop run as separate processes
 against one copy (median of three). No sweep can scale better than that; on a shared virtual
 machine it is often well below the core count.
+
+Episodes last as long as the default scenario's (60 s) unless ``--duration`` says otherwise: the
+first 2 s of every episode start the twin and the controller side by side (about 1.7 cores
+busy), so short episodes measure start-up more than sweeping. Measured here: 10 s episodes gave
+speed-ups of 1.40-2.09 (median 1.6, machine_speedup 1.36-2.29 in the same runs); 60 s episodes
+1.75 and 1.87. About 6.5 minutes with the defaults.
 
 Lockstep is the benchmarked mode: it runs as fast as the CPU allows (twin and controller are two
 busy processes), so the figure measures throughput. Realtime episodes are paced by the wall clock
@@ -26,12 +32,18 @@ from pathlib import Path
 
 from twin.errors import CdwTwinError
 from twin.fileio import write_atomic
+from twin.scenario import Scenario
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the benchmark options."""
     parser.add_argument("--episodes", type=int, default=4, help="episodes per pass (4)")
-    parser.add_argument("--duration", type=float, default=10.0, help="sim seconds each (10)")
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=Scenario().duration_s,
+        help="sim seconds each (the default scenario's: %(default)s)",
+    )
     parser.add_argument("--workers", type=int, default=2, help="workers of the parallel pass")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
 
