@@ -34,9 +34,10 @@ import pybullet as pb
 
 from twin.config import CellConfig
 from twin.events import Event, EventType
+from twin.objects import read_obj_triangles
 from twin.robot import Robot
 from twin.stream import Placement
-from twin.top_view import TopView, top_view
+from twin.top_view import FloatArray, TopView, top_view
 from twin.world import SpawnedBody, World
 
 _NEAR_TCP_M = 0.25
@@ -125,6 +126,7 @@ class Monitor:
         self.world = world
         self.robot = robot
         self._records: list[_Record] = []
+        self._vertex_cache: dict[tuple[str, float], FloatArray] = {}
         self._active: list[_Record] = []  # simulated ones, in spawn order
         self._step = 0
         self._poll_reach_m = _MAX_CLOSING_SPEED_MPS / cell.physics.physics_hz
@@ -483,6 +485,17 @@ class Monitor:
         self._by_body.pop(record.body, None)
         self.world.remove(record.body)
 
+    def _vertices(self, record: _Record) -> FloatArray:
+        """The object's mesh vertices in its body frame, m (z scaled to its height); cached."""
+        spec = record.placement.spec
+        key = (str(spec.mesh_path), record.height_m)
+        vertices = self._vertex_cache.get(key)
+        if vertices is None:
+            vertices = read_obj_triangles(spec.mesh_path).reshape(-1, 3)
+            vertices[:, 2] *= record.height_m / spec.height_m
+            self._vertex_cache[key] = vertices
+        return vertices
+
     # -- ground truth -----------------------------------------------------------------------
     def ground_truth(self) -> tuple[GroundTruth, ...]:
         """Every object that is on the belt, held, or in a bin (not those that fell off)."""
@@ -510,7 +523,12 @@ class Monitor:
                     linear_velocity_mps=tuple(lin),
                     angular_velocity_radps=tuple(ang),
                     top_view=top_view(
-                        orientation, spec.yaw_rad, spec.length_m, spec.width_m, record.height_m
+                        orientation,
+                        spec.yaw_rad,
+                        length_m=spec.length_m,
+                        width_m=spec.width_m,
+                        height_m=record.height_m,
+                        vertices_m=self._vertices(record),
                     ),
                     length_m=spec.length_m,
                     width_m=spec.width_m,

@@ -163,7 +163,7 @@ class Perception:
                     confidence=1.0,
                     x_m=x + cfg.position_noise_m * float(noise[0]),
                     y_m=y + cfg.position_noise_m * float(noise[1]),
-                    z_m=max(self.surface_z_m, obj.position_m[2] - 0.5 * seen.height_m),
+                    z_m=max(self.surface_z_m, obj.position_m[2] - seen.below_m),
                     yaw_rad=wrap_half_pi(seen.yaw_rad + cfg.yaw_noise_rad * float(noise[2])),
                     length_m=seen.length_m,
                     width_m=seen.width_m,

@@ -1,13 +1,15 @@
 """What a camera above the belt sees of an object: its footprint's heading and extents from above.
 
 An object is a prism: its footprint (length along the footprint's long axis, width across it)
-extruded by its height. Upright, a camera above sees that footprint and the height is the
-extrusion. An object that has tipped over (a wooden stick rolled onto its side, a brick on its
-end) shows another face: the box's axis nearest the vertical is the one seen as height, the
-other two span the seen footprint, the longer of them (as projected on the belt) is its long
-axis. Extents are those of the object's oriented bounding box projected on the world axes
-(the box is centred on the body origin, the centre of mass), so a slightly tilted object looks
-slightly larger, as it would to a camera. Pure geometry, no simulator.
+extruded by its height. Upright (within :data:`UPRIGHT_TILT_RAD`), a camera above sees that
+footprint and the height is the extrusion: the recorded measurements are used as they are, as
+they are for an object leaning on another (see :data:`FLAT_TILT_RAD`). An object that has
+tipped over onto a face (a wooden stick rolled onto its side, a brick on its end) shows that
+face: of the footprint's long axis, its width axis and its extrusion axis, the one nearest the
+vertical is seen as height, and the other two, projected on the belt, span the seen footprint
+(the longer one its long axis). The extents are those of the mesh's vertices, turned with the
+object, along those directions: exact for the silhouette's extents, and the height is from the
+lowest vertex to the highest. Pure geometry, no simulator.
 """
 
 from __future__ import annotations
@@ -16,6 +18,18 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+UPRIGHT_TILT_RAD = math.radians(5.0)
+"""Up to this tilt of the extrusion axis an object counts as upright (its recorded footprint)."""
+
+FLAT_TILT_RAD = math.radians(15.0)
+"""An object whose box axis nearest the vertical is within this of it lies on a face (upright,
+on its side or on its end) and is seen by that face. One leaning at a steeper angle (propped on
+another) keeps its recorded footprint: its top is not above its centroid, so no single seen
+footprint and height would describe where to grasp it."""
 
 
 @dataclass(frozen=True)
@@ -24,16 +38,18 @@ class TopView:
 
     ``yaw_rad`` is the heading of the seen footprint's long axis about the world z axis (not
     wrapped; the axis has no direction), ``length_m`` the footprint's extent along it,
-    ``width_m`` across it on the belt plane, ``height_m`` the object's vertical extent.
+    ``width_m`` across it on the belt plane, ``height_m`` the object's vertical extent and
+    ``below_m`` how far its lowest point lies below its centre of mass.
     """
 
     yaw_rad: float
     length_m: float
     width_m: float
     height_m: float
+    below_m: float
 
 
-def rotation_matrix(quat_xyzw: tuple[float, float, float, float]) -> np.ndarray:
+def rotation_matrix(quat_xyzw: tuple[float, float, float, float]) -> FloatArray:
     """3x3 rotation matrix of a unit xyzw quaternion."""
     x, y, z, w = quat_xyzw
     return np.array(
@@ -48,29 +64,54 @@ def rotation_matrix(quat_xyzw: tuple[float, float, float, float]) -> np.ndarray:
 def top_view(
     orientation_xyzw: tuple[float, float, float, float],
     footprint_yaw_rad: float,
+    *,
     length_m: float,
     width_m: float,
     height_m: float,
+    vertices_m: FloatArray,
 ) -> TopView:
-    """The top view of a box with the body frame's ``orientation_xyzw``.
+    """The top view of a prism with the body frame's ``orientation_xyzw``.
 
-    In the body frame the box's long axis lies at ``footprint_yaw_rad`` about z, its width axis
-    across it, its height along z.
+    In the body frame (origin at the centre of mass, z the extrusion axis) the footprint's long
+    axis lies at ``footprint_yaw_rad`` about z; ``length_m``, ``width_m`` and ``height_m`` are
+    its recorded extents and ``vertices_m`` its mesh's ``(n, 3)`` vertices.
     """
+    x, y, z, w = orientation_xyzw
+    yaw_body = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    if 1.0 - 2.0 * (x * x + y * y) >= math.cos(UPRIGHT_TILT_RAD):  # extrusion axis near up
+        return TopView(
+            yaw_rad=yaw_body + footprint_yaw_rad,
+            length_m=length_m,
+            width_m=width_m,
+            height_m=height_m,
+            below_m=0.5 * height_m,
+        )
+    rotation = rotation_matrix(orientation_xyzw)
     c, s = math.cos(footprint_yaw_rad), math.sin(footprint_yaw_rad)
-    body_axes = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # unit axes as columns
-    axes = rotation_matrix(orientation_xyzw) @ body_axes
-    extents = np.array([length_m, width_m, height_m])
-    edges = axes * extents  # each column: one edge of the box, world frame
+    axes = rotation @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # unit columns
+    points = vertices_m @ rotation.T  # world offsets from the centre of mass
     vertical = int(np.argmax(np.abs(axes[2])))
-    flat = [i for i in range(3) if i != vertical]
-    long_axis = max(flat, key=lambda i: float(np.hypot(edges[0, i], edges[1, i])))
-    yaw = math.atan2(float(edges[1, long_axis]), float(edges[0, long_axis]))
+    if abs(float(axes[2, vertical])) < math.cos(FLAT_TILT_RAD):  # leaning: as recorded
+        return TopView(
+            yaw_rad=yaw_body + footprint_yaw_rad,
+            length_m=length_m,
+            width_m=width_m,
+            height_m=height_m,
+            below_m=0.5 * height_m,
+        )
+
+    def seen_extent(i: int) -> float:
+        heading = axes[:2, i] / max(float(np.hypot(*axes[:2, i])), 1e-12)
+        return float(np.ptp(points[:, :2] @ heading))
+
+    long_axis = max((i for i in range(3) if i != vertical), key=seen_extent)
+    yaw = math.atan2(float(axes[1, long_axis]), float(axes[0, long_axis]))
     along = np.array([math.cos(yaw), math.sin(yaw)])
     across = np.array([-along[1], along[0]])
     return TopView(
         yaw_rad=yaw,
-        length_m=float(np.sum(np.abs(along @ edges[:2]))),
-        width_m=float(np.sum(np.abs(across @ edges[:2]))),
-        height_m=float(np.sum(np.abs(edges[2]))),
+        length_m=float(np.ptp(points[:, :2] @ along)),
+        width_m=float(np.ptp(points[:, :2] @ across)),
+        height_m=float(np.ptp(points[:, 2])),
+        below_m=float(-points[:, 2].min()),
     )

@@ -25,7 +25,7 @@ def _object(
         orientation_xyzw=(0.0, 0.0, 0.0, 1.0),
         linear_velocity_mps=(0.4, 0.0, 0.0),
         angular_velocity_radps=(0.0, 0.0, 0.0),
-        top_view=TopView(yaw_rad=yaw, length_m=0.1, width_m=0.05, height_m=0.04),
+        top_view=TopView(yaw_rad=yaw, length_m=0.1, width_m=0.05, height_m=0.04, below_m=0.02),
         length_m=0.1,
         width_m=0.05,
         area_m2=0.005,
