@@ -78,27 +78,22 @@ def top_view(
     """
     x, y, z, w = orientation_xyzw
     yaw_body = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    recorded = TopView(  # the footprint as meshgen measured it, turned with the body
+        yaw_rad=yaw_body + footprint_yaw_rad,
+        length_m=length_m,
+        width_m=width_m,
+        height_m=height_m,
+        below_m=0.5 * height_m,
+    )
     if 1.0 - 2.0 * (x * x + y * y) >= math.cos(UPRIGHT_TILT_RAD):  # extrusion axis near up
-        return TopView(
-            yaw_rad=yaw_body + footprint_yaw_rad,
-            length_m=length_m,
-            width_m=width_m,
-            height_m=height_m,
-            below_m=0.5 * height_m,
-        )
+        return recorded
     rotation = rotation_matrix(orientation_xyzw)
     c, s = math.cos(footprint_yaw_rad), math.sin(footprint_yaw_rad)
     axes = rotation @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # unit columns
     points = vertices_m @ rotation.T  # world offsets from the centre of mass
     vertical = int(np.argmax(np.abs(axes[2])))
     if abs(float(axes[2, vertical])) < math.cos(FLAT_TILT_RAD):  # leaning: as recorded
-        return TopView(
-            yaw_rad=yaw_body + footprint_yaw_rad,
-            length_m=length_m,
-            width_m=width_m,
-            height_m=height_m,
-            below_m=0.5 * height_m,
-        )
+        return recorded
 
     def seen_extent(i: int) -> float:
         heading = axes[:2, i] / max(float(np.hypot(*axes[:2, i])), 1e-12)
