@@ -14,7 +14,7 @@ Episodes last as long as the default scenario's (60 s) unless ``--duration`` say
 first 2 s of every episode start the twin and the controller side by side (about 1.7 cores
 busy), so short episodes measure start-up more than sweeping. Measured here: 10 s episodes gave
 speed-ups of 1.40-2.09 (median 1.6, machine_speedup 1.36-2.29 in the same runs); 60 s episodes
-1.75 and 1.87. About 6.5 minutes with the defaults.
+1.75, 1.87 and 1.62 (machine_speedup 1.90-2.05). About 6.5 minutes with the defaults.
 
 Lockstep is the benchmarked mode: it runs as fast as the CPU allows (twin and controller are two
 busy processes), so the figure measures throughput. Realtime episodes are paced by the wall clock
