@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import pybullet as pb
 
@@ -528,7 +529,7 @@ class Monitor:
                         length_m=spec.length_m,
                         width_m=spec.width_m,
                         height_m=record.height_m,
-                        vertices_m=self._vertices(record),
+                        vertices_m=partial(self._vertices, record),
                     ),
                     length_m=spec.length_m,
                     width_m=spec.width_m,

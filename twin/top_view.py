@@ -15,6 +15,7 @@ lowest vertex to the highest. Pure geometry, no simulator.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,13 +69,14 @@ def top_view(
     length_m: float,
     width_m: float,
     height_m: float,
-    vertices_m: FloatArray,
+    vertices_m: Callable[[], FloatArray],
 ) -> TopView:
     """The top view of a prism with the body frame's ``orientation_xyzw``.
 
     In the body frame (origin at the centre of mass, z the extrusion axis) the footprint's long
     axis lies at ``footprint_yaw_rad`` about z; ``length_m``, ``width_m`` and ``height_m`` are
-    its recorded extents and ``vertices_m`` its mesh's ``(n, 3)`` vertices.
+    its recorded extents; ``vertices_m()`` gives its mesh's ``(n, 3)`` vertices, asked for only
+    when the object has tipped onto a face (reading a mesh is not for every upright object).
     """
     x, y, z, w = orientation_xyzw
     yaw_body = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
@@ -90,10 +92,10 @@ def top_view(
     rotation = rotation_matrix(orientation_xyzw)
     c, s = math.cos(footprint_yaw_rad), math.sin(footprint_yaw_rad)
     axes = rotation @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # unit columns
-    points = vertices_m @ rotation.T  # world offsets from the centre of mass
     vertical = int(np.argmax(np.abs(axes[2])))
     if abs(float(axes[2, vertical])) < math.cos(FLAT_TILT_RAD):  # leaning: as recorded
         return recorded
+    points = vertices_m() @ rotation.T  # world offsets from the centre of mass
 
     def seen_extent(i: int) -> float:
         heading = axes[:2, i] / max(float(np.hypot(*axes[:2, i])), 1e-12)

@@ -45,7 +45,7 @@ def _view(rotation: Rotation, yaw: float, length: float, width: float, height: f
         length_m=length,
         width_m=width,
         height_m=height,
-        vertices_m=_box(length, width, height, yaw),
+        vertices_m=lambda: _box(length, width, height, yaw),
     )
 
 
@@ -100,7 +100,7 @@ def test_an_irregular_object_on_its_side_is_as_tall_as_its_outline_not_its_box()
     vertices = _prism(outline, height)
     roll = Rotation.from_euler("x", 90, degrees=True)  # footprint's y turns up
     seen = top_view(
-        _quat(roll), 0.0, length_m=0.12, width_m=0.09, height_m=height, vertices_m=vertices
+        _quat(roll), 0.0, length_m=0.12, width_m=0.09, height_m=height, vertices_m=lambda: vertices
     )
     assert seen.height_m == pytest.approx(0.09, abs=1e-12)
     centroid_y = 0.03  # of the outline: (0 + 0 + 0.09) / 3
@@ -131,3 +131,12 @@ def test_a_tilt_near_a_face_grows_the_seen_extents_like_a_projection() -> None:
     assert seen.length_m == pytest.approx(L * math.cos(tilt) + H * math.sin(tilt))
     assert seen.width_m == pytest.approx(W)
     assert seen.height_m == pytest.approx(H * math.cos(tilt) + L * math.sin(tilt))
+
+
+def test_upright_and_leaning_objects_never_read_their_mesh() -> None:
+    def unread() -> np.ndarray:
+        raise AssertionError("the mesh was read for an object that has not tipped onto a face")
+
+    for rotation in (Rotation.from_euler("z", 0.7), Rotation.from_euler("y", 40, degrees=True)):
+        seen = top_view(_quat(rotation), 0.3, length_m=L, width_m=W, height_m=H, vertices_m=unread)
+        assert (seen.length_m, seen.width_m, seen.height_m) == (L, W, H)
