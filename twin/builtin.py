@@ -16,7 +16,11 @@ SAMPLE_SEED = 0
 
 
 def cache_root() -> Path:
-    """Where cached, regenerable data lives."""
+    """Where cached, regenerable data lives: the built-in dataset and merged collision shapes.
+
+    ``$CDW_TWIN_CACHE``, else ``$XDG_CACHE_HOME/cdw-twin``, else ``~/.cache/cdw-twin``; deleting
+    it only costs the time to regenerate.
+    """
     env = os.environ.get("CDW_TWIN_CACHE")
     if env:
         return Path(env)

@@ -56,8 +56,21 @@ def _available(module: str) -> bool:
     return importlib.util.find_spec(module) is not None
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Build the argument parser with every subcommand whose module is installed."""
+def selected_command(argv: Sequence[str]) -> tuple[str, ...] | None:
+    """The command words ``argv`` starts with (``("bench", "sweep")``), if they name one."""
+    for words, _, _ in COMMANDS:
+        if tuple(argv[: len(words)]) == words:
+            return words
+    return None
+
+
+def build_parser(only: tuple[str, ...] | None = None) -> argparse.ArgumentParser:
+    """Build the argument parser with every subcommand whose module is installed.
+
+    Every subcommand is listed, but with ``only`` just that one's module is imported and its
+    options added: a process started as ``cdw-twin twin-node`` (each episode starts two) does
+    not import and configure the fifteen others.
+    """
     parser = argparse.ArgumentParser(
         prog="cdw-twin",
         description="Digital twin and benchmark for robotic sorting of CDW on a conveyor.",
@@ -76,16 +89,18 @@ def build_parser() -> argparse.ArgumentParser:
                 )
             action = groups[word]
         sub = action.add_parser(words[-1], help=help_text, description=help_text)
-        module = cast(_CommandModule, importlib.import_module(module_name))
-        module.configure(sub)
         sub.set_defaults(_module=module_name)
+        if only is None or words == only:
+            module = cast(_CommandModule, importlib.import_module(module_name))
+            module.configure(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``cdw-twin`` command line; returns the process exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(selected_command(words))
+    args = parser.parse_args(words)
     module = cast(_CommandModule, importlib.import_module(args._module))
     try:
         return module.run(args)

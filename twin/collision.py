@@ -151,19 +151,28 @@ def pieces_obj_text(pieces: list[np.ndarray], name: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def merged_collision_file(
-    source: Path, cache_dir: Path, tolerance: float, max_pieces: int
-) -> tuple[Path, int]:
-    """Write (once) and return the merged-pieces OBJ for ``source`` and its piece count."""
-    key = hashlib.sha1(f"{source}|{tolerance}|{max_pieces}".encode()).hexdigest()[:16]
-    target = cache_dir / f"{source.stem}-{key}.obj"
-    count = _written.get(target)
-    if count is None or not target.is_file():
+MERGE_VERSION = 1
+"""Bumped whenever :func:`merge_pieces` or :func:`pieces_obj_text` would write a different file."""
+
+
+def merged_collision_file(source: Path, cache_dir: Path, tolerance: float, max_pieces: int) -> Path:
+    """The merged-pieces OBJ for ``source``, from ``cache_dir`` or written there first.
+
+    The file name is keyed by the source's *content*, the merge parameters and
+    :data:`MERGE_VERSION`, so a persistent ``cache_dir`` is shared safely by every episode, run
+    and process (the same dataset is merged once per machine, not once per episode) and a changed
+    mesh or algorithm never reads a stale file. Files are written atomically: one that exists is
+    complete.
+    """
+    try:
+        content = source.read_bytes()
+    except OSError as exc:
+        msg = f"{source}: cannot read the convex pieces: {exc.strerror or exc}"
+        raise SceneError(msg) from None
+    digest = hashlib.sha1(content)
+    digest.update(f"|{tolerance!r}|{max_pieces}|v{MERGE_VERSION}".encode())
+    target = cache_dir / f"{source.stem}-{digest.hexdigest()[:20]}.obj"
+    if not target.is_file():
         pieces = merge_pieces(read_pieces(source), tolerance, max_pieces)
         write_atomic(target, pieces_obj_text(pieces, source.name))
-        count = _written[target] = len(pieces)
-    return target, count
-
-
-_written: dict[Path, int] = {}
-"""Merged files written by this process and their piece counts (each source is merged once)."""
+    return target

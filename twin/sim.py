@@ -25,6 +25,7 @@ logged as a ``fault`` event with ``kind`` ``injected_belt_stall`` / ``injected_d
 from __future__ import annotations
 
 import math
+import os
 import tempfile
 import time
 from collections.abc import Iterator
@@ -36,6 +37,7 @@ import numpy as np
 import pybullet as pb
 
 from twin.belt_drive import BeltDrive, BeltState
+from twin.builtin import cache_root
 from twin.config import ROBOTS, CellConfig
 from twin.errors import ConfigError
 from twin.events import Event, EventType
@@ -55,6 +57,25 @@ PERTURBATION_PARAMETERS = (
     "perturbation_correlation_time_s",
     "perturbation_seed",
 )
+
+
+def collision_cache_dir() -> tuple[Path, tempfile.TemporaryDirectory[str] | None]:
+    """Where merged collision shapes go: ``<cache root>/collision``, shared by every episode.
+
+    The files are keyed by content (:func:`twin.collision.merged_collision_file`), so one merge
+    per mesh per machine serves every later episode. Where the cache root cannot be created
+    (a read-only home), a temporary folder of this twin's own, removed on close.
+    """
+    folder = cache_root() / "collision"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        usable = os.access(folder, os.W_OK | os.X_OK)
+    except OSError:
+        usable = False
+    if not usable:
+        temporary = tempfile.TemporaryDirectory(prefix="cdw-twin-shapes-")
+        return Path(temporary.name), temporary
+    return folder, None
 
 
 @dataclass(frozen=True)
@@ -118,7 +139,7 @@ class Twin:
         self.targets = TargetTracker()
         self._released: list[DetectionFrame] = []
         self.layouts: tuple[ImageLayout, ...] = load_dataset(dataset_dir, scenario.objects.classes)
-        self._cache = tempfile.TemporaryDirectory(prefix="cdw-twin-shapes-")
+        self._cache_dir, self._cache = collision_cache_dir()
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
         self._drive: BeltDrive | None = None
         self._world: World | None = None
@@ -153,7 +174,8 @@ class Twin:
         if self.client >= 0:
             pb.disconnect(physicsClientId=self.client)
             self.client = -1
-        self._cache.cleanup()
+        if self._cache is not None:
+            self._cache.cleanup()
 
     def reset(self, seed: int | None = None) -> tuple[Observation, dict[str, object]]:
         """Start a new episode; ``seed`` overrides the scenario's seed."""
@@ -171,7 +193,7 @@ class Twin:
             enableConeFriction=0,
             physicsClientId=c,
         )
-        self._world = World(c, self.cell, Path(self._cache.name))
+        self._world = World(c, self.cell, self._cache_dir)
         self._world.prepare([spec for layout in self.layouts for spec in layout.objects])
         self.robot = Robot(c, self.cell.robot)
         self._monitor = Monitor(c, self.cell, self._world, self.robot)

@@ -121,7 +121,7 @@ class World:
             path = spec.collision_path
             if spec.convex_path is not None:
                 physics = self.cell.physics
-                path, _ = merged_collision_file(
+                path = merged_collision_file(
                     spec.convex_path,
                     self.cache_dir,
                     physics.hull_merge_tolerance,

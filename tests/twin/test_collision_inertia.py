@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import shapely
 
-from twin.collision import merge_pieces
+from twin.collision import merge_pieces, merged_collision_file, pieces_obj_text, read_pieces
 from twin.errors import SceneError
 from twin.objects import read_obj_triangles, unit_mass_inertia
 
@@ -78,6 +78,40 @@ def _box_obj(path: Path, a: float, b: float, c: float, offset: tuple[float, floa
     box = trimesh.creation.box(extents=(a, b, c))
     box.apply_translation(offset)
     path.write_text(trimesh.exchange.obj.export_obj(box), encoding="utf-8")
+
+
+def test_merged_file_is_keyed_by_content_so_a_shared_cache_is_never_stale(
+    tmp_path: Path,
+) -> None:
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    source = tmp_path / "obj_1_convex.obj"
+    source.write_text(pieces_obj_text(L_PIECES, source.name))
+    first = merged_collision_file(source, cache, tolerance=0.1, max_pieces=6)
+    expected = merge_pieces(L_PIECES, tolerance=0.1, max_pieces=6)
+    got = read_pieces(first)
+    assert len(got) == len(expected) == 2
+    for a, b in zip(got, expected, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-6)
+    # a second episode (any process) reuses the file: nothing is merged or written again
+    stamp = first.stat().st_mtime_ns
+    assert merged_collision_file(source, cache, tolerance=0.1, max_pieces=6) == first
+    assert first.stat().st_mtime_ns == stamp
+    # other merge parameters, or a mesh rewritten at the same path, never read the old file
+    exact = merged_collision_file(source, cache, tolerance=0.0, max_pieces=100)
+    assert exact != first
+    assert len(read_pieces(exact)) == len(merge_pieces(L_PIECES, 0.0, 100)) == 3
+    source.write_text(pieces_obj_text(L_PIECES[:2], source.name))
+    changed = merged_collision_file(source, cache, tolerance=0.1, max_pieces=6)
+    assert changed != first
+    assert len(read_pieces(changed)) == 2
+    assert sorted(p.name for p in cache.iterdir()) == sorted({first.name, exact.name, changed.name})
+
+
+def test_a_missing_pieces_file_is_named(tmp_path: Path) -> None:
+    missing = tmp_path / "gone_convex.obj"
+    with pytest.raises(SceneError, match=r"gone_convex\.obj"):
+        merged_collision_file(missing, tmp_path, tolerance=0.1, max_pieces=6)
 
 
 def test_box_inertia_is_the_textbook_one(tmp_path: Path) -> None:
