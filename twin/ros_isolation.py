@@ -12,6 +12,12 @@ Typical use::
 
     env = isolated_ros_env()                          # lock held until this process exits
 
+Child processes also get ``FASTRTPS_DEFAULT_PROFILES_FILE`` (and Fast DDS 3's
+``FASTDDS_DEFAULT_PROFILES_FILE``) set to ``twin/fastdds_profile.xml`` unless the environment
+already names a profile: participants announce themselves more often, so a controller that
+starts seconds after the twin matches in a fraction of a second instead of waiting up to 3 s for
+Fast DDS's next periodic announcement (see the file for the figures).
+
 Fast DDS puts its shared-memory transport in ``/dev/shm``: per segment ``fastrtps_<16 chars>``
 plus a lock file ``..._el``, per port ``fastrtps_port<n>`` plus ``..._el``/``..._sl`` and a
 semaphore ``sem.fastrtps_port<n>_mutex`` (``fastdds_`` instead of ``fastrtps_`` in Fast DDS 3).
@@ -48,6 +54,9 @@ _LOCK_FILE_RE = re.compile(
     r"^(?P<base>(?:fastrtps|fastdds)_(?:port\d{1,5}|[0-9a-z]{16}))_(?:el|sl)$"
 )
 _DROPPED_VARIABLES = ("ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS")
+FASTDDS_PROFILE = Path(__file__).with_name("fastdds_profile.xml")
+"""The participant profile isolated runs use unless the environment names another."""
+_PROFILE_VARIABLES = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
 
 
 class RosIsolationError(CdwTwinError):
@@ -91,6 +100,8 @@ def _environment(base: Mapping[str, str] | None, domain_id: int) -> dict[str, st
     for name in _DROPPED_VARIABLES:
         env.pop(name, None)
     env.update(ros_variables(domain_id))
+    if not any(env.get(name) for name in _PROFILE_VARIABLES):
+        env.update(dict.fromkeys(_PROFILE_VARIABLES, str(FASTDDS_PROFILE)))
     return env
 
 
@@ -177,8 +188,9 @@ def isolated_ros_env(
     """An environment for an isolated ROS 2 run.
 
     Sets ``ROS_DOMAIN_ID``, ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and
-    ``RMW_IMPLEMENTATION=rmw_fastrtps_cpp`` on a copy of ``base`` (default ``os.environ``) and
-    drops ``ROS_LOCALHOST_ONLY``/``ROS_STATIC_PEERS``. With ``domain_id=None`` the id is claimed
+    ``RMW_IMPLEMENTATION=rmw_fastrtps_cpp`` on a copy of ``base`` (default ``os.environ``), the
+    Fast DDS profile (see the module) unless ``base`` names one, and drops
+    ``ROS_LOCALHOST_ONLY``/``ROS_STATIC_PEERS``. With ``domain_id=None`` the id is claimed
     once per process and held until the process exits; use :func:`ros_domain` for a shorter claim.
     An explicit ``domain_id`` is used as given, without a claim.
     """

@@ -16,6 +16,7 @@ from twin.errors import ConfigError
 from twin.ros_isolation import (
     DOMAIN_ID_MAX,
     DOMAIN_ID_MIN,
+    FASTDDS_PROFILE,
     RosIsolationError,
     clean_stale_fastdds_shm,
     isolated_ros_env,
@@ -49,6 +50,54 @@ def test_isolated_env_sets_ros_variables_and_keeps_the_rest() -> None:
     assert env["PATH"] == "/usr/bin"
     assert "ROS_LOCALHOST_ONLY" not in env
     assert base["ROS_DOMAIN_ID"] == "0"
+
+
+def test_isolated_env_names_the_discovery_profile_unless_one_is_set() -> None:
+    env = isolated_ros_env({}, domain_id=42)
+    assert env["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(FASTDDS_PROFILE)
+    assert env["FASTDDS_DEFAULT_PROFILES_FILE"] == str(FASTDDS_PROFILE)
+    own = isolated_ros_env({"FASTRTPS_DEFAULT_PROFILES_FILE": "/etc/mine.xml"}, domain_id=42)
+    assert own["FASTRTPS_DEFAULT_PROFILES_FILE"] == "/etc/mine.xml"
+    assert "FASTDDS_DEFAULT_PROFILES_FILE" not in own
+
+
+_PARTICIPANT = (
+    "import rclpy\n"
+    "rclpy.init()\n"
+    "node = rclpy.create_node('profile_check')\n"
+    "node.destroy_node()\n"
+    "rclpy.shutdown()\n"
+)
+
+
+def _participant_log(env: dict[str, str]) -> str:
+    done = subprocess.run(
+        [sys.executable, "-c", _PARTICIPANT],
+        check=True,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        timeout=60,
+    )
+    return done.stdout
+
+
+def test_fast_dds_loads_the_discovery_profile_without_an_error(
+    ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    # Fast DDS keeps going on its defaults after a profile it cannot parse and only logs it
+    # (``XMLPARSER Error`` lines, on stdout), so a real participant is started and its log read.
+    assert ros_env["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(FASTDDS_PROFILE)
+    log = _participant_log(ros_env)
+    assert "XMLPARSER" not in log, log
+    assert "Error" not in log, log
+    bad = tmp_path / "bad.xml"
+    bad.write_text(
+        FASTDDS_PROFILE.read_text().replace("<nanosec>500000000</nanosec>", "<nanosec>x</nanosec>")
+    )
+    rejected = _participant_log({**ros_env, "FASTRTPS_DEFAULT_PROFILES_FILE": str(bad)})
+    assert "XMLPARSER" in rejected  # so the check above would see a profile Fast DDS rejects
 
 
 def test_isolated_env_claims_one_domain_per_process() -> None:
