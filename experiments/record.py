@@ -426,12 +426,12 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.experimental.events_executor import EventsExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from twin.ros_isolation import clean_stale_fastdds_shm
+    from twin.ros_isolation import clean_stale_fastdds_shm, local_ros_defaults
 
     if not args.flush_interval > 0:
         msg = f"--flush-interval {args.flush_interval!r} must be > 0 s"
         raise RecordingError(msg)
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    local_ros_defaults()
     clean_stale_fastdds_shm()
     classes = {spec.msgtype: _message_class(spec.msgtype) for spec in TOPICS}
     wall0, cpu0 = time.perf_counter(), time.process_time()

@@ -313,7 +313,9 @@ class ClockWatch:
         from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
 
-        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        from twin.ros_isolation import local_ros_defaults
+
+        local_ros_defaults()
         self.time_s = 0.0
         self._context = Context()
         rclpy.init(

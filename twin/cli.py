@@ -57,11 +57,9 @@ def _available(module: str) -> bool:
 
 
 def selected_command(argv: Sequence[str]) -> tuple[str, ...] | None:
-    """The command words ``argv`` starts with (``("bench", "sweep")``), if they name one."""
-    for words, _, _ in COMMANDS:
-        if tuple(argv[: len(words)]) == words:
-            return words
-    return None
+    """The longest command words ``argv`` starts with (``("bench", "sweep")``), if any."""
+    matches = [words for words, _, _ in COMMANDS if tuple(argv[: len(words)]) == words]
+    return max(matches, key=len, default=None)
 
 
 def build_parser(only: tuple[str, ...] | None = None) -> argparse.ArgumentParser:

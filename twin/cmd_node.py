@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import signal
 import time
 from pathlib import Path
@@ -122,13 +121,13 @@ def run(args: argparse.Namespace) -> int:
     from twin.episode_log import tracking_summary, write_episode
     from twin.fileio import write_atomic
     from twin.perception import PerceptionConfig
-    from twin.ros_isolation import clean_stale_fastdds_shm
+    from twin.ros_isolation import clean_stale_fastdds_shm, local_ros_defaults
     from twin.ros_node import TwinNode, make_executor, run_loop
     from twin.sim import Twin
 
     scenario, dataset = build_scenario(args)
     perception = PerceptionConfig.zero_noise() if args.perception == "zero" else None
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    local_ros_defaults()
     clean_stale_fastdds_shm()
     stop = {"requested": False}
 

@@ -152,7 +152,8 @@ def pieces_obj_text(pieces: list[np.ndarray], name: str) -> str:
 
 
 MERGE_VERSION = 1
-"""Bumped whenever :func:`merge_pieces` or :func:`pieces_obj_text` would write a different file."""
+"""Bumped whenever :func:`read_pieces`, :func:`merge_pieces` or :func:`pieces_obj_text` would
+give a different file for the same source."""
 
 
 def merged_collision_file(source: Path, cache_dir: Path, tolerance: float, max_pieces: int) -> Path:
@@ -174,5 +175,12 @@ def merged_collision_file(source: Path, cache_dir: Path, tolerance: float, max_p
     target = cache_dir / f"{source.stem}-{digest.hexdigest()[:20]}.obj"
     if not target.is_file():
         pieces = merge_pieces(read_pieces(source), tolerance, max_pieces)
-        write_atomic(target, pieces_obj_text(pieces, source.name))
+        try:
+            write_atomic(target, pieces_obj_text(pieces, source.name))
+        except OSError as exc:
+            msg = (
+                f"{target}: cannot write the merged collision shape of {source}: "
+                f"{exc.strerror or exc} (CDW_TWIN_CACHE chooses the cache folder)"
+            )
+            raise SceneError(msg) from None
     return target

@@ -36,7 +36,7 @@ import random
 import re
 import tempfile
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, MutableMapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
@@ -95,13 +95,29 @@ def _check_domain_id(domain_id: int) -> None:
         raise ConfigError(msg)
 
 
+def _add_profile(env: MutableMapping[str, str]) -> None:
+    if not any(env.get(name) for name in _PROFILE_VARIABLES):
+        env.update(dict.fromkeys(_PROFILE_VARIABLES, str(FASTDDS_PROFILE)))
+
+
+def local_ros_defaults(env: MutableMapping[str, str] | None = None) -> None:
+    """Defaults for a node started by hand (``cdw-twin twin-node``, ``record``), before rclpy.
+
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and the Fast DDS profile, each only where
+    ``env`` (default ``os.environ``) does not set it already; the domain is left as it is.
+    A controller that joins later then matches within one of this node's announcements.
+    """
+    target = os.environ if env is None else env
+    target.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    _add_profile(target)
+
+
 def _environment(base: Mapping[str, str] | None, domain_id: int) -> dict[str, str]:
     env = dict(os.environ if base is None else base)
     for name in _DROPPED_VARIABLES:
         env.pop(name, None)
     env.update(ros_variables(domain_id))
-    if not any(env.get(name) for name in _PROFILE_VARIABLES):
-        env.update(dict.fromkeys(_PROFILE_VARIABLES, str(FASTDDS_PROFILE)))
+    _add_profile(env)
     return env
 
 

@@ -20,6 +20,7 @@ from twin.ros_isolation import (
     RosIsolationError,
     clean_stale_fastdds_shm,
     isolated_ros_env,
+    local_ros_defaults,
     ros_domain,
 )
 
@@ -83,21 +84,38 @@ def _participant_log(env: dict[str, str]) -> str:
     return done.stdout
 
 
-def test_fast_dds_loads_the_discovery_profile_without_an_error(
-    ros_env: dict[str, str], tmp_path: Path
-) -> None:
+def test_fast_dds_loads_the_discovery_profile_without_an_error(tmp_path: Path) -> None:
     # Fast DDS keeps going on its defaults after a profile it cannot parse and only logs it
     # (``XMLPARSER Error`` lines, on stdout), so a real participant is started and its log read.
-    assert ros_env["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(FASTDDS_PROFILE)
-    log = _participant_log(ros_env)
-    assert "XMLPARSER" not in log, log
-    assert "Error" not in log, log
-    bad = tmp_path / "bad.xml"
-    bad.write_text(
-        FASTDDS_PROFILE.read_text().replace("<nanosec>500000000</nanosec>", "<nanosec>x</nanosec>")
-    )
-    rejected = _participant_log({**ros_env, "FASTRTPS_DEFAULT_PROFILES_FILE": str(bad)})
+    base = {k: v for k, v in os.environ.items() if not k.endswith("_DEFAULT_PROFILES_FILE")}
+    with ros_domain(base) as domain:
+        ros_env = domain.env
+        assert ros_env["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(FASTDDS_PROFILE)
+        log = _participant_log(ros_env)
+        assert "XMLPARSER" not in log, log
+        bad = tmp_path / "bad.xml"
+        bad.write_text(
+            FASTDDS_PROFILE.read_text().replace(
+                "<nanosec>500000000</nanosec>", "<nanosec>x</nanosec>"
+            )
+        )
+        rejected = _participant_log({**ros_env, "FASTRTPS_DEFAULT_PROFILES_FILE": str(bad)})
     assert "XMLPARSER" in rejected  # so the check above would see a profile Fast DDS rejects
+
+
+def test_local_defaults_fill_in_only_what_is_not_set() -> None:
+    env: dict[str, str] = {"ROS_DOMAIN_ID": "7"}
+    local_ros_defaults(env)
+    assert env == {
+        "ROS_DOMAIN_ID": "7",
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        "FASTRTPS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE),
+        "FASTDDS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE),
+    }
+    own = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "FASTDDS_DEFAULT_PROFILES_FILE": "/x.xml"}
+    kept = dict(own)
+    local_ros_defaults(own)
+    assert own == kept
 
 
 def test_isolated_env_claims_one_domain_per_process() -> None:

@@ -18,6 +18,13 @@ def test_selected_command_takes_the_longest_words_argv_starts_with() -> None:
     assert selected_command(["sweeps"]) is None
 
 
+def test_selected_command_prefers_the_longest_match(monkeypatch: pytest.MonkeyPatch) -> None:
+    longer = (("fmu",), "twin.bench_fmu", "a shorter command listed first")
+    monkeypatch.setattr("twin.cli.COMMANDS", (longer, *COMMANDS))
+    assert selected_command(["fmu", "build", "--help"]) == ("fmu", "build")
+    assert selected_command(["fmu", "--help"]) == ("fmu",)
+
+
 def test_a_process_imports_only_the_module_of_its_subcommand() -> None:
     code = (
         "import sys\n"

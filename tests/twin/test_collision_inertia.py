@@ -108,6 +108,17 @@ def test_merged_file_is_keyed_by_content_so_a_shared_cache_is_never_stale(
     assert sorted(p.name for p in cache.iterdir()) == sorted({first.name, exact.name, changed.name})
 
 
+def test_a_cache_that_cannot_be_written_is_a_clear_error(tmp_path: Path) -> None:
+    source = tmp_path / "obj_2_convex.obj"
+    source.write_text(pieces_obj_text(L_PIECES, source.name))
+    not_a_folder = tmp_path / "cache"
+    not_a_folder.write_text("")
+    with pytest.raises(
+        SceneError, match=r"cannot write the merged collision shape.*CDW_TWIN_CACHE"
+    ):
+        merged_collision_file(source, not_a_folder, tolerance=0.1, max_pieces=6)
+
+
 def test_a_missing_pieces_file_is_named(tmp_path: Path) -> None:
     missing = tmp_path / "gone_convex.obj"
     with pytest.raises(SceneError, match=r"gone_convex\.obj"):
