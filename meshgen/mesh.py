@@ -54,11 +54,25 @@ def triangulate_many(rings: list[FloatArray]) -> list[IntArray]:
 
     Gives exactly what :func:`triangulate` gives for each ring (same triangles, same order, each
     triangle with a clockwise result reversed); only the orientation check, which costs more
-    than earcut itself on small rings, is vectorised over all rings together, on coordinate
-    columns (same products as :func:`triangulate`; a reversed ``(a, b, c)`` is ``(c, b, a)``).
+    than earcut itself on small rings, is vectorised over all rings together
+    (:func:`triangulate_ragged`).
     """
     if not rings:
         return []
+    sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=len(rings))
+    faces, counts = triangulate_ragged(rings, np.concatenate(rings), sizes)
+    return split_rows(faces, counts)
+
+
+def triangulate_ragged(
+    rings: list[FloatArray], points: FloatArray, sizes: IntArray
+) -> tuple[IntArray, IntArray]:
+    """:func:`triangulate_many` as one ``(M, 3)`` array of ring-local triangles and its counts.
+
+    ``points`` is ``rings`` concatenated (``sizes`` their lengths). The orientation check runs
+    on coordinate columns (same products as :func:`triangulate`; a reversed ``(a, b, c)`` is
+    ``(c, b, a)``).
+    """
     raw = [
         np.asarray(
             mapbox_earcut.triangulate_float64(ring, np.array([len(ring)], dtype=np.uint32)),
@@ -67,16 +81,14 @@ def triangulate_many(rings: list[FloatArray]) -> list[IntArray]:
         for ring in rings
     ]
     counts = np.fromiter((len(t) // 3 for t in raw), dtype=np.int64, count=len(raw))
-    sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=len(rings))
     shift = np.repeat(np.cumsum(sizes) - sizes, counts)[:, None]
     faces = np.concatenate(raw).reshape(-1, 3) + shift
-    pts = np.concatenate(rings)
-    x, y = pts[:, 0], pts[:, 1]
+    x, y = points[:, 0], points[:, 1]
     a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
     flip = (x[b] - x[a]) * (y[c] - y[a]) < (y[b] - y[a]) * (x[c] - x[a])
     faces[:, 0], faces[:, 2] = np.where(flip, c, a), np.where(flip, a, c)
     faces -= shift
-    return split_rows(faces, counts)
+    return faces, counts
 
 
 def extrude(ring: FloatArray, tris: IntArray, height_m: float) -> tuple[FloatArray, IntArray]:

@@ -53,19 +53,10 @@ from meshgen.footprint import (
     build_footprints,
 )
 from meshgen.loaders import ImageSource, discover, load_source
-from meshgen.mesh import (
-    IntArray,
-    caps_texts,
-    clear_text_caches,
-    diagonals_many,
-    hertel_mehlhorn,
-    pieces_text,
-    sides_text,
-    triangulate_many,
-    vertex_blocks,
-)
+from meshgen.mesh import clear_text_caches
+from meshgen.prisms import prism_texts
 from meshgen.ragged import split_rows
-from meshgen.records import ObjectRecord, csv_row, object_json, whole_pixels
+from meshgen.records import ObjectRecord, csv_row, object_json_text
 from meshgen.seeding import first_doubles, pcg64_first_double
 
 
@@ -168,7 +159,7 @@ def _skip(ann: ImageAnnotation, poly: RawPolygon, reason: str, detail: str) -> S
     return Skip(file=ann.source, where=poly.where, reason=reason, detail=detail)
 
 
-def _mesh_object(
+def _record(
     ann: ImageAnnotation,
     poly: RawPolygon,
     *,
@@ -176,45 +167,13 @@ def _mesh_object(
     spec: ClassSpec,
     class_id: int,
     height: float,
-    ring: FloatArray,
-    tris: IntArray,
-    caps: str,
-    diagonals: tuple[IntArray, IntArray] | None,
-    whole_px: bool,
-    config: MeshgenConfig,
-    folder: str,
-    sink: FileSink,
-) -> tuple[ObjectRecord, str]:
-    """Write the mesh (and convex pieces) of one footprint; return its record and JSON text.
-
-    The caller computes in batches: ``height`` (:func:`object_heights_m`), ``ring``, the
-    ``(n, 2)`` footprint relative to its centroid, ``tris``, its earcut triangles
-    (:func:`meshgen.mesh.triangulate_many`), ``caps``, the face lines of both caps
-    (:func:`meshgen.mesh.caps_texts`), and for a concave footprint the ``diagonals`` of
-    that triangulation (:func:`meshgen.mesh.diagonals_many`); ``whole_px`` tells whether its
-    pixel polygon holds whole numbers only (:func:`meshgen.records.whole_pixels`).
-    """
+    n_pieces: int,
+) -> ObjectRecord:
+    """The scene record of one meshed footprint (``n_pieces`` > 1 means it has convex pieces)."""
     object_id = f"{ann.stem}_{poly.index:03d}"
     cx, cy = fp.centroid_m
-    n = len(ring)
-    if len(tris) != n - 2:
-        msg = f"earcut gave {len(tris)} triangles for {n} points"
-        raise FootprintRejected("degenerate", msg)
-    bottom, top = vertex_blocks(ring, 0.5 * height, config.up)
-    header = f"# cdw-twin meshgen {object_id}\nmtllib ../materials.mtl\nusemtl {spec.name}\n"
-    sink.write(
-        f"{folder}/{object_id}.obj",
-        f"{header}o {object_id}\n{bottom}{top}{caps}{sides_text(n)}",
-    )
-    convex_path = ""
-    n_pieces = 1
-    if not fp.convex:
-        pieces = hertel_mehlhorn(ring, tris, diagonals)
-        n_pieces = len(pieces)
-        convex_path = f"{object_id}_convex.obj"
-        sink.write(f"{folder}/{convex_path}", header + pieces_text(bottom, top, pieces))
     volume = fp.area_m2 * height
-    record = ObjectRecord(
+    return ObjectRecord(
         object_id=object_id,
         source_image=ann.source,
         class_id=class_id,
@@ -229,22 +188,11 @@ def _mesh_object(
         volume_m3=volume,
         mass_kg=volume * spec.density_kg_m3,
         mesh_path=f"{object_id}.obj",
-        convex_path=convex_path,
+        convex_path="" if fp.convex else f"{object_id}_convex.obj",
         n_convex_pieces=n_pieces,
         area_change_ratio=fp.area_change_ratio,
         repairs=fp.repairs,
     )
-    meta = object_json(
-        record,
-        source_where=poly.where,
-        density_kg_m3=spec.density_kg_m3,
-        seed=config.seed,
-        rng_key=(config.seed, zlib.crc32(ann.stem.encode()), poly.index),
-        footprint_m=fp.ring_m,
-        polygon_px=poly.points_px,
-        polygon_px_whole=whole_px,
-    )
-    return record, meta
 
 
 def _select(
@@ -301,16 +249,6 @@ def _select(
     return skips, kept, kept_rings
 
 
-def _local_rings(footprints: list[Footprint]) -> list[FloatArray]:
-    """Each footprint's ring relative to its centroid (the mesh frame), in one subtraction."""
-    if not footprints:
-        return []
-    sizes = np.fromiter((len(fp.ring_m) for fp in footprints), dtype=np.int64)
-    centroids = np.array([fp.centroid_m for fp in footprints], dtype=np.float64)
-    points = np.concatenate([fp.ring_m for fp in footprints])
-    return split_rows(points - np.repeat(centroids, sizes, axis=0), sizes)
-
-
 def _scene_json(
     ann: ImageAnnotation, config: MeshgenConfig, skips: list[Skip], metas: list[str]
 ) -> str:
@@ -341,9 +279,10 @@ def mesh_images(
 ) -> list[ImageResult]:
     """Mesh every polygon of several images into ``out / ann.stem`` each.
 
-    Bad polygons become skips. Border checks, metric conversion and footprints
-    (:func:`build_footprints`) are computed for all polygons of all the images together; then
-    each object's mesh and convex pieces are written, and one scene.csv and scene.json per image.
+    Bad polygons become skips. Border checks, metric conversion, footprints
+    (:func:`build_footprints`), heights and the mesh texts (:func:`meshgen.prisms.prism_texts`)
+    are computed for all polygons of all the images together; then each object's mesh and convex
+    pieces are written, and one scene.csv and scene.json per image.
     Files go through ``sink`` (default: written right away; the caller closes its own sink).
     """
     if sink is None:
@@ -366,46 +305,58 @@ def mesh_images(
         for item, fp in zip(kept, footprints, strict=True)
         if not isinstance(fp, FootprintRejected)
     ]
-    heights = iter(
-        object_heights_m(config.seed, [(anns[t[0]].stem, t[2].index, t[4]) for t, _ in good])
+    heights = object_heights_m(config.seed, [(anns[t[0]].stem, t[2].index, t[4]) for t, _ in good])
+    texts = prism_texts(
+        [fp for _, fp in good],
+        heights,
+        [t[2].points_px for t, _ in good],
+        [f"{anns[t[0]].stem}_{t[2].index:03d}" for t, _ in good],
+        config.up,
     )
-    local_rings = _local_rings([fp for _, fp in good])
-    triangles = triangulate_many(local_rings)
-    caps = caps_texts(triangles, [len(r) for r in local_rings])
-    concave = [k for k, (_, fp) in enumerate(good) if not fp.convex]
-    found = diagonals_many([triangles[k] for k in concave], [len(local_rings[k]) for k in concave])
-    diagonals: list[tuple[IntArray, IntArray] | None] = [None] * len(good)
-    for k, pair in zip(concave, found, strict=True):
-        diagonals[k] = pair
-    wholes = whole_pixels([t[2].points_px for t, _ in good])
-    shapes = iter(zip(local_rings, triangles, caps, diagonals, wholes, strict=True))
+    crcs = {ann.stem: zlib.crc32(ann.stem.encode()) for ann in anns}
+    made = iter(
+        zip(
+            heights,
+            texts.mesh,
+            texts.pieces,
+            texts.n_pieces,
+            texts.footprint_json,
+            texts.polygon_json,
+            texts.error,
+            strict=True,
+        )
+    )
     for (img, pos, poly, class_id, spec), fp in zip(kept, footprints, strict=True):
         ann = anns[img]
-        try:
-            if isinstance(fp, FootprintRejected):
-                raise fp
-            ring, tris, cap_faces, diags, whole = next(shapes)
-            record, meta = _mesh_object(
-                ann,
-                poly,
-                fp=fp,
-                spec=spec,
-                class_id=class_id,
-                height=next(heights),
-                ring=ring,
-                tris=tris,
-                caps=cap_faces,
-                diagonals=diags,
-                whole_px=whole,
-                config=config,
-                folder=folders[img],
-                sink=sink,
-            )
-        except FootprintRejected as exc:
-            early[img].append((pos, _skip(ann, poly, exc.reason, exc.detail)))
+        if isinstance(fp, FootprintRejected):
+            early[img].append((pos, _skip(ann, poly, fp.reason, fp.detail)))
             continue
+        height, mesh, pieces, n_pieces, footprint_json, polygon_json, error = next(made)
+        if error:
+            early[img].append((pos, _skip(ann, poly, "degenerate", error)))
+            continue
+        record = _record(
+            ann, poly, fp=fp, spec=spec, class_id=class_id, height=height, n_pieces=n_pieces
+        )
+        header = (
+            f"# cdw-twin meshgen {record.object_id}\nmtllib ../materials.mtl\nusemtl {spec.name}\n"
+        )
+        folder = folders[img]
+        sink.write(f"{folder}/{record.mesh_path}", header + mesh)
+        if pieces:
+            sink.write(f"{folder}/{record.convex_path}", header + pieces)
         records[img].append(record)
-        metas[img].append(meta)
+        metas[img].append(
+            object_json_text(
+                record,
+                source_where=poly.where,
+                density_kg_m3=spec.density_kg_m3,
+                seed=config.seed,
+                rng_key=(config.seed, crcs[ann.stem], poly.index),
+                footprint_json=footprint_json,
+                polygon_json=polygon_json,
+            )
+        )
     results: list[ImageResult] = []
     header = ",".join(SCENE_COLUMNS) + "\n"
     for img, ann in enumerate(anns):

@@ -181,6 +181,33 @@ def object_json(
     function ``json.dumps`` uses for ``str``. Anything else goes through ``json.dumps``.
     ``polygon_px_whole`` is :func:`whole_pixels` of ``polygon_px`` when already known.
     """
+    return object_json_text(
+        record,
+        source_where=source_where,
+        density_kg_m3=density_kg_m3,
+        seed=seed,
+        rng_key=rng_key,
+        footprint_json=points_json(footprint_m, "%.9f"),
+        polygon_json=pixels_json(polygon_px, polygon_px_whole),
+    )
+
+
+def object_json_text(
+    record: ObjectRecord,
+    *,
+    source_where: str,
+    density_kg_m3: float,
+    seed: int,
+    rng_key: tuple[int, int, int],
+    footprint_json: str,
+    polygon_json: str,
+) -> str:
+    """:func:`object_json` with the point arrays given as JSON text already.
+
+    ``footprint_json`` is ``points_json(footprint_m, "%.9f")`` and ``polygon_json``
+    ``points_json(polygon_px, "%.3f")`` (the pipeline formats them for many objects at once,
+    :func:`meshgen.objtext.points_json_blocks`).
+    """
     r = record
     floats = (
         r.area_change_ratio,
@@ -235,7 +262,4 @@ def object_json(
             rng_key=rng_key,
         )
         head = json.dumps(fields, sort_keys=True, separators=(",", ":"))[:-1] + ","
-    return (
-        f'{head}"footprint_m":{points_json(footprint_m, "%.9f")},'
-        f'"polygon_px":{pixels_json(polygon_px, polygon_px_whole)}}}'
-    )
+    return f'{head}"footprint_m":{footprint_json},"polygon_px":{polygon_json}}}'

@@ -1,0 +1,126 @@
+"""The mesh texts of a batch of footprints: prism OBJ bodies, convex pieces, scene.json points.
+
+:func:`prism_texts` does for many footprints at once what meshing one footprint does:
+earcut triangulation (:func:`meshgen.mesh.triangulate_ragged`), the check that it gave
+``n - 2`` triangles, the prism's vertex and face lines, and for a concave footprint its
+Hertel–Mehlhorn convex pieces. The numbers of all objects are formatted together
+(:mod:`meshgen.objtext`); each object's text is a slice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from meshgen.annotations import FloatArray
+from meshgen.footprint import Footprint
+from meshgen.mesh import IntArray, diagonals_many, hertel_mehlhorn, sides_text, triangulate_ragged
+from meshgen.objtext import (
+    caps_blocks,
+    pieces_blocks,
+    points_json_blocks,
+    vertex_rows,
+    vertex_texts,
+)
+from meshgen.ragged import split_rows
+
+FOOTPRINT_DECIMALS = 9
+"""scene.json ``footprint_m`` numbers are written with ``%.9f``."""
+PIXEL_DECIMALS = 3
+"""scene.json ``polygon_px`` numbers are written with ``%.3f``."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PrismTexts:
+    """Per footprint (in order): its texts, or ``error`` when it cannot be meshed.
+
+    ``mesh`` is the OBJ body after the material lines (``o`` line, vertices, faces);
+    ``pieces`` the convex pieces' OBJ body (empty for a convex footprint) and ``n_pieces``
+    their number (1 when convex); ``footprint_json`` and ``polygon_json`` the point arrays of
+    the scene.json entry. ``error`` is "" or the detail of a ``degenerate`` skip.
+    """
+
+    mesh: list[str]
+    pieces: list[str]
+    n_pieces: list[int]
+    footprint_json: list[str]
+    polygon_json: list[str]
+    error: list[str]
+
+
+def _ragged(arrays: list[FloatArray]) -> tuple[FloatArray, IntArray]:
+    sizes = np.fromiter((len(a) for a in arrays), dtype=np.int64, count=len(arrays))
+    return np.concatenate(arrays), sizes
+
+
+def prism_texts(
+    footprints: list[Footprint],
+    heights_m: list[float],
+    polygons_px: list[FloatArray],
+    object_ids: list[str],
+    up: str,
+) -> PrismTexts:
+    """Mesh texts of prisms of ``heights_m`` over ``footprints`` (see :class:`PrismTexts`).
+
+    The mesh frame is the footprint's ring relative to its centroid, half the height above
+    the belt; ``polygons_px`` are the source polygons (for scene.json); ``object_ids`` name
+    the ``o`` lines.
+    """
+    count = len(footprints)
+    if not count:
+        return PrismTexts(
+            mesh=[], pieces=[], n_pieces=[], footprint_json=[], polygon_json=[], error=[]
+        )
+    ring_points, sizes = _ragged([fp.ring_m for fp in footprints])
+    centroids = np.array([fp.centroid_m for fp in footprints], dtype=np.float64)
+    local = ring_points - np.repeat(centroids, sizes, axis=0)
+    rings = split_rows(local, sizes)
+    faces, counts = triangulate_ragged(rings, local, sizes)
+    size_list: list[int] = sizes.tolist()
+    count_list: list[int] = counts.tolist()
+    error = [
+        "" if m == n - 2 else f"earcut gave {m} triangles for {n} points"
+        for m, n in zip(count_list, size_list, strict=True)
+    ]
+    half_m = 0.5 * np.array(heights_m, dtype=np.float64)
+    vertices = vertex_rows(local, sizes, half_m, up)
+    bottoms, tops = vertex_texts(vertices, sizes)
+    caps = caps_blocks(faces, counts, sizes)
+    blocks = zip(object_ids, bottoms, tops, caps, size_list, strict=True)
+    mesh = [f"o {name}\n{bottom}{top}{cap}{sides_text(n)}" for name, bottom, top, cap, n in blocks]
+    pieces = [""] * count
+    n_pieces = [1] * count
+    concave = [k for k, fp in enumerate(footprints) if not fp.convex and not error[k]]
+    if concave:
+        triangles = split_rows(faces, counts)
+        found = diagonals_many([triangles[k] for k in concave], [size_list[k] for k in concave])
+        flat: list[int] = []
+        piece_sizes: list[int] = []
+        per_object: list[int] = []
+        for k, diagonals in zip(concave, found, strict=True):
+            parts = hertel_mehlhorn(rings[k], triangles[k], diagonals)
+            per_object.append(len(parts))
+            for part in parts:
+                flat += part
+                piece_sizes.append(len(part))
+        ring_starts = np.cumsum(sizes) - sizes
+        texts = pieces_blocks(
+            vertices,
+            ring_starts[concave],
+            np.array(flat, dtype=np.int64),
+            np.array(piece_sizes, dtype=np.int64),
+            np.array(per_object, dtype=np.int64),
+        )
+        for k, text, number in zip(concave, texts, per_object, strict=True):
+            pieces[k] = text
+            n_pieces[k] = number
+    pixel_points, pixel_sizes = _ragged(polygons_px)
+    return PrismTexts(
+        mesh=mesh,
+        pieces=pieces,
+        n_pieces=n_pieces,
+        footprint_json=points_json_blocks(ring_points, sizes, FOOTPRINT_DECIMALS),
+        polygon_json=points_json_blocks(pixel_points, pixel_sizes, PIXEL_DECIMALS),
+        error=error,
+    )
