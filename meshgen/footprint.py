@@ -197,26 +197,6 @@ def min_area_rectangle(
     return yaw, length, width
 
 
-def polygon_centroid(ring: FloatArray) -> tuple[float, float, float]:
-    """Area and centroid ``(area_m2, cx, cy)`` of an open counter-clockwise ``(n, 2)`` ring."""
-    origin = ring[0]
-    p = ring - origin
-    q = _next(p)
-    cross = p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]
-    area = 0.5 * float(cross.sum())
-    cx = float(((p[:, 0] + q[:, 0]) * cross).sum()) / (6.0 * area)
-    cy = float(((p[:, 1] + q[:, 1]) * cross).sum()) / (6.0 * area)
-    return area, cx + float(origin[0]), cy + float(origin[1])
-
-
-def drop_duplicates(ring: FloatArray) -> tuple[FloatArray, int]:
-    """Drop consecutive duplicate points (closing point included) of a ``(n, 2)`` ring."""
-    keep = np.any(ring != _prev(ring), axis=1)
-    if keep.all():
-        return ring, 0
-    return ring[keep], int((~keep).sum())
-
-
 def _ragged_polygons(rings: list[FloatArray]) -> npt.NDArray[np.object_]:
     """Shapely polygons of open ``(n_i, 2)`` rings, built in one call."""
     sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=len(rings))
@@ -494,7 +474,7 @@ def _centroid_areas(rings: list[FloatArray]) -> FloatArray:
 
 
 def _centroids(rings: list[FloatArray]) -> list[tuple[float, float, float]]:
-    """:func:`polygon_centroid` for many open CCW rings at once."""
+    """Area and centroid ``(area_m2, cx, cy)`` of each open counter-clockwise ``(n, 2)`` ring."""
     sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=len(rings))
     pts = np.concatenate(rings)
     ends = np.cumsum(sizes)

@@ -10,17 +10,13 @@ Mesh local frame: origin at the centre of mass (footprint centroid, half the hei
 belt), axes parallel to the belt frame. ``up="z"`` writes ``(x, y, z)`` (ROS REP 103),
 ``up="y"`` writes ``(x, z, -y)``.
 
-OBJ text is built from strings, not per line: the ring's vertex lines are formatted once with
-one ``%``-format and shared by the mesh and the convex pieces (a piece's vertices are ring
-vertices); face index text for the side quads of an ``n``-prism and for a convex ``k``-piece
-at a given vertex offset depends only on those integers and is cached for the run
-(:func:`clear_text_caches` empties the caches; the pipeline calls it at the start of each run);
-the caps of a batch of prisms are numbered in one array operation (:func:`caps_texts`).
+OBJ text is written for a whole batch of prisms at once (:mod:`meshgen.prisms`,
+:mod:`meshgen.objtext`). The one piece made here is the face text of the side walls of an
+``n``-prism (:func:`sides_text`), which depends only on ``n`` and is cached for the run
+(:func:`clear_text_caches` empties the cache; the pipeline calls it at the start of each run).
 """
 
 from __future__ import annotations
-
-from operator import itemgetter
 
 import mapbox_earcut
 import numpy as np
@@ -233,50 +229,13 @@ def hertel_mehlhorn(
     return pieces
 
 
-def to_up_axis(verts: FloatArray, up: str) -> FloatArray:
-    """Return ``(n, 3)`` vertices in the output axis convention (``"z"`` or ``"y"`` up)."""
-    if up == "z":
-        return verts
-    out = np.empty_like(verts)
-    out[:, 0] = verts[:, 0]
-    out[:, 1] = verts[:, 2]
-    out[:, 2] = -verts[:, 1]
-    return out
-
-
 _SIDES_TEXT: dict[int, str] = {}
-_PIECE_TEXT: dict[tuple[int, int], str] = {}
-_PIECE_PATTERN: dict[int, IntArray] = {}
 _CACHE_LIMIT = 100_000
 
 
 def clear_text_caches() -> None:
-    """Empty the face-text caches (so every run starts cold and memory stays bounded)."""
+    """Empty the side-wall text cache (so every run starts cold and memory stays bounded)."""
     _SIDES_TEXT.clear()
-    _PIECE_TEXT.clear()
-    _PIECE_PATTERN.clear()
-
-
-def _faces_text(faces_1based: IntArray) -> str:
-    flat = faces_1based.ravel().tolist()
-    return ("f %d %d %d\n" * (len(flat) // 3)) % tuple(flat)
-
-
-def vertex_blocks(ring: FloatArray, half_m: float, up: str) -> tuple[str, str]:
-    """OBJ ``v`` lines of the bottom (``z = -half_m``) and top ring of a prism, in order.
-
-    ``ring`` is ``(n, 2) float`` in the mesh frame; ``up`` as in :func:`to_up_axis`. Each block
-    is ``n`` lines ``v x y z`` with 6 decimals.
-    """
-    n = len(ring)
-    if up == "z":
-        text = ("v %.6f %.6f|\n" * n) % tuple(ring.ravel().tolist())
-        return text.replace("|", f" {-half_m:.6f}"), text.replace("|", f" {half_m:.6f}")
-    flipped = np.empty_like(ring)
-    flipped[:, 0] = ring[:, 0]
-    flipped[:, 1] = -ring[:, 1]
-    text = ("v %.6f|%.6f\n" * n) % tuple(flipped.ravel().tolist())
-    return text.replace("|", f" {-half_m:.6f} "), text.replace("|", f" {half_m:.6f} ")
 
 
 def sides_text(n: int) -> str:
@@ -295,81 +254,3 @@ def sides_text(n: int) -> str:
         if len(_SIDES_TEXT) < _CACHE_LIMIT:
             _SIDES_TEXT[n] = sides
     return sides
-
-
-def prism_faces_text(tris: IntArray, n: int) -> str:
-    """OBJ ``f`` lines of the prism :func:`extrude` builds (same faces, same order, 1-based)."""
-    caps = np.empty((2 * len(tris), 3), dtype=np.int64)
-    caps[: len(tris)] = tris[:, ::-1]
-    caps[len(tris) :] = tris + n
-    caps += 1
-    return _faces_text(caps) + sides_text(n)
-
-
-def caps_texts(tris_list: list[IntArray], sizes: list[int]) -> list[str]:
-    """OBJ ``f`` lines of both caps of many prisms: what :func:`prism_faces_text` writes first.
-
-    Per prism over ``sizes[k]`` points: the bottom cap (``tris`` reversed, facing down), then
-    the top cap (``tris + n``), 1-based. The index arithmetic is done once for all prisms and
-    converted to Python ints in one go; each prism's text is then one ``%`` of its slices.
-    """
-    if not tris_list:
-        return []
-    counts = [len(t) for t in tris_list]
-    faces = np.concatenate(tris_list)
-    bottom: list[int] = (faces[:, ::-1] + 1).ravel().tolist()
-    shift = np.repeat(np.array(sizes, dtype=np.int64) + 1, counts)
-    top: list[int] = (faces + shift[:, None]).ravel().tolist()
-    texts: list[str] = []
-    start = 0
-    for m in counts:
-        stop = start + 3 * m
-        texts.append(("f %d %d %d\n" * (2 * m)) % (*bottom[start:stop], *top[start:stop]))
-        start = stop
-    return texts
-
-
-def _piece_pattern(k: int) -> IntArray:
-    """``(4k - 4, 3) int`` local faces of a prism over a convex ``k``-gon (fans, then sides)."""
-    pattern = _PIECE_PATTERN.get(k)
-    if pattern is None:
-        i = np.arange(1, k - 1, dtype=np.int64)
-        fan_bottom = np.stack((np.zeros_like(i), i + 1, i), axis=1)
-        fan_top = np.stack((np.full_like(i, k), i + k, i + k + 1), axis=1)
-        local = np.arange(k, dtype=np.int64)
-        nxt = np.concatenate((local[1:], local[:1]))
-        sides = np.empty((2 * k, 3), dtype=np.int64)
-        sides[0::2] = np.stack((local, nxt, nxt + k), axis=1)
-        sides[1::2] = np.stack((local, nxt + k, local + k), axis=1)
-        pattern = np.concatenate((fan_bottom, fan_top, sides))
-        _PIECE_PATTERN[k] = pattern
-    return pattern
-
-
-def pieces_text(bottom: str, top: str, pieces: list[list[int]]) -> str:
-    """OBJ text with one ``o piece_k`` block per convex piece, each a closed prism.
-
-    ``bottom`` and ``top`` are the ring's vertex blocks from :func:`vertex_blocks`; ``pieces``
-    are CCW lists of ring indices (:func:`hertel_mehlhorn`). A piece of ``k`` vertices gets
-    ``2k`` vertices (bottom ring, top ring) and ``4k - 4`` triangles (bottom fan, top fan,
-    sides), indices global and 1-based.
-    """
-    rows_b = bottom.splitlines(keepends=True)
-    rows_t = top.splitlines(keepends=True)
-    parts: list[str] = []
-    offset = 0
-    for number, piece in enumerate(pieces):
-        size = len(piece)
-        pick = itemgetter(*piece)
-        parts.append(f"o piece_{number}\n")
-        parts.append("".join(pick(rows_b)))
-        parts.append("".join(pick(rows_t)))
-        key = (size, offset)
-        faces = _PIECE_TEXT.get(key)
-        if faces is None:
-            faces = _faces_text(_piece_pattern(size) + (offset + 1))
-            if len(_PIECE_TEXT) < _CACHE_LIMIT:
-                _PIECE_TEXT[key] = faces
-        parts.append(faces)
-        offset += 2 * size
-    return "".join(parts)

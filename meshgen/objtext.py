@@ -1,9 +1,9 @@
 """OBJ and scene.json text of many objects at once, formatted by :func:`meshgen.numtext.render`.
 
-Every function here gives, per object, exactly the text of its one-object counterpart
-(:func:`meshgen.mesh.vertex_blocks`, :func:`meshgen.mesh.prism_faces_text`,
-:func:`meshgen.mesh.pieces_text`, :func:`meshgen.records.points_json`); the numbers of all
-objects are formatted together and each object's text is a slice of one string.
+Every function here gives, per object, exactly the text that formatting that one object
+line by line with Python's ``%`` gives (``tests/meshgen/reference_text.py`` is that reference;
+``tests/meshgen/test_numtext.py`` checks against it); the numbers of all objects are formatted
+together and each object's text is a slice of one string.
 
 Objects are given as ragged arrays: the rows of all objects concatenated, cut by ``sizes``.
 """
@@ -39,8 +39,8 @@ def vertex_rows(points: FloatArray, sizes: IntArray, half_m: FloatArray, up: str
     """OBJ ``v`` rows of prisms: all bottom rings (``z = -half_m``), then all top rings.
 
     ``points`` is the ``(P, 2)`` mesh-frame rings of all prisms, cut by ``sizes``; ``half_m``
-    their half heights. Rows ``i`` (bottom) and ``P + i`` (top) are the lines
-    :func:`meshgen.mesh.vertex_blocks` writes for point ``i``. When every ``-half_m`` has its
+    their half heights. Rows ``i`` (bottom) and ``P + i`` (top) are the lines ``v x y z`` of
+    point ``i`` (``%.6f``; ``up`` as in :mod:`meshgen.mesh`). When every ``-half_m`` has its
     sign bit set, ``"%.6f" % half`` is ``"%.6f" % -half`` without the ``-``, so the top rows
     are the bottom rows with that one character dropped.
     """
@@ -109,7 +109,7 @@ def pieces_blocks(
     piece_sizes: IntArray,
     pieces_per_object: IntArray,
 ) -> list[str]:
-    """OBJ text of the convex pieces of many prisms, as :func:`meshgen.mesh.pieces_text`.
+    """OBJ text of the convex pieces of many prisms, one ``o`` block per piece, each a prism.
 
     ``vertices`` is :func:`vertex_rows` of all prisms (``P`` bottom rows, then ``P`` top rows);
     ``ring_starts`` the first row of each object's ring among them. The pieces of all objects
@@ -145,9 +145,9 @@ def pieces_blocks(
 def piece_faces(sizes: IntArray) -> IntArray:
     """``(sum(4k - 4), 3)`` local faces of prisms over convex ``k``-gons, one after another.
 
-    Per piece, as :func:`meshgen.mesh._piece_pattern`: the bottom fan ``(0, i + 1, i)`` and
-    the top fan ``(k, i + k, i + k + 1)`` for ``i = 1 .. k - 2``, then per ring edge
-    ``l -> l'`` the sides ``(l, l', l' + k)`` and ``(l, l' + k, l + k)``; 0-based in the piece.
+    Per piece: the bottom fan ``(0, i + 1, i)`` and the top fan ``(k, i + k, i + k + 1)`` for
+    ``i = 1 .. k - 2``, then per ring edge ``l -> l'`` the sides ``(l, l', l' + k)`` and
+    ``(l, l' + k, l + k)``; 0-based in the piece.
     """
     fans = sizes - 2
     fan_starts = np.cumsum(fans) - fans

@@ -18,10 +18,6 @@ import math
 from dataclasses import dataclass
 from json.encoder import encode_basestring_ascii
 
-import numpy as np
-import numpy.typing as npt
-
-from meshgen.annotations import FloatArray
 from meshgen.export import SCENE_COLUMNS, csv_field
 
 
@@ -90,48 +86,6 @@ def csv_row(record: ObjectRecord) -> str:
     )
 
 
-def points_json(points: npt.NDArray[np.float64] | npt.NDArray[np.int64], fmt: str) -> str:
-    """``[[a,b],...]`` JSON text of ``(n, 2)`` points, each number with the %-format ``fmt``."""
-    pair = f"[{fmt},{fmt}],"
-    return "[" + (pair * len(points))[:-1] % tuple(points.ravel().tolist()) + "]"
-
-
-_WHOLE_LIMIT = float(2**53)
-"""Whole floats below this are exact integers; ``%d`` of them matches ``%.0f``."""
-
-
-def whole_pixels(polygons_px: list[FloatArray]) -> list[bool]:
-    """Per ``(n_i, 2)`` polygon: True when every coordinate is a whole number in ``[0, 2**53)``.
-
-    ``-0.0`` does not count (its sign bit is set). This is the test :func:`pixels_json` needs,
-    made for many polygons in a few numpy calls.
-    """
-    if not polygons_px:
-        return []
-    sizes = np.fromiter((p.size for p in polygons_px), dtype=np.int64, count=len(polygons_px))
-    values = np.concatenate([p.ravel() for p in polygons_px])
-    good = (values == np.trunc(values)) & ~np.signbit(values) & (values < _WHOLE_LIMIT)
-    flags = np.ones(len(polygons_px), dtype=bool)
-    live = sizes > 0
-    flags[live] = np.logical_and.reduceat(good, (np.cumsum(sizes) - sizes)[live])
-    return [bool(f) for f in flags.tolist()]
-
-
-def pixels_json(points_px: FloatArray, whole: bool | None = None) -> str:
-    """``points_json(points_px, "%.3f")``, faster when all coordinates are whole and >= 0.
-
-    Annotation tools mostly store whole pixels. For a whole number ``0 <= x < 2**53``,
-    ``"%.3f" % x`` is ``"%d.000" % int(x)``, and formatting integers costs about a third of
-    formatting floats. Anything else (fractions, negatives, -0.0) takes the float format.
-    ``whole`` is that test's result when known (:func:`whole_pixels`), else it is made here.
-    """
-    if whole is None:
-        (whole,) = whole_pixels([points_px])
-    if whole:
-        return points_json(points_px.astype(np.int64), "%d.000")
-    return points_json(points_px, "%.3f")
-
-
 def _object_fields(
     record: ObjectRecord,
     *,
@@ -140,7 +94,7 @@ def _object_fields(
     seed: int,
     rng_key: tuple[int, int, int],
 ) -> dict[str, object]:
-    """The scene.json fields of one object other than its point arrays (the reference form)."""
+    """The scene.json fields of one object other than its point arrays, for ``json.dumps``."""
     fields: dict[str, object] = dict(zip(SCENE_COLUMNS, record.row(), strict=True))
     fields["repairs"] = list(record.repairs)
     fields["source_where"] = source_where
@@ -160,38 +114,6 @@ _OBJECT_FORMAT = (
 """:func:`_object_fields` as sorted compact JSON without the closing brace, for plain floats."""
 
 
-def object_json(
-    record: ObjectRecord,
-    *,
-    source_where: str,
-    density_kg_m3: float,
-    seed: int,
-    rng_key: tuple[int, int, int],
-    footprint_m: FloatArray,
-    polygon_px: FloatArray,
-    polygon_px_whole: bool | None = None,
-) -> str:
-    """The scene.json entry of one object: its record plus where it came from and its points.
-
-    The fields of :func:`_object_fields` as ``json.dumps(..., sort_keys=True,
-    separators=(",", ":"))`` writes them, then ``footprint_m`` (``(n, 2)`` metres, ``%.9f``)
-    and ``polygon_px`` (``(m, 2)`` pixels, ``%.3f``). When every float is a finite built-in
-    ``float`` (always, in the pipeline) the fields are formatted with one template: ``%r`` of
-    such a float is the ``float.__repr__`` that ``json`` writes, and text is escaped with the
-    function ``json.dumps`` uses for ``str``. Anything else goes through ``json.dumps``.
-    ``polygon_px_whole`` is :func:`whole_pixels` of ``polygon_px`` when already known.
-    """
-    return object_json_text(
-        record,
-        source_where=source_where,
-        density_kg_m3=density_kg_m3,
-        seed=seed,
-        rng_key=rng_key,
-        footprint_json=points_json(footprint_m, "%.9f"),
-        polygon_json=pixels_json(polygon_px, polygon_px_whole),
-    )
-
-
 def object_json_text(
     record: ObjectRecord,
     *,
@@ -202,11 +124,16 @@ def object_json_text(
     footprint_json: str,
     polygon_json: str,
 ) -> str:
-    """:func:`object_json` with the point arrays given as JSON text already.
+    """The scene.json entry of one object: its record plus where it came from and its points.
 
-    ``footprint_json`` is ``points_json(footprint_m, "%.9f")`` and ``polygon_json``
-    ``points_json(polygon_px, "%.3f")`` (the pipeline formats them for many objects at once,
-    :func:`meshgen.objtext.points_json_blocks`).
+    The fields of :func:`_object_fields` as ``json.dumps(..., sort_keys=True,
+    separators=(",", ":"))`` writes them, then ``footprint_json`` and ``polygon_json``: the
+    JSON text of ``footprint_m`` (``(n, 2)`` metres, ``%.9f``) and ``polygon_px`` (``(m, 2)``
+    pixels, ``%.3f``), which the pipeline formats for many objects at once
+    (:func:`meshgen.objtext.points_json_blocks`). When every float is a finite built-in
+    ``float`` (always, in the pipeline) the fields are formatted with one template: ``%r`` of
+    such a float is the ``float.__repr__`` that ``json`` writes, and text is escaped with the
+    function ``json.dumps`` uses for ``str``. Anything else goes through ``json.dumps``.
     """
     r = record
     floats = (

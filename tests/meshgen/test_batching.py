@@ -10,15 +10,9 @@ import pytest
 from meshgen import footprint
 from meshgen.footprint import _min_area_rectangles, _ragged_polygons, min_area_rectangle
 from meshgen.loaders import _checked_points, points_one_by_one
-from meshgen.mesh import (
-    caps_texts,
-    diagonals_many,
-    extrude,
-    prism_faces_text,
-    sides_text,
-    triangulate,
-)
+from meshgen.mesh import diagonals_many, extrude, sides_text, triangulate
 from meshgen.ragged import split_rows
+from tests.meshgen.reference_text import caps_texts, prism_faces_text
 
 
 def _star(points: int, seed: int) -> np.ndarray:

@@ -9,14 +9,7 @@ import numpy as np
 import pytest
 
 from meshgen.loaders import _numeric_pairs
-from meshgen.mesh import (
-    caps_texts,
-    diagonals_many,
-    hertel_mehlhorn,
-    pieces_text,
-    triangulate,
-    vertex_blocks,
-)
+from meshgen.mesh import diagonals_many, hertel_mehlhorn, triangulate
 from meshgen.numtext import Fixed, Part, Whole, render, round_scaled
 from meshgen.objtext import (
     caps_blocks,
@@ -25,7 +18,7 @@ from meshgen.objtext import (
     vertex_rows,
     vertex_texts,
 )
-from meshgen.records import points_json
+from tests.meshgen.reference_text import caps_texts, pieces_text, points_json, vertex_blocks
 
 
 def _floats() -> np.ndarray:
@@ -150,6 +143,24 @@ def test_points_json_blocks_match_points_json() -> None:
     for decimals in (3, 9):
         blocks = points_json_blocks(points, SIZES, decimals)
         assert blocks == [points_json(r * 1000.0, f"%.{decimals}f") for r in RINGS]
+
+
+def test_points_json_blocks_of_pixel_polygons() -> None:
+    # whole pixels (the usual case), fractions, negatives, -0.0, huge and almost-whole values
+    rng = np.random.default_rng(3)
+    polygons = [
+        rng.integers(0, 5000, size=(50, 2)).astype(np.float64),
+        rng.uniform(-10, 5000, size=(50, 2)),
+        np.array([[-0.0, 0.0], [1.0, 2.0], [3.0, 4.5]]),
+        np.array([[-2.0, 5.0], [3.0, 5.0], [3.0, 9.0]]),
+        np.array([[2.0**53, 1.0], [2.0**60, 2.0], [3.0, 4.0]]),
+        np.array([[0.9999999999999999, 1.0], [1.0, 2.0], [3.0, 4.0]]),
+        np.zeros((0, 2)),
+    ]
+    sizes = np.array([len(p) for p in polygons], dtype=np.int64)
+    blocks = points_json_blocks(np.concatenate(polygons), sizes, 3)
+    assert blocks == [points_json(p, "%.3f") for p in polygons]
+    assert blocks[2] == "[[-0.000,0.000],[1.000,2.000],[3.000,4.500]]"
 
 
 @pytest.mark.parametrize(

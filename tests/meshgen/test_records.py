@@ -8,15 +8,8 @@ import numpy as np
 import pytest
 
 from meshgen.export import SCENE_COLUMNS, csv_text
-from meshgen.records import (
-    ObjectRecord,
-    _object_fields,
-    csv_row,
-    object_json,
-    pixels_json,
-    points_json,
-    whole_pixels,
-)
+from meshgen.records import ObjectRecord, csv_row, object_json_text
+from tests.meshgen.reference_text import object_json, points_json
 
 
 def _record(**changes: object) -> ObjectRecord:
@@ -48,15 +41,28 @@ FOOTPRINT = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.05], [-1e-12, 0.05]])
 PIXELS = np.array([[10.0, 20.0], [30.0, 20.0], [30.0, 41.0]])
 
 
-def _reference(record: ObjectRecord, polygon_px: np.ndarray, density: float = 600.0) -> str:
-    fields = _object_fields(
-        record, source_where="shape 7", density_kg_m3=density, seed=5, rng_key=(5, 123, 7)
+def _texts(record: ObjectRecord, density: float) -> tuple[str, str]:
+    """``object_json_text`` of ``record`` and the ``json.dumps`` reference of it."""
+    where, seed, key = "shape 7", 5, (5, 123, 7)
+    text = object_json_text(
+        record,
+        source_where=where,
+        density_kg_m3=density,
+        seed=seed,
+        rng_key=key,
+        footprint_json=points_json(FOOTPRINT, "%.9f"),
+        polygon_json=points_json(PIXELS, "%.3f"),
     )
-    head = json.dumps(fields, sort_keys=True, separators=(",", ":"))
-    return (
-        f'{head[:-1]},"footprint_m":{points_json(FOOTPRINT, "%.9f")}'
-        f',"polygon_px":{points_json(polygon_px, "%.3f")}}}'
+    reference = object_json(
+        record,
+        source_where=where,
+        density_kg_m3=density,
+        seed=seed,
+        rng_key=key,
+        footprint_m=FOOTPRINT,
+        polygon_px=PIXELS,
     )
+    return text, reference
 
 
 @pytest.mark.parametrize(
@@ -70,61 +76,17 @@ def _reference(record: ObjectRecord, polygon_px: np.ndarray, density: float = 60
         {"area_change_ratio": float("inf"), "width_m": 1e300},
     ],
 )
-@pytest.mark.parametrize(
-    "polygon_px",
-    [
-        PIXELS,
-        PIXELS + 0.5,
-        np.array([[-0.0, 5.0], [3.0, 5.0], [3.0, 9.0]]),
-        np.array([[-2.0, 5.0], [3.0, 5.0], [3.0, 9.0]]),
-        np.array([[2.0**60, 5.0], [3.0, 5.0], [3.0, 9.0]]),
-    ],
-)
-def test_object_json_is_sorted_compact_json(
-    changes: dict[str, object], polygon_px: np.ndarray
-) -> None:
+def test_object_json_text_is_sorted_compact_json(changes: dict[str, object]) -> None:
     record = _record(**changes)
-    kwargs = {"source_where": "shape 7", "density_kg_m3": 600.0, "seed": 5, "rng_key": (5, 123, 7)}
-    expected = _reference(record, polygon_px)
-    for whole in (None, *whole_pixels([polygon_px])):
-        text = object_json(
-            record, footprint_m=FOOTPRINT, polygon_px=polygon_px, polygon_px_whole=whole, **kwargs
-        )
-        assert text == expected
+    text, reference = _texts(record, 600.0)
+    assert text == reference
     assert json.loads(text)["object_id"] == record.object_id
 
 
-def test_object_json_keeps_an_integer_density() -> None:
-    record = _record()
-    text = object_json(
-        record,
-        source_where="shape 7",
-        density_kg_m3=600,  # a YAML int would print as 600, not 600.0
-        seed=5,
-        rng_key=(5, 123, 7),
-        footprint_m=FOOTPRINT,
-        polygon_px=PIXELS,
-    )
-    assert text == _reference(record, PIXELS, density=600)
+def test_object_json_text_keeps_an_integer_density() -> None:
+    text, reference = _texts(_record(), 600)  # a YAML int would print as 600, not 600.0
+    assert text == reference
     assert '"density_kg_m3":600,' in text
-
-
-def test_pixels_json_matches_float_format() -> None:
-    rng = np.random.default_rng(3)
-    cases = [
-        rng.integers(0, 5000, size=(50, 2)).astype(np.float64),
-        rng.uniform(-10, 5000, size=(50, 2)),
-        np.array([[0.0, 0.0], [1.0, 2.0], [3.0, 4.0]]),
-        np.array([[-0.0, 0.0], [1.0, 2.0], [3.0, 4.0]]),
-        np.array([[2.0**53, 1.0], [1.0, 2.0], [3.0, 4.0]]),
-        np.array([[0.9999999999999999, 1.0], [1.0, 2.0], [3.0, 4.0]]),
-        np.zeros((0, 2)),
-    ]
-    flags = whole_pixels(cases)
-    assert flags == [True, False, True, False, False, False, True]
-    for points, whole in zip(cases, flags, strict=True):
-        assert pixels_json(points) == points_json(points, "%.3f")
-        assert pixels_json(points, whole) == points_json(points, "%.3f")
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,136 @@
+"""Reference one-object OBJ and scene.json texts: the oracle for the batched production code.
+
+meshgen formats the text of a whole batch of objects at once (:mod:`meshgen.objtext`,
+:mod:`meshgen.prisms`, :func:`meshgen.records.object_json_text`). These functions write the
+same text for one object in the plainest way: Python ``%``/f-string formatting, one line at a
+time, no caches, no numpy tricks. ``tests/meshgen/test_numtext.py`` and
+``tests/meshgen/test_records.py`` check the batched forms against them;
+``tests/meshgen/test_reference_text.py`` and ``tests/meshgen/test_batching.py`` check these
+against independent expectations (hand-written text, :func:`meshgen.mesh.extrude`, closed
+convex pieces, ``json.dumps``).
+
+Import as ``from tests.meshgen.reference_text import ...`` (pytest's importlib mode names
+this folder's modules ``tests.meshgen.*``).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import numpy.typing as npt
+
+from meshgen.export import SCENE_COLUMNS
+from meshgen.records import ObjectRecord
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+def _faces_text(faces_0based: list[tuple[int, int, int]]) -> str:
+    return "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces_0based)
+
+
+def vertex_blocks(ring: FloatArray, half_m: float, up: str) -> tuple[str, str]:
+    """OBJ ``v`` lines of the bottom (``z = -half_m``) and the top ring of a prism.
+
+    ``ring`` is the ``(n, 2)`` mesh-frame footprint; ``up="z"`` writes ``(x, y, z)``,
+    ``up="y"`` writes ``(x, z, -y)``. Every number with 6 decimals.
+    """
+
+    def block(z: float) -> str:
+        lines = []
+        for x, y in ring.tolist():
+            a, b, c = (x, y, z) if up == "z" else (x, z, -y)
+            lines.append(f"v {a:.6f} {b:.6f} {c:.6f}\n")
+        return "".join(lines)
+
+    return block(-half_m), block(half_m)
+
+
+def caps_faces(tris: IntArray, n: int) -> list[tuple[int, int, int]]:
+    """0-based cap faces of a prism over ``n`` points: bottom (reversed, facing down), top."""
+    bottom = [(c, b, a) for a, b, c in tris.tolist()]
+    top = [(a + n, b + n, c + n) for a, b, c in tris.tolist()]
+    return bottom + top
+
+
+def caps_texts(tris_list: list[IntArray], sizes: list[int]) -> list[str]:
+    """Per prism the ``f`` lines of both caps (what :func:`prism_faces_text` writes first)."""
+    return [_faces_text(caps_faces(t, n)) for t, n in zip(tris_list, sizes, strict=True)]
+
+
+def prism_faces_text(tris: IntArray, n: int) -> str:
+    """OBJ ``f`` lines of a prism over ``n`` points with CCW cap triangles ``tris``, 1-based.
+
+    Both caps (:func:`caps_faces`), then per ring edge ``i -> j`` the side triangles
+    ``(i, j, j + n)`` and ``(i, j + n, i + n)``: the faces of :func:`meshgen.mesh.extrude`.
+    """
+    sides = []
+    for i in range(n):
+        j = (i + 1) % n
+        sides += [(i, j, j + n), (i, j + n, i + n)]
+    return _faces_text(caps_faces(tris, n) + sides)
+
+
+def pieces_text(bottom: str, top: str, pieces: list[list[int]]) -> str:
+    """OBJ text with one ``o piece_j`` block per convex piece, each a closed prism.
+
+    ``bottom`` and ``top`` are the ring's vertex blocks (:func:`vertex_blocks`); ``pieces``
+    are CCW lists of ring indices (:func:`meshgen.mesh.hertel_mehlhorn`). A piece of ``k``
+    vertices writes its ``k`` bottom and ``k`` top vertex lines and ``4k - 4`` triangles:
+    the bottom fan ``(0, i + 1, i)``, the top fan ``(k, i + k, i + k + 1)`` for
+    ``i = 1 .. k - 2``, then per edge ``l -> l'`` the sides ``(l, l', l' + k)`` and
+    ``(l, l' + k, l + k)``; indices count on from the earlier pieces' vertices.
+    """
+    bottom_lines = bottom.splitlines(keepends=True)
+    top_lines = top.splitlines(keepends=True)
+    out = []
+    offset = 0
+    for number, piece in enumerate(pieces):
+        k = len(piece)
+        out.append(f"o piece_{number}\n")
+        out += [bottom_lines[i] for i in piece]
+        out += [top_lines[i] for i in piece]
+        faces = [(0, i + 1, i) for i in range(1, k - 1)]
+        faces += [(k, i + k, i + k + 1) for i in range(1, k - 1)]
+        for m in range(k):
+            m_next = (m + 1) % k
+            faces += [(m, m_next, m_next + k), (m, m_next + k, m + k)]
+        out.append(_faces_text([(a + offset, b + offset, c + offset) for a, b, c in faces]))
+        offset += 2 * k
+    return "".join(out)
+
+
+def points_json(points: FloatArray, fmt: str) -> str:
+    """``[[a,b],...]`` JSON text of ``(n, 2)`` points, each number with the %-format ``fmt``."""
+    return "[" + ",".join(f"[{fmt % a},{fmt % b}]" for a, b in points.tolist()) + "]"
+
+
+def object_json(
+    record: ObjectRecord,
+    *,
+    source_where: str,
+    density_kg_m3: float,
+    seed: int,
+    rng_key: tuple[int, int, int],
+    footprint_m: FloatArray,
+    polygon_px: FloatArray,
+) -> str:
+    """The scene.json entry of one object, built with ``json.dumps``.
+
+    The record's scene.csv fields (``repairs`` as a list) plus ``source_where``,
+    ``density_kg_m3``, ``seed`` and ``rng_key``, as sorted compact JSON, then ``footprint_m``
+    (``%.9f``) and ``polygon_px`` (``%.3f``).
+    """
+    fields: dict[str, object] = {name: getattr(record, name) for name in SCENE_COLUMNS}
+    fields["repairs"] = list(record.repairs)
+    fields["source_where"] = source_where
+    fields["density_kg_m3"] = density_kg_m3
+    fields["seed"] = seed
+    fields["rng_key"] = list(rng_key)
+    head = json.dumps(fields, sort_keys=True, separators=(",", ":"))
+    return (
+        f'{head[:-1]},"footprint_m":{points_json(footprint_m, "%.9f")}'
+        f',"polygon_px":{points_json(polygon_px, "%.3f")}}}'
+    )
