@@ -107,7 +107,10 @@ class PickStats:
     ``untargeted`` counts objects that were never targeted, by the last reason the scheduler gave;
     ``aborted`` counts aborted picks by reason (``target_lost``, ``too_late``, ``ruckig_error``,
     ``ik_failure``); ``errors`` counts every Ruckig/IK error, also outside a pick;
-    ``rate_limited`` counts joint commands slowed to the joint velocity limits.
+    ``rate_limited`` counts joint commands slowed to the joint velocity limits;
+    ``sync_fallbacks`` counts Ruckig plans (Cartesian steps and joint moves) whose time
+    synchronisation failed and that were solved without it (see
+    :func:`control.planner.calculate_synchronised`).
     """
 
     targeted: int
@@ -117,6 +120,7 @@ class PickStats:
     untargeted: Mapping[str, int]
     errors: Mapping[str, int]
     rate_limited: int = 0
+    sync_fallbacks: int = 0
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -245,6 +249,7 @@ class PickController:
             untargeted=dict(Counter(self._untargeted.values())),
             errors=dict(self._errors),
             rate_limited=self._commander.rate_limited,
+            sync_fallbacks=self._planner.sync_fallbacks + self._joint_planner.sync_fallbacks,
         )
 
     def _set_phase(self, phase: Phase, t_s: float) -> None:

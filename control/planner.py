@@ -27,6 +27,32 @@ Vec4 = tuple[float, float, float, float]
 FloatArray = NDArray[np.float64]
 
 _ZERO4: Vec4 = (0.0, 0.0, 0.0, 0.0)
+_SOLVED = (Result.Working, Result.Finished)
+
+
+def calculate_synchronised(
+    otg: Ruckig, inp: InputParameter, trajectory: Trajectory, fallback: Synchronization
+) -> tuple[Result, bool]:
+    """Ruckig with time synchronisation, retried once with ``fallback`` if that fails.
+
+    Ruckig's synchronisation step fails numerically for rare states (seen here: a carry whose
+    every retry from the same state failed the same way, "error in step 2 ... for t sync", for
+    10 s), while the same input solves without it. Returns the result and whether the fallback
+    was used; a ``RuckigError`` of the fallback propagates. ``inp.synchronization`` is left at
+    ``Time``.
+    """
+    inp.synchronization = Synchronization.Time
+    try:
+        result = otg.calculate(inp, trajectory)
+    except RuckigError:
+        result = Result.Error
+    if result in _SOLVED:
+        return result, False
+    inp.synchronization = fallback
+    try:
+        return otg.calculate(inp, trajectory), True
+    finally:
+        inp.synchronization = Synchronization.Time
 
 
 def _vec4(values: object) -> Vec4:
@@ -103,20 +129,16 @@ class _AxisGroup:
         inp.target_velocity = [0.0] * self.dofs
         inp.target_acceleration = [0.0] * self.dofs
         inp.min_velocity, inp.max_velocity, inp.max_acceleration, inp.max_jerk = limits
-        inp.synchronization = Synchronization.Time
         try:
-            result = self.otg.calculate(inp, self.trajectory)
-        except RuckigError:
-            result = Result.Error
-        if result not in (Result.Working, Result.Finished):
+            result, fell_back = calculate_synchronised(
+                self.otg, inp, self.trajectory, Synchronization.No
+            )
+        except RuckigError as exc:
             self.fallbacks += 1
-            inp.synchronization = Synchronization.No
-            try:
-                result = self.otg.calculate(inp, self.trajectory)
-            except RuckigError as exc:
-                msg = f"Ruckig rejected the input: {str(exc).strip()}"
-                raise PlanningError(msg) from exc
-        if result not in (Result.Working, Result.Finished):
+            msg = f"Ruckig rejected the input: {str(exc).strip()}"
+            raise PlanningError(msg) from exc
+        self.fallbacks += fell_back
+        if result not in _SOLVED:
             msg = f"Ruckig returned {result}"
             raise PlanningError(msg)
         duration_s = float(self.trajectory.duration)
@@ -386,6 +408,8 @@ class JointPlanner:
         self._q = np.zeros(n)
         self._dq = np.zeros(n)
         self._ddq = np.zeros(n)
+        self.sync_fallbacks = 0
+        """Plans where time synchronisation failed and the fallback solved the move."""
 
     def reset(self, q: FloatArray, dq: FloatArray | None = None) -> None:
         """Continue from ``q`` (and ``dq``, clipped to the velocity limits), zero acceleration."""
@@ -422,7 +446,11 @@ class JointPlanner:
         inp.target_position = list(q_target)
         inp.target_velocity = list(velocity)
         inp.minimum_duration = min_duration_s if min_duration_s > 0.0 else None
-        return self._otg.calculate(inp, trajectory)
+        # to rest, every joint may arrive on its own; a moving target keeps them together
+        fallback = Synchronization.No if not velocity.any() else Synchronization.TimeIfNecessary
+        result, fell_back = calculate_synchronised(self._otg, inp, trajectory, fallback)
+        self.sync_fallbacks += fell_back
+        return result
 
     def _checked(
         self,

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from ruckig import Synchronization
 
 from control.config import ControllerConfig, MotionConfig
 from control.errors import ControlConfigError, IkError, PlanningError
@@ -17,6 +18,7 @@ from control.planner import (
     FeedbackTerm,
     JointCommander,
     JointPlanner,
+    calculate_synchronised,
     per_joint,
 )
 
@@ -235,3 +237,64 @@ def test_a_planned_move_arrives_on_time_with_the_target_velocity() -> None:
     assert np.allclose(kin.tcp_velocity(step.q, step.dq), [0.3, 0.0, 0.0, 0.0], atol=1e-6)
     with pytest.raises(PlanningError, match="outside the velocity limits"):
         planner.start_move(goal.q, 10 * vmax)
+
+
+# A carry's state (realtime throughput run, seed 2) for which Ruckig 0.19's time
+# synchronisation fails ("error in step 2 in dof: 1 for t sync"); the controller retried it
+# every control period for 10 s, holding the object above the belt.
+_STUCK_CARRY = {
+    "current_position": [
+        0.7506670151160297,
+        0.4882624548094206,
+        0.5678165529458206,
+        -1.952749876568748,
+        -0.3896200141553445,
+        2.353583386831434,
+        -0.938743188181798,
+    ],
+    "current_velocity": [
+        -0.7070633649332816,
+        -1.3924436505907682,
+        0.1176630443549214,
+        -0.7006242327949512,
+        0.5772033741679845,
+        0.04044115975952839,
+        -0.627920849228561,
+    ],
+    "current_acceleration": [-15.0, 5.15414404350267, 0.0, -12.5, 15.0, 20.0, -20.0],
+    "target_position": [
+        -0.5422284827662038,
+        -0.355311841795625,
+        0.6494837711361389,
+        -2.92628668394903,
+        0.420131630475602,
+        2.599634061585844,
+        -1.476855370616502,
+    ],
+    "target_velocity": [0.0] * 7,
+    "max_velocity": [2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61],
+    "max_acceleration": [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0],
+    "max_jerk": [7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0],
+}
+
+
+def test_a_move_whose_time_synchronisation_fails_is_planned_without_it() -> None:
+    from ruckig import InputParameter, Result, Ruckig, RuckigError, Trajectory
+
+    inp = InputParameter(7)
+    for name, value in _STUCK_CARRY.items():
+        setattr(inp, name, value)
+    otg, trajectory = Ruckig(7, 1.0 / 120.0), Trajectory(7)
+    with pytest.raises(RuckigError, match="step 2"):
+        otg.calculate(inp, trajectory)  # the failure this test is about
+    result, fell_back = calculate_synchronised(otg, inp, trajectory, Synchronization.No)
+    assert result == Result.Working
+    assert fell_back
+    assert inp.synchronization == Synchronization.Time
+    q, dq, _ = trajectory.at_time(trajectory.duration)
+    np.testing.assert_allclose(q, _STUCK_CARRY["target_position"], atol=1e-9)
+    np.testing.assert_allclose(dq, 0.0, atol=1e-9)
+    for t_s in np.linspace(0.0, trajectory.duration, 200):
+        _, v, a = trajectory.at_time(float(t_s))
+        assert np.all(np.abs(v) <= np.asarray(_STUCK_CARRY["max_velocity"]) + 1e-9)
+        assert np.all(np.abs(a) <= np.asarray(_STUCK_CARRY["max_acceleration"]) + 1e-9)
