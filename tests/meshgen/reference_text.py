@@ -19,6 +19,7 @@ import json
 
 import numpy as np
 import numpy.typing as npt
+import trimesh
 
 from meshgen.export import SCENE_COLUMNS
 from meshgen.records import ObjectRecord
@@ -134,3 +135,24 @@ def object_json(
         f'{head[:-1]},"footprint_m":{points_json(footprint_m, "%.9f")}'
         f',"polygon_px":{points_json(polygon_px, "%.3f")}}}'
     )
+
+
+def obj_meshes(text: str) -> list[trimesh.Trimesh]:
+    """One mesh per ``o`` block of OBJ text (a single mesh when there is no ``o`` line)."""
+    verts: list[list[float]] = []
+    blocks: list[list[list[int]]] = [[]]
+    for line in text.splitlines():
+        if line.startswith("o "):
+            blocks.append([])
+        elif line.startswith("v "):
+            verts.append([float(v) for v in line.split()[1:]])
+        elif line.startswith("f "):
+            blocks[-1].append([int(i) - 1 for i in line.split()[1:]])
+    out = []
+    for faces in (b for b in blocks if b):
+        f = np.array(faces)
+        used = np.unique(f)
+        remap = np.full(len(verts), -1)
+        remap[used] = np.arange(len(used))
+        out.append(trimesh.Trimesh(np.array(verts)[used], remap[f], process=False))
+    return out

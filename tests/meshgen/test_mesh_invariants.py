@@ -14,28 +14,7 @@ import trimesh
 
 from meshgen.export import INDEX_COLUMNS, SCENE_COLUMNS
 from meshgen.pipeline import DatasetSummary
-
-
-def obj_pieces(path: Path) -> list[trimesh.Trimesh]:
-    """Parse an OBJ into one mesh per ``o`` block (global 1-based indices)."""
-    verts: list[list[float]] = []
-    blocks: list[list[list[int]]] = []
-    for line in path.read_text().splitlines():
-        if line.startswith("o "):
-            blocks.append([])
-        elif line.startswith("v "):
-            verts.append([float(v) for v in line.split()[1:]])
-        elif line.startswith("f "):
-            blocks[-1].append([int(i) - 1 for i in line.split()[1:]])
-    all_verts = np.array(verts)
-    meshes = []
-    for faces in blocks:
-        f = np.array(faces)
-        used = np.unique(f)
-        remap = np.full(len(all_verts), -1)
-        remap[used] = np.arange(len(used))
-        meshes.append(trimesh.Trimesh(all_verts[used], remap[f], process=False))
-    return meshes
+from tests.meshgen.reference_text import obj_meshes
 
 
 def _scenes(out: Path) -> list[tuple[Path, dict[str, object]]]:
@@ -111,7 +90,7 @@ def test_convex_pieces_are_convex_and_tile_the_footprint(meshed: DatasetSummary)
                 assert math.isclose(footprint.convex_hull.area, footprint.area, rel_tol=1e-6)
                 continue
             concave += 1
-            pieces = obj_pieces(folder / obj["convex_path"])
+            pieces = obj_meshes((folder / obj["convex_path"]).read_text())
             assert len(pieces) == obj["n_convex_pieces"] >= 2
             shapes = []
             for piece in pieces:

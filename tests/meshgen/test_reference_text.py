@@ -8,10 +8,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 
 from meshgen.mesh import hertel_mehlhorn, triangulate
-from tests.meshgen.reference_text import pieces_text, points_json, prism_faces_text, vertex_blocks
+from tests.meshgen.reference_text import (
+    obj_meshes,
+    pieces_text,
+    points_json,
+    prism_faces_text,
+    vertex_blocks,
+)
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 SQUARE_TRIS = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
@@ -61,27 +66,6 @@ def test_points_json_literal() -> None:
     assert points_json(np.zeros((0, 2)), "%.3f") == "[]"
 
 
-def _meshes(text: str) -> list[trimesh.Trimesh]:
-    """One mesh per ``o`` block of OBJ text (a single mesh when there is no ``o`` line)."""
-    verts: list[list[float]] = []
-    blocks: list[list[list[int]]] = [[]]
-    for line in text.splitlines():
-        if line.startswith("o "):
-            blocks.append([])
-        elif line.startswith("v "):
-            verts.append([float(v) for v in line.split()[1:]])
-        elif line.startswith("f "):
-            blocks[-1].append([int(i) - 1 for i in line.split()[1:]])
-    out = []
-    for faces in (b for b in blocks if b):
-        f = np.array(faces)
-        used = np.unique(f)
-        remap = np.full(len(verts), -1)
-        remap[used] = np.arange(len(used))
-        out.append(trimesh.Trimesh(np.array(verts)[used], remap[f], process=False))
-    return out
-
-
 def _star(points: int, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     angles = np.linspace(0.0, 2.0 * np.pi, points, endpoint=False)
@@ -97,11 +81,11 @@ def test_prism_and_pieces_are_closed_and_fill_the_prism(points: int, seed: int, 
     volume = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)) * 0.4
     tris = triangulate(ring)
     bottom, top = vertex_blocks(ring, 0.2, up)
-    (prism,) = _meshes(bottom + top + prism_faces_text(tris, len(ring)))
+    (prism,) = obj_meshes(bottom + top + prism_faces_text(tris, len(ring)))
     assert prism.is_watertight
     assert prism.is_winding_consistent
     assert prism.volume == pytest.approx(volume, rel=1e-4)
-    pieces = _meshes(pieces_text(bottom, top, hertel_mehlhorn(ring, tris)))
+    pieces = obj_meshes(pieces_text(bottom, top, hertel_mehlhorn(ring, tris)))
     assert all(p.is_watertight and p.is_winding_consistent and p.is_convex for p in pieces)
     assert all(p.volume > 0 for p in pieces)  # outward normals
     assert sum(p.volume for p in pieces) == pytest.approx(volume, rel=1e-4)
