@@ -25,7 +25,7 @@ from meshgen.config import MeshgenConfig
 from meshgen.export import SCENE_COLUMNS, csv_text, write_text
 from meshgen.footprint import pixels_to_belt, touches_border
 from meshgen.loaders import discover, load_source
-from meshgen.pipeline import object_height_m
+from meshgen.pipeline import object_height_m, object_id
 
 
 def run_baseline(dataset: Path, out: Path, config: MeshgenConfig) -> tuple[int, int, float]:
@@ -80,16 +80,16 @@ def run_baseline(dataset: Path, out: Path, config: MeshgenConfig) -> tuple[int, 
             cx, cy = shape.centroid.x, shape.centroid.y
             mesh = trimesh.creation.extrude_polygon(shape, height, engine="earcut")
             mesh.apply_translation((-cx, -cy, -0.5 * height))
-            object_id = f"{ann.stem}_{poly.index:03d}"
+            name = object_id(ann.stem, poly.index)
             text = trimesh.exchange.obj.export_obj(  # type: ignore[no-untyped-call]
                 mesh, include_normals=False, include_texture=False
             )
-            write_text(folder / f"{object_id}.obj", text)
+            write_text(folder / f"{name}.obj", text)
             area = shape.area
             volume = area * height
             rows.append(
                 (
-                    object_id,
+                    name,
                     ann.source,
                     class_id,
                     spec.name,
@@ -102,7 +102,7 @@ def run_baseline(dataset: Path, out: Path, config: MeshgenConfig) -> tuple[int, 
                     height,
                     volume,
                     volume * spec.density_kg_m3,
-                    f"{object_id}.obj",
+                    f"{name}.obj",
                     "",
                     1,
                     1.0,

@@ -159,6 +159,11 @@ def _skip(ann: ImageAnnotation, poly: RawPolygon, reason: str, detail: str) -> S
     return Skip(file=ann.source, where=poly.where, reason=reason, detail=detail)
 
 
+def object_id(stem: str, index: int) -> str:
+    """``<stem>_<index:03d>``: the id of polygon ``index`` of source file ``stem``."""
+    return f"{stem}_{index:03d}"
+
+
 def _record(
     ann: ImageAnnotation,
     poly: RawPolygon,
@@ -170,11 +175,11 @@ def _record(
     n_pieces: int,
 ) -> ObjectRecord:
     """The scene record of one meshed footprint (``n_pieces`` > 1 means it has convex pieces)."""
-    object_id = f"{ann.stem}_{poly.index:03d}"
+    name = object_id(ann.stem, poly.index)
     cx, cy = fp.centroid_m
     volume = fp.area_m2 * height
     return ObjectRecord(
-        object_id=object_id,
+        object_id=name,
         source_image=ann.source,
         class_id=class_id,
         class_name=spec.name,
@@ -187,8 +192,8 @@ def _record(
         height_m=height,
         volume_m3=volume,
         mass_kg=volume * spec.density_kg_m3,
-        mesh_path=f"{object_id}.obj",
-        convex_path="" if fp.convex else f"{object_id}_convex.obj",
+        mesh_path=f"{name}.obj",
+        convex_path="" if fp.convex else f"{name}_convex.obj",
         n_convex_pieces=n_pieces,
         area_change_ratio=fp.area_change_ratio,
         repairs=fp.repairs,
@@ -310,7 +315,7 @@ def mesh_images(
         [fp for _, fp in good],
         heights,
         [t[2].points_px for t, _ in good],
-        [f"{anns[t[0]].stem}_{t[2].index:03d}" for t, _ in good],
+        [object_id(anns[t[0]].stem, t[2].index) for t, _ in good],
         config.up,
     )
     crcs = {ann.stem: zlib.crc32(ann.stem.encode()) for ann in anns}

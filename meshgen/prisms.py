@@ -15,7 +15,7 @@ import numpy as np
 
 from meshgen.annotations import FloatArray
 from meshgen.footprint import Footprint
-from meshgen.mesh import IntArray, diagonals_many, hertel_mehlhorn, sides_text, triangulate_ragged
+from meshgen.mesh import diagonals_many, hertel_mehlhorn, sides_text, triangulate_ragged
 from meshgen.objtext import (
     caps_blocks,
     pieces_blocks,
@@ -23,7 +23,7 @@ from meshgen.objtext import (
     vertex_rows,
     vertex_texts,
 )
-from meshgen.ragged import split_rows
+from meshgen.ragged import join_rows, split_rows
 
 FOOTPRINT_DECIMALS = 9
 """scene.json ``footprint_m`` numbers are written with ``%.9f``."""
@@ -49,11 +49,6 @@ class PrismTexts:
     error: list[str]
 
 
-def _ragged(arrays: list[FloatArray]) -> tuple[FloatArray, IntArray]:
-    sizes = np.fromiter((len(a) for a in arrays), dtype=np.int64, count=len(arrays))
-    return np.concatenate(arrays), sizes
-
-
 def prism_texts(
     footprints: list[Footprint],
     heights_m: list[float],
@@ -72,7 +67,7 @@ def prism_texts(
         return PrismTexts(
             mesh=[], pieces=[], n_pieces=[], footprint_json=[], polygon_json=[], error=[]
         )
-    ring_points, sizes = _ragged([fp.ring_m for fp in footprints])
+    ring_points, sizes = join_rows([fp.ring_m for fp in footprints])
     centroids = np.array([fp.centroid_m for fp in footprints], dtype=np.float64)
     local = ring_points - np.repeat(centroids, sizes, axis=0)
     rings = split_rows(local, sizes)
@@ -115,7 +110,7 @@ def prism_texts(
         for k, text, number in zip(concave, texts, per_object, strict=True):
             pieces[k] = text
             n_pieces[k] = number
-    pixel_points, pixel_sizes = _ragged(polygons_px)
+    pixel_points, pixel_sizes = join_rows(polygons_px)
     return PrismTexts(
         mesh=mesh,
         pieces=pieces,

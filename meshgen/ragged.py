@@ -21,3 +21,11 @@ def split_rows(
     ends: list[int] = np.cumsum(sizes).tolist()
     starts = [0, *ends[:-1]]
     return [rows[start:end] for start, end in zip(starts, ends, strict=True)]
+
+
+def join_rows(
+    blocks: list[npt.NDArray[ScalarT]],
+) -> tuple[npt.NDArray[ScalarT], npt.NDArray[np.int64]]:
+    """The inverse of :func:`split_rows`: ``blocks`` concatenated, and each one's row count."""
+    sizes = np.fromiter((len(b) for b in blocks), dtype=np.int64, count=len(blocks))
+    return np.concatenate(blocks), sizes
