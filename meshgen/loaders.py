@@ -31,6 +31,7 @@ import numpy as np
 from meshgen.annotations import ImageAnnotation, RawPolygon, Skip
 from meshgen.errors import DatasetError
 from meshgen.imagesize import IMAGE_SUFFIXES, read_image_size
+from meshgen.jsondoc import NOT_DECODED, loads_exact
 
 FORMATS: tuple[str, ...] = ("auto", "yolo", "coco", "labelme")
 OUT_OF_RANGE_FRACTION = 0.05
@@ -90,10 +91,14 @@ def _json_files(folder: Path, recursive: bool) -> list[Path]:
 
 
 def _peek_json(path: Path) -> Any:
+    """The decoded JSON document at ``path``, or None when it cannot be read or decoded."""
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        data = loads_exact(path.read_bytes())
+        if data is NOT_DECODED:
+            data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
         return None
+    return data
 
 
 def _coco_files(dataset: Path) -> list[Path]:
@@ -473,20 +478,43 @@ def _numeric_pairs(raws: list[Any]) -> np.ndarray | None:
     return arr.reshape(-1, 2)
 
 
-def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None, list[Skip]]:
-    """Parse one labelme JSON file; bad shapes become skips, good shapes polygons."""
-    name = _rel(source.path, root)
+def _read_labelme(path: Path, name: str) -> tuple[Any, bool] | Skip:
+    """The decoded document of a labelme file and whether it is free of ``true``/``false``.
+
+    A file that cannot be read, is blank or is not JSON gives its file-level skip instead.
+    orjson decodes the file when it gives what ``json`` gives
+    (:func:`meshgen.jsondoc.loads_exact`); everything else, errors included, goes the standard
+    way (``read_text``, ``json.loads``). The literal check is the ``fast`` flag of
+    :func:`_points_from_json`.
+    """
     try:
-        text = source.path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
+    except OSError:
+        raw = b""  # the standard route below reports the error
+    data = loads_exact(raw) if raw else NOT_DECODED
+    if data is not NOT_DECODED:
+        return data, b"true" not in raw and b"false" not in raw
+    try:
+        text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        return None, [Skip(file=name, where="", reason="unreadable_file", detail=str(exc))]
+        return Skip(file=name, where="", reason="unreadable_file", detail=str(exc))
     if not text.strip():
-        return None, [Skip(file=name, where="", reason="empty_file", detail="file is empty")]
+        return Skip(file=name, where="", reason="empty_file", detail="file is empty")
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         detail = f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
-        return None, [Skip(file=name, where="", reason="unreadable_file", detail=detail)]
+        return Skip(file=name, where="", reason="unreadable_file", detail=detail)
+    return data, "true" not in text and "false" not in text
+
+
+def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None, list[Skip]]:
+    """Parse one labelme JSON file; bad shapes become skips, good shapes polygons."""
+    name = _rel(source.path, root)
+    loaded = _read_labelme(source.path, name)
+    if isinstance(loaded, Skip):
+        return None, [loaded]
+    data, fast = loaded
     if not isinstance(data, dict) or not isinstance(data.get("shapes"), list):
         detail = 'no "shapes" list at the top level'
         return None, [Skip(file=name, where="", reason="bad_file", detail=detail)]
@@ -507,7 +535,6 @@ def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | No
         detail = "no image file, no imageWidth/imageHeight and no --image-size"
         return None, [Skip(file=name, where="", reason="missing_image_size", detail=detail)]
     width, height = size
-    fast = "true" not in text and "false" not in text
     polygons: list[RawPolygon] = []
     skips: list[Skip] = []
     pending: list[tuple[int, str, str]] = []  # (index, where, label) of shapes with points

@@ -18,12 +18,15 @@ OBJ text is written for a whole batch of prisms at once (:mod:`meshgen.prisms`,
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from itertools import compress
+
 import mapbox_earcut
 import numpy as np
 import numpy.typing as npt
 
 from meshgen.annotations import FloatArray
-from meshgen.ragged import split_rows
+from meshgen.ragged import join_rows, split_rows
 
 IntArray = npt.NDArray[np.int64]
 
@@ -119,19 +122,19 @@ def is_convex(ring: FloatArray) -> bool:
     return bool((cross >= -CONVEX_REL_TOL * scale * scale).all())
 
 
-def diagonals_many(tris_list: list[IntArray], sizes: list[int]) -> list[tuple[IntArray, IntArray]]:
+def interior_diagonals(tris_list: list[IntArray], sizes: list[int]) -> tuple[IntArray, IntArray]:
     """Interior half-edge pairs of many triangulations (of rings of ``sizes[i]`` points) at once.
 
-    Half-edge ``e`` runs from ``tris.ravel()[e]`` to the next corner of its triangle. For each
-    triangulation: ``(e, f)``, every half-edge ``e`` whose start index is below its end index
-    and that has a twin ``f`` (the same edge, reversed, in the neighbouring triangle), ``e``
-    increasing. The half-edges of all triangulations are shifted to one numbering (vertex
-    indices by the preceding rings' sizes, half-edges by the preceding half-edge counts), so
-    edge keys never collide between rings and one stable sort and one search serve them all.
-    Gives exactly the per-ring results (same pairs, same order, indices local to each ring).
+    The half-edges of all triangulations are numbered one after another: half-edge ``e`` of
+    the concatenated ``tris.ravel()`` arrays runs from its corner to the next corner of its
+    triangle. Returns ``(e, f)``: every half-edge ``e`` whose start index is below its end
+    index and that has a twin ``f`` (the same edge, reversed, in the neighbouring triangle of
+    the same ring), ``e`` increasing. Vertex indices are shifted by the preceding rings' sizes,
+    so edge keys never collide between rings and one stable sort and one search serve them all.
     """
     if not tris_list:
-        return []
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty
     counts = np.fromiter((t.size for t in tris_list), dtype=np.int64, count=len(tris_list))
     ring_sizes = np.array(sizes, dtype=np.int64)
     vertex_shift = np.repeat(np.cumsum(ring_sizes) - ring_sizes, counts)
@@ -148,15 +151,7 @@ def diagonals_many(tris_list: list[IntArray], sizes: list[int]) -> list[tuple[In
     twin_keys = dst[candidates] * stride + org[candidates]
     at = np.minimum(np.searchsorted(sorted_keys, twin_keys), total - 1)
     found = sorted_keys[at] == twin_keys
-    first, second = candidates[found], order[at[found]]
-    edge_ends = np.cumsum(counts)
-    ring_ends = np.searchsorted(first, edge_ends)
-    found_per_ring = np.diff(ring_ends, prepend=0)
-    local = np.repeat(edge_ends - counts, found_per_ring)
-    first, second = first - local, second - local
-    per_ring = ring_ends.tolist()
-    starts = [0, *per_ring[:-1]]
-    return [(first[a:b], second[a:b]) for a, b in zip(starts, per_ring, strict=True)]
+    return candidates[found], order[at[found]]
 
 
 _NEXT_IN_TRIANGLE: list[int] = []
@@ -168,7 +163,7 @@ def _triangle_links(count: int) -> tuple[list[int], list[int]]:
 
     Half-edge ``e`` belongs to triangle ``e // 3``; its successor is the next corner of that
     triangle. The lists depend on ``count`` only, so they are sliced from module-level
-    templates (grown on demand) instead of being rebuilt element by element for every ring.
+    templates (grown on demand) instead of being rebuilt element by element for every batch.
     """
     if len(_NEXT_IN_TRIANGLE) < count:
         size = max(count, 2 * len(_NEXT_IN_TRIANGLE), 3 * 256)
@@ -178,55 +173,95 @@ def _triangle_links(count: int) -> tuple[list[int], list[int]]:
     return _NEXT_IN_TRIANGLE[:count], _PREV_IN_TRIANGLE[:count]
 
 
-def hertel_mehlhorn(
-    ring: FloatArray, tris: IntArray, diagonals: tuple[IntArray, IntArray] | None = None
-) -> list[list[int]]:
-    """Exact convex decomposition of a CCW ring from its triangulation (Hertel–Mehlhorn).
+@dataclass(frozen=True, slots=True)
+class ConvexPieces:
+    """Convex pieces of many rings: ``vertices`` holds every piece's CCW ring indices (local to
+    its ring) one piece after another, cut by ``sizes``; ring ``k`` owns the next
+    ``per_ring[k]`` pieces."""
 
-    Removes every diagonal whose removal keeps both of its end points convex; the result has at
-    most four times the minimum number of pieces. Returns pieces as CCW lists of ring indices.
-    The triangles are held as half-edges (``e`` runs from ``org[e]`` to ``org[nxt[e]]``), so
-    removing a diagonal is four pointer updates and its test two cross products. Diagonals are
-    visited in half-edge order; finding them and their twins is vectorised
-    (:func:`diagonals_many`; pass ``diagonals`` when it found them for many
-    rings at once), only the removals, which depend on earlier ones, run in Python.
+    vertices: IntArray
+    sizes: IntArray
+    per_ring: IntArray
+
+
+def hertel_mehlhorn(rings: list[FloatArray], tris_list: list[IntArray]) -> ConvexPieces:
+    """Exact convex decomposition (Hertel–Mehlhorn) of many CCW rings from their triangulations.
+
+    Per ring: removes every diagonal whose removal keeps both of its end points convex (a left
+    turn, or within ``CONVEX_REL_TOL`` of the ring's squared extent of one); the result has at
+    most four times the minimum number of pieces. The triangles of all rings are held as
+    half-edges in one numbering (``e`` runs from ``org[e]`` to ``org[nxt[e]]``), so removing a
+    diagonal is four pointer updates and its test two cross products. Diagonals are visited in
+    half-edge order (:func:`interior_diagonals`), pieces listed from their lowest half-edge.
+    Everything that does not depend on earlier removals (diagonals and twins, each half-edge's
+    corner coordinates, each ring's tolerance) is computed for all rings at once in numpy; only
+    the removals and the walk around the pieces run in Python, over all rings in one loop each.
     """
-    xs: list[float] = ring[:, 0].tolist()
-    ys: list[float] = ring[:, 1].tolist()
-    scale = max(max(xs) - min(xs), max(ys) - min(ys))
-    tol = -CONVEX_REL_TOL * scale * scale
-    org: list[int] = tris.ravel().tolist()
-    count = len(org)
+    sizes = [len(r) for r in rings]
+    if not rings:
+        empty = np.zeros(0, dtype=np.int64)
+        return ConvexPieces(empty, empty, empty)
+    first, second = interior_diagonals(tris_list, sizes)
+    edge_counts = np.fromiter((t.size for t in tris_list), dtype=np.int64, count=len(rings))
+    edge_ends = np.cumsum(edge_counts)
+    points, ring_sizes = join_rows(rings)
+    starts = np.cumsum(ring_sizes) - ring_sizes
+    span = np.maximum(
+        np.maximum.reduceat(points[:, 0], starts) - np.minimum.reduceat(points[:, 0], starts),
+        np.maximum.reduceat(points[:, 1], starts) - np.minimum.reduceat(points[:, 1], starts),
+    )
+    ring_tol = -CONVEX_REL_TOL * span * span
+    local = np.concatenate([t.ravel() for t in tris_list])
+    corners = np.take(points, local + np.repeat(starts, edge_counts), axis=0)
+    xs: list[float] = corners[:, 0].tolist()
+    ys: list[float] = corners[:, 1].tolist()
+    diagonal_ring = np.searchsorted(edge_ends, first, side="right")
+    tols: list[float] = ring_tol[diagonal_ring].tolist()
+    count = len(local)
     nxt, prv = _triangle_links(count)
     alive = [True] * count
-    if diagonals is None:
-        diagonals = diagonals_many([tris], [len(ring)])[0]
-    first, second = diagonals
-    for e, f in zip(first.tolist(), second.tolist(), strict=True):
-        a = org[e]
-        b = org[f]
-        pe, ne, pf, nf = prv[e], nxt[e], prv[f], nxt[f]
-        x, w = org[pe], org[nxt[nf]]
-        u, y = org[pf], org[nxt[ne]]
-        if (xs[a] - xs[x]) * (ys[w] - ys[a]) - (ys[a] - ys[x]) * (xs[w] - xs[a]) < tol:
+    for e, f, tol in zip(first.tolist(), second.tolist(), tols, strict=True):
+        # a = org[e] joins x = org[prv[e]] and w = org[nxt[nxt[f]]]
+        pe = prv[e]
+        w = nxt[nxt[f]]
+        xa = xs[e]
+        ya = ys[e]
+        if (xa - xs[pe]) * (ys[w] - ya) - (ya - ys[pe]) * (xs[w] - xa) < tol:
             continue
-        if (xs[b] - xs[u]) * (ys[y] - ys[b]) - (ys[b] - ys[u]) * (xs[y] - xs[b]) < tol:
+        # b = org[f] joins u = org[prv[f]] and y = org[nxt[nxt[e]]]
+        pf = prv[f]
+        ne = nxt[e]
+        y = nxt[ne]
+        xb = xs[f]
+        yb = ys[f]
+        if (xb - xs[pf]) * (ys[y] - yb) - (yb - ys[pf]) * (xs[y] - xb) < tol:
             continue
-        nxt[pe], prv[nf] = nf, pe
-        nxt[pf], prv[ne] = ne, pf
+        nf = nxt[f]
+        nxt[pe] = nf
+        prv[nf] = pe
+        nxt[pf] = ne
+        prv[ne] = pf
         alive[e] = alive[f] = False
-    pieces: list[list[int]] = []
-    for start in range(count):
-        if not alive[start]:
-            continue
-        piece: list[int] = []
+    org: list[int] = local.tolist()
+    vertices: list[int] = []
+    piece_sizes: list[int] = []
+    piece_starts: list[int] = []
+    # compress reads ``alive`` as it goes, so edges already walked are passed over
+    for start in compress(range(count), alive):
+        before = len(vertices)
         e = start
         while alive[e]:
             alive[e] = False
-            piece.append(org[e])
+            vertices.append(org[e])
             e = nxt[e]
-        pieces.append(piece)
-    return pieces
+        piece_sizes.append(len(vertices) - before)
+        piece_starts.append(start)
+    owner = np.searchsorted(edge_ends, np.array(piece_starts, dtype=np.int64), side="right")
+    return ConvexPieces(
+        np.array(vertices, dtype=np.int64),
+        np.array(piece_sizes, dtype=np.int64),
+        np.bincount(owner, minlength=len(rings)).astype(np.int64),
+    )
 
 
 _SIDES_TEXT: dict[int, str] = {}

@@ -56,7 +56,7 @@ from meshgen.loaders import ImageSource, discover, load_source
 from meshgen.mesh import clear_text_caches
 from meshgen.prisms import prism_texts
 from meshgen.ragged import split_rows
-from meshgen.records import ObjectRecord, csv_row, object_json_text
+from meshgen.records import EntryExtras, ObjectRecord, csv_row, objects_json_text
 from meshgen.seeding import first_doubles, pcg64_first_double
 
 
@@ -255,7 +255,7 @@ def _select(
 
 
 def _scene_json(
-    ann: ImageAnnotation, config: MeshgenConfig, skips: list[Skip], metas: list[str]
+    ann: ImageAnnotation, config: MeshgenConfig, skips: list[Skip], objects_json: str
 ) -> str:
     head = json.dumps(
         {
@@ -273,7 +273,7 @@ def _scene_json(
         sort_keys=True,
         separators=(",", ":"),
     )
-    return f'{head[:-1]},"objects":[{",".join(metas)}]}}\n'
+    return f'{head[:-1]},"objects":[{objects_json}]}}\n'
 
 
 def mesh_images(
@@ -304,7 +304,7 @@ def mesh_images(
     for folder in folders:
         sink.mkdir(folder)
     records: list[list[ObjectRecord]] = [[] for _ in anns]
-    metas: list[list[str]] = [[] for _ in anns]
+    extras: list[list[EntryExtras]] = [[] for _ in anns]
     good = [
         (item, fp)
         for item, fp in zip(kept, footprints, strict=True)
@@ -351,15 +351,13 @@ def mesh_images(
         if pieces:
             sink.write(f"{folder}/{record.convex_path}", header + pieces)
         records[img].append(record)
-        metas[img].append(
-            object_json_text(
-                record,
-                source_where=poly.where,
-                density_kg_m3=spec.density_kg_m3,
-                seed=config.seed,
-                rng_key=(config.seed, crcs[ann.stem], poly.index),
-                footprint_json=footprint_json,
-                polygon_json=polygon_json,
+        extras[img].append(
+            EntryExtras(
+                poly.where,
+                spec.density_kg_m3,
+                (config.seed, crcs[ann.stem], poly.index),
+                footprint_json,
+                polygon_json,
             )
         )
     results: list[ImageResult] = []
@@ -368,7 +366,8 @@ def mesh_images(
         early[img].sort(key=lambda item: item[0])
         skips = list(ann.skips) + [s for _, s in early[img]]
         sink.write(f"{folders[img]}/scene.csv", header + "".join(map(csv_row, records[img])))
-        sink.write(f"{folders[img]}/scene.json", _scene_json(ann, config, skips, metas[img]))
+        objects_json = objects_json_text(records[img], extras[img], config.seed)
+        sink.write(f"{folders[img]}/scene.json", _scene_json(ann, config, skips, objects_json))
         results.append(
             ImageResult(
                 stem=ann.stem,

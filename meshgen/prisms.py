@@ -15,7 +15,7 @@ import numpy as np
 
 from meshgen.annotations import FloatArray
 from meshgen.footprint import Footprint
-from meshgen.mesh import diagonals_many, hertel_mehlhorn, sides_text, triangulate_ragged
+from meshgen.mesh import hertel_mehlhorn, sides_text, triangulate_ragged
 from meshgen.objtext import (
     caps_blocks,
     pieces_blocks,
@@ -89,25 +89,12 @@ def prism_texts(
     concave = [k for k, fp in enumerate(footprints) if not fp.convex and not error[k]]
     if concave:
         triangles = split_rows(faces, counts)
-        found = diagonals_many([triangles[k] for k in concave], [size_list[k] for k in concave])
-        flat: list[int] = []
-        piece_sizes: list[int] = []
-        per_object: list[int] = []
-        for k, diagonals in zip(concave, found, strict=True):
-            parts = hertel_mehlhorn(rings[k], triangles[k], diagonals)
-            per_object.append(len(parts))
-            for part in parts:
-                flat += part
-                piece_sizes.append(len(part))
+        found = hertel_mehlhorn([rings[k] for k in concave], [triangles[k] for k in concave])
         ring_starts = np.cumsum(sizes) - sizes
         texts = pieces_blocks(
-            vertices,
-            ring_starts[concave],
-            np.array(flat, dtype=np.int64),
-            np.array(piece_sizes, dtype=np.int64),
-            np.array(per_object, dtype=np.int64),
+            vertices, ring_starts[concave], found.vertices, found.sizes, found.per_ring
         )
-        for k, text, number in zip(concave, texts, per_object, strict=True):
+        for k, text, number in zip(concave, texts, found.per_ring.tolist(), strict=True):
             pieces[k] = text
             n_pieces[k] = number
     pixel_points, pixel_sizes = join_rows(polygons_px)

@@ -15,8 +15,11 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import chain
 from json.encoder import encode_basestring_ascii
+from typing import NamedTuple, cast
 
 from meshgen.export import SCENE_COLUMNS, csv_field
 
@@ -190,3 +193,90 @@ def object_json_text(
         )
         head = json.dumps(fields, sort_keys=True, separators=(",", ":"))[:-1] + ","
     return f'{head}"footprint_m":{footprint_json},"polygon_px":{polygon_json}}}'
+
+
+_ENTRY_FORMAT = _OBJECT_FORMAT + '"footprint_m":%s,"polygon_px":%s}'
+""":func:`object_json_text` of plain floats as one template (26 values)."""
+_ENTRY_WIDTH = 26
+_ENTRY_FLOATS = (0, 1, 2, 3, 7, 8, 9, 10, 21, 22, 23)
+"""Where in an entry's values the floats stand (written with ``%r``)."""
+_ENTRY_INTS = (4, 12, 15, 16, 17, 18)
+"""Where in an entry's values the integers stand (written with ``%d``)."""
+
+
+class EntryExtras(NamedTuple):
+    """What an object's scene.json entry holds beyond its record (see :func:`object_json_text`)."""
+
+    source_where: str
+    density_kg_m3: float
+    rng_key: tuple[int, int, int]
+    footprint_json: str
+    polygon_json: str
+
+
+def objects_json_text(
+    records: Sequence[ObjectRecord], extras: Sequence[EntryExtras], seed: int
+) -> str:
+    """The scene.json entries of many objects joined with ``,`` (one image's ``objects``).
+
+    Exactly ``",".join`` of :func:`object_json_text` of each record with its extras, but when
+    every float is a finite built-in ``float`` and every integer a built-in ``int`` (always, in
+    the pipeline), all entries are formatted by one ``%`` of one repeated template, which saves
+    the per-object checks, calls and copies of the long point texts. Otherwise each entry is
+    made on its own.
+    """
+    text = encode_basestring_ascii
+    values: list[object] = []
+    try:
+        for r, (where, density, key, footprint_json, polygon_json) in zip(
+            records, extras, strict=True
+        ):
+            values += (
+                r.area_change_ratio,
+                r.area_m2,
+                r.centroid_x_m,
+                r.centroid_y_m,
+                r.class_id,
+                text(r.class_name),
+                text(r.convex_path),
+                density,
+                r.height_m,
+                r.length_m,
+                r.mass_kg,
+                text(r.mesh_path),
+                r.n_convex_pieces,
+                text(r.object_id),
+                ",".join(map(text, r.repairs)),
+                *key,
+                seed,
+                text(r.source_image),
+                text(where),
+                r.volume_m3,
+                r.width_m,
+                r.yaw_rad,
+                footprint_json,
+                polygon_json,
+            )
+    except TypeError:  # a text field that is not a str: as object_json_text handles it
+        values = []
+    floats = list(chain.from_iterable(values[at::_ENTRY_WIDTH] for at in _ENTRY_FLOATS))
+    ints = list(chain.from_iterable(values[at::_ENTRY_WIDTH] for at in _ENTRY_INTS))
+    if (
+        values
+        and set(map(type, floats)) == {float}
+        and math.isfinite(sum(cast(list[float], floats)))
+        and set(map(type, ints)) == {int}
+    ):
+        return ",".join([_ENTRY_FORMAT] * len(records)) % tuple(values)
+    return ",".join(
+        object_json_text(
+            record,
+            source_where=extra.source_where,
+            density_kg_m3=extra.density_kg_m3,
+            seed=seed,
+            rng_key=extra.rng_key,
+            footprint_json=extra.footprint_json,
+            polygon_json=extra.polygon_json,
+        )
+        for record, extra in zip(records, extras, strict=True)
+    )

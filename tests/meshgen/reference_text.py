@@ -22,6 +22,7 @@ import numpy.typing as npt
 import trimesh
 
 from meshgen.export import SCENE_COLUMNS
+from meshgen.mesh import ConvexPieces
 from meshgen.records import ObjectRecord
 
 FloatArray = npt.NDArray[np.float64]
@@ -78,7 +79,7 @@ def pieces_text(bottom: str, top: str, pieces: list[list[int]]) -> str:
     """OBJ text with one ``o piece_j`` block per convex piece, each a closed prism.
 
     ``bottom`` and ``top`` are the ring's vertex blocks (:func:`vertex_blocks`); ``pieces``
-    are CCW lists of ring indices (:func:`meshgen.mesh.hertel_mehlhorn`). A piece of ``k``
+    are CCW lists of ring indices (:func:`hertel_mehlhorn_one`). A piece of ``k``
     vertices writes its ``k`` bottom and ``k`` top vertex lines and ``4k - 4`` triangles:
     the bottom fan ``(0, i + 1, i)``, the top fan ``(k, i + k, i + k + 1)`` for
     ``i = 1 .. k - 2``, then per edge ``l -> l'`` the sides ``(l, l', l' + k)`` and
@@ -155,4 +156,86 @@ def obj_meshes(text: str) -> list[trimesh.Trimesh]:
         remap = np.full(len(verts), -1)
         remap[used] = np.arange(len(used))
         out.append(trimesh.Trimesh(np.array(verts)[used], remap[f], process=False))
+    return out
+
+
+CONVEX_REL_TOL = 1e-9
+"""The convexity tolerance of :mod:`meshgen.mesh` (relative to the ring's squared extent)."""
+
+
+def interior_diagonals_one(tris: IntArray) -> list[tuple[int, int]]:
+    """``(e, f)`` interior half-edge pairs of one triangulation, from a dictionary of edges.
+
+    Half-edge ``e`` of ``tris.ravel()`` runs from its corner to the next corner of its
+    triangle; pairs are every ``e`` whose start index is below its end index with its twin
+    ``f`` (the reversed edge), ``e`` increasing.
+    """
+    org = tris.ravel().tolist()
+    nxt = [e + 1 if e % 3 != 2 else e - 2 for e in range(len(org))]
+    edge = {(org[e], org[nxt[e]]): e for e in range(len(org))}
+    return [
+        (e, edge[org[nxt[e]], org[e]])
+        for e in range(len(org))
+        if org[e] < org[nxt[e]] and (org[nxt[e]], org[e]) in edge
+    ]
+
+
+def hertel_mehlhorn_one(ring: FloatArray, tris: IntArray) -> list[list[int]]:
+    """Hertel–Mehlhorn convex pieces of one CCW ring, the plainest way.
+
+    Visits the interior diagonals in half-edge order (:func:`interior_diagonals_one`) and
+    removes each one whose removal leaves both end points turning left (cross product at least
+    ``-CONVEX_REL_TOL * extent**2``, ``extent`` the larger side of the ring's bounding box);
+    then lists the pieces from their lowest half-edge, as CCW lists of ring indices.
+    """
+    xs: list[float] = ring[:, 0].tolist()
+    ys: list[float] = ring[:, 1].tolist()
+    scale = max(max(xs) - min(xs), max(ys) - min(ys))
+    tol = -CONVEX_REL_TOL * scale * scale
+    org: list[int] = tris.ravel().tolist()
+    count = len(org)
+    nxt = [e + 1 if e % 3 != 2 else e - 2 for e in range(count)]
+    prv = [e - 1 if e % 3 != 0 else e + 2 for e in range(count)]
+    alive = [True] * count
+
+    def turns_left(p: int, q: int, r: int) -> bool:
+        cross = (xs[q] - xs[p]) * (ys[r] - ys[q]) - (ys[q] - ys[p]) * (xs[r] - xs[q])
+        return cross >= tol
+
+    for e, f in interior_diagonals_one(tris):
+        a, b = org[e], org[f]
+        pe, ne, pf, nf = prv[e], nxt[e], prv[f], nxt[f]
+        if not turns_left(org[pe], a, org[nxt[nf]]):
+            continue
+        if not turns_left(org[pf], b, org[nxt[ne]]):
+            continue
+        nxt[pe], prv[nf] = nf, pe
+        nxt[pf], prv[ne] = ne, pf
+        alive[e] = alive[f] = False
+    pieces: list[list[int]] = []
+    for start in range(count):
+        piece: list[int] = []
+        e = start
+        while alive[e]:
+            alive[e] = False
+            piece.append(org[e])
+            e = nxt[e]
+        if piece:
+            pieces.append(piece)
+    return pieces
+
+
+def nested_pieces(found: ConvexPieces) -> list[list[list[int]]]:
+    """The ragged convex pieces of :func:`meshgen.mesh.hertel_mehlhorn` as per-ring lists."""
+    flat: list[int] = found.vertices.tolist()
+    pieces: list[list[int]] = []
+    at = 0
+    for size in found.sizes.tolist():
+        pieces.append(flat[at : at + size])
+        at += size
+    out: list[list[list[int]]] = []
+    at = 0
+    for count in found.per_ring.tolist():
+        out.append(pieces[at : at + count])
+        at += count
     return out

@@ -15,6 +15,7 @@ from meshgen.footprint import (
     touches_border,
 )
 from meshgen.mesh import extrude, hertel_mehlhorn, is_convex, triangulate
+from tests.meshgen.reference_text import nested_pieces
 
 
 def _rect(length: float, width: float, yaw: float) -> np.ndarray:
@@ -110,7 +111,7 @@ def test_hertel_mehlhorn_on_comb() -> None:
     )
     tris = triangulate(ring)
     assert len(tris) == len(ring) - 2
-    pieces = hertel_mehlhorn(ring, tris)
+    (pieces,) = nested_pieces(hertel_mehlhorn([ring], [tris]))
     assert 3 <= len(pieces) <= 6
     assert sum(shapely.Polygon(ring[p]).area for p in pieces) == pytest.approx(
         shapely.Polygon(ring).area

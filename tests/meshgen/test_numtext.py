@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from meshgen.loaders import _numeric_pairs
-from meshgen.mesh import diagonals_many, hertel_mehlhorn, triangulate
+from meshgen.mesh import triangulate
 from meshgen.numtext import Fixed, Part, Whole, render, round_scaled
 from meshgen.objtext import (
     caps_blocks,
@@ -18,7 +18,13 @@ from meshgen.objtext import (
     vertex_rows,
     vertex_texts,
 )
-from tests.meshgen.reference_text import caps_texts, pieces_text, points_json, vertex_blocks
+from tests.meshgen.reference_text import (
+    caps_texts,
+    hertel_mehlhorn_one,
+    pieces_text,
+    points_json,
+    vertex_blocks,
+)
 
 
 def _floats() -> np.ndarray:
@@ -122,10 +128,7 @@ def test_caps_and_pieces_blocks_match_one_object_texts() -> None:
     assert caps == caps_texts(tris, SIZES.tolist())
     halves = np.linspace(0.01, 0.04, len(RINGS))
     rows = vertex_rows(np.concatenate(RINGS), SIZES, halves, "z")
-    pieces = [
-        hertel_mehlhorn(r, t, d)
-        for r, t, d in zip(RINGS, tris, diagonals_many(tris, SIZES.tolist()), strict=True)
-    ]
+    pieces = [hertel_mehlhorn_one(r, t) for r, t in zip(RINGS, tris, strict=True)]
     flat = [i for parts in pieces for piece in parts for i in piece]
     texts = pieces_blocks(
         rows,

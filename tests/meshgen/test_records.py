@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from meshgen.export import SCENE_COLUMNS, csv_text
-from meshgen.records import ObjectRecord, csv_row, object_json_text
+from meshgen.records import EntryExtras, ObjectRecord, csv_row, object_json_text, objects_json_text
 from tests.meshgen.reference_text import object_json, points_json
 
 
@@ -97,3 +97,36 @@ def test_csv_row_matches_csv_text(changes: dict[str, object]) -> None:
     record = _record(**changes)
     header = ",".join(SCENE_COLUMNS) + "\n"
     assert header + csv_row(record) == csv_text(SCENE_COLUMNS, [record.row()])
+
+
+def test_objects_json_text_joins_the_json_dumps_entries() -> None:
+    # plain records (one template) and, in a second batch, records that need json.dumps
+    plain = [_record(), _record(object_id='quote"and,comma', repairs=()), _record(mass_kg=0.1)]
+    odd = [*plain, _record(yaw_rad=float("nan")), _record(mass_kg=np.float64(0.3))]
+    footprints = [FOOTPRINT, FOOTPRINT * 3.0, FOOTPRINT[:3], FOOTPRINT, FOOTPRINT]
+    for records in (plain, odd, plain[:1], []):
+        extras = [
+            EntryExtras(
+                f"shape {k}",
+                600.0 if k % 2 else 750,  # a YAML int stays an int
+                (5, 123, k),
+                points_json(footprints[k], "%.9f"),
+                points_json(PIXELS + k, "%.3f"),
+            )
+            for k in range(len(records))
+        ]
+        text = objects_json_text(records, extras, 5)
+        want = [
+            object_json(
+                record,
+                source_where=extra.source_where,
+                density_kg_m3=extra.density_kg_m3,
+                seed=5,
+                rng_key=extra.rng_key,
+                footprint_m=footprints[k],
+                polygon_px=PIXELS + k,
+            )
+            for k, (record, extra) in enumerate(zip(records, extras, strict=True))
+        ]
+        assert text == ",".join(want)
+        assert json.loads(f"[{text}]") == [json.loads(w) for w in want]

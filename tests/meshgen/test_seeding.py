@@ -8,6 +8,7 @@ import numpy as np
 
 from meshgen.mesh import hertel_mehlhorn, triangulate, triangulate_many
 from meshgen.seeding import first_doubles
+from tests.meshgen.reference_text import nested_pieces
 
 
 def test_first_doubles_match_numpy() -> None:
@@ -43,8 +44,10 @@ def test_triangulate_many_equals_triangulate() -> None:
 
 
 def test_hertel_mehlhorn_pieces_cover_every_triangle_once() -> None:
-    for ring in _star_rings(100):
-        tris = triangulate(ring)
-        pieces = hertel_mehlhorn(ring, tris)
+    rings = _star_rings(100)
+    tris_list = [triangulate(ring) for ring in rings]
+    for tris, pieces in zip(
+        tris_list, nested_pieces(hertel_mehlhorn(rings, tris_list)), strict=True
+    ):
         assert sum(len(p) - 2 for p in pieces) == len(tris)
         assert sorted(i for p in pieces for i in p)[0] == 0
