@@ -2,7 +2,10 @@
 
 One object moves on the belt at constant speed; a simulated camera reports it at 30 Hz with
 Gaussian noise and latency; the arm reaches every joint command exactly ``command_latency_s``
-after it was issued. The episode measures the tracking time to 4 mm (from the start of tracking
+after it was issued. With a :class:`GripperSpec` the fingers move towards the commanded opening
+at a finite speed and stop on the object's sides when they close around it (or close on nothing
+when it is not ``grippable``), and the controller gets the measured opening; without one the
+opening is not measured. The episode measures the tracking time to 4 mm (from the start of tracking
 the target until the TCP-to-grasp-point distance stays below 4 mm until the gripper has closed)
 by ground truth. Used by the tests and by ``python -m control.bench``.
 """
@@ -46,12 +49,22 @@ class CameraSpec:
 
 
 @dataclass(frozen=True, kw_only=True)
+class GripperSpec:
+    """The simulated gripper: opening speed (m/s, both fingers together) and whether the
+    object can be gripped at all (False: the fingers close past it, as on a missed grasp)."""
+
+    speed_mps: float = 0.2
+    grippable: bool = True
+
+
+@dataclass(frozen=True, kw_only=True)
 class EpisodeResult:
     """Outcome of one episode.
 
     ``tracking_time_4mm_s`` is NaN when the TCP never stayed within 4 mm until the close ended;
     ``max_follow_error_m`` is the largest TCP-to-grasp-point distance during dwell and close;
-    ``release_tcp_m`` is where the TCP was when the gripper first opened over a bin.
+    ``release_tcp_m`` is where the TCP was when the gripper first opened over a bin;
+    ``openings_m`` is the measured gripper opening at every tick (NaN without a gripper).
     """
 
     tracking_time_4mm_s: float
@@ -60,6 +73,7 @@ class EpisodeResult:
     stats: PickStats
     max_joint_limit_violation_rad: float
     release_tcp_m: tuple[float, float, float] | None
+    openings_m: tuple[float, ...] = ()
 
 
 def run_episode(
@@ -70,6 +84,7 @@ def run_episode(
     config: ControllerConfig | None = None,
     obj: ObjectSpec | None = None,
     camera: CameraSpec | None = None,
+    gripper: GripperSpec | None = None,
 ) -> EpisodeResult:
     """Run one closed-loop episode at belt speed ``speed_mps`` and measure it."""
     cfg = config if config is not None else ControllerConfig()
@@ -89,6 +104,10 @@ def run_episode(
     phases: list[tuple[float, Phase]] = []
     worst_violation = 0.0
     release_tcp_m: tuple[float, float, float] | None = None
+    opening_m = cfg.robot.gripper_max_opening_m
+    commanded_width_m = opening_m
+    holding = False
+    openings: list[float] = []
     for tick in range(round(duration_s / dt_s)):
         t_s = tick * dt_s
         while frame / camera.rate_hz <= t_s + 1e-12:
@@ -113,6 +132,14 @@ def run_episode(
         oMtool = kin.fk(q)  # noqa: N806
         truth = (obj.x0_m + speed_mps * t_s, obj.y_m, grasp_z)
         distance = math.dist(tuple(float(v) for v in oMtool.translation), truth)
+        if gripper is not None:
+            # the fingers stop on the object's sides once they closed around it at the grasp point
+            holding = gripper.grippable and (holding or distance < 0.01)
+            goal = max(commanded_width_m, obj.width_m) if holding else commanded_width_m
+            step = gripper.speed_mps * dt_s
+            opening_m += min(max(goal - opening_m, -step), step)
+            holding = holding and opening_m <= obj.width_m + 1e-9
+        openings.append(opening_m if gripper is not None else math.nan)
         measured = TcpMeasurement(
             position_m=(
                 float(oMtool.translation[0]),
@@ -120,10 +147,12 @@ def run_episode(
                 float(oMtool.translation[2]),
             ),
             yaw_rad=yaw_of(oMtool),
+            opening_m=openings[-1],
         )
         command: Command = controller.update(
             t_s, measured, tracker.predict_to(t_s), (speed_mps, 0.0)
         )
+        commanded_width_m = command.gripper_width_m
         q_cmd = np.asarray(command.joint_positions_rad)
         violation = float(
             np.max(np.maximum(kin.lower_rad - q_cmd, 0.0) + np.maximum(q_cmd - kin.upper_rad, 0.0))
@@ -144,6 +173,7 @@ def run_episode(
         stats=controller.stats(),
         max_joint_limit_violation_rad=worst_violation,
         release_tcp_m=release_tcp_m,
+        openings_m=tuple(openings),
     )
 
 

@@ -111,22 +111,42 @@ def to_time(t_s: float) -> TimeMsg:
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class JointSample:
-    """Measured arm joints at ``stamp_s``: ``positions_rad`` ``(n_arm,) float``."""
+    """Measured arm joints at ``stamp_s``: ``positions_rad`` ``(n_arm,) float``, and the
+    gripper's ``opening_m`` (NaN when not measured)."""
 
     stamp_s: float
     positions_rad: FloatArray
+    opening_m: float = math.nan
 
 
-def joint_sample(msg: JointState, arm_joint_names: Sequence[str]) -> JointSample | None:
+def joint_sample(
+    msg: JointState, arm_joint_names: Sequence[str], finger_joint_names: Sequence[str] = ()
+) -> JointSample | None:
     """The arm joints of a ``JointState`` in ``arm_joint_names`` order; None if any is missing
-    or not finite."""
+    or not finite.
+
+    The gripper opening is twice the mean of the ``finger_joint_names`` positions: each finger
+    joint reports half the opening, as a Panda's two prismatic fingers do (and the twin
+    publishes for any gripper). NaN when a finger joint is missing or not finite, or none is
+    named.
+    """
     index = {name: i for i, name in enumerate(msg.name)}
     if len(msg.position) != len(msg.name) or any(n not in index for n in arm_joint_names):
         return None
     q = np.array([msg.position[index[n]] for n in arm_joint_names], dtype=np.float64)
     if not np.all(np.isfinite(q)):
         return None
-    return JointSample(stamp_s=stamp_to_s(msg.header.stamp), positions_rad=q)
+    fingers = [float(msg.position[index[n]]) for n in finger_joint_names if n in index]
+    opening = (
+        2.0 * sum(fingers) / len(fingers)
+        if fingers and len(fingers) == len(finger_joint_names)
+        else math.nan
+    )
+    return JointSample(
+        stamp_s=stamp_to_s(msg.header.stamp),
+        positions_rad=q,
+        opening_m=opening if math.isfinite(opening) else math.nan,
+    )
 
 
 def detections_of(msg: DetectionArray) -> tuple[float, list[Detection]]:
@@ -198,6 +218,7 @@ class ControllerNode(Node):
         self._tracker = Tracker(config.tracking)
         self._controller: PickController | None = None
         self._arm_names = tuple(config.robot.arm_joint_names)
+        self._finger_names = tuple(config.robot.finger_joint_names)
         self._steps_per_update = config.steps_per_update
         self._period_s = config.motion.control_period_s
         self._priorities: dict[str, float] | None = None
@@ -315,7 +336,7 @@ class ControllerNode(Node):
             stamp_s, detections = detections_of(frame)
             self._tracker.update(stamp_s, detections, self._belt_velocity_mps)
         for joints in self._inbox.take("/joint_states", limit.get("/joint_states")):
-            sample = joint_sample(joints, self._arm_names)
+            sample = joint_sample(joints, self._arm_names, self._finger_names)
             if sample is None:
                 self.skipped["bad_joint_state"] += 1
                 self._warn("joints", "/joint_states: arm joints missing or not finite, ignored")
@@ -378,7 +399,9 @@ class ControllerNode(Node):
             oMtool = self._kin.fk(joint.positions_rad)  # noqa: N806
             p = oMtool.translation
             measured = TcpMeasurement(
-                position_m=(float(p[0]), float(p[1]), float(p[2])), yaw_rad=yaw_of(oMtool)
+                position_m=(float(p[0]), float(p[1]), float(p[2])),
+                yaw_rad=yaw_of(oMtool),
+                opening_m=joint.opening_m,
             )
             tracks = self._tracker.predict_to(t_s)
             command = controller.update(t_s, measured, tracks, self._belt_velocity_mps)

@@ -316,3 +316,32 @@ def test_ack_publisher_waits_for_the_readers_to_match(tmp_path: Path) -> None:
         "ack_publisher_appeared": True,
         "tick_matched": True,
     }
+
+
+def test_joint_sample_reads_the_gripper_opening_from_the_finger_joints() -> None:
+    """Each finger joint reports half the opening; a missing or NaN finger leaves it unmeasured
+    (NaN), and the arm joints are read in the configured order whatever the message's order."""
+    from sensor_msgs.msg import JointState
+
+    from control.node import joint_sample
+
+    arm = [f"panda_joint{i}" for i in range(1, 8)]
+    fingers = ["panda_finger_joint1", "panda_finger_joint2"]
+    msg = JointState()
+    msg.name = fingers[::-1] + arm[::-1]
+    msg.position = [0.021, 0.019] + [0.1 * i for i in range(7, 0, -1)]
+    sample = joint_sample(msg, arm, fingers)
+    assert sample is not None
+    assert sample.positions_rad.tolist() == pytest.approx([0.1 * i for i in range(1, 8)])
+    assert sample.opening_m == pytest.approx(0.04)
+    no_fingers = joint_sample(msg, arm)
+    assert no_fingers is not None
+    assert math.isnan(no_fingers.opening_m)
+    msg.position = [math.nan, 0.019] + [0.1 * i for i in range(7, 0, -1)]
+    nan_finger = joint_sample(msg, arm, fingers)
+    assert nan_finger is not None
+    assert math.isnan(nan_finger.opening_m)
+    msg.name, msg.position = arm, [0.1 * i for i in range(1, 8)]
+    missing = joint_sample(msg, arm, fingers)
+    assert missing is not None
+    assert math.isnan(missing.opening_m)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import replace
@@ -10,7 +11,8 @@ import numpy as np
 import pytest
 
 from control.config import ControllerConfig
-from control.kinematic_sim import run_episode
+from control.ik import yaw_of
+from control.kinematic_sim import GripperSpec, ObjectSpec, run_episode
 from control.pick import Command, Phase, PickController, TcpMeasurement
 from control.scheduler import nearest_half_turn
 from control.tracking import Track
@@ -81,6 +83,58 @@ def test_full_pick_drops_into_the_class_bin() -> None:
     assert result.max_joint_limit_violation_rad == 0.0
 
 
+def _phase_spans(result_phases: tuple[tuple[float, Phase], ...], phase: Phase) -> list[float]:
+    """Durations of every stretch spent in ``phase``."""
+    return [t1 - t0 for (t0, p0), (t1, _) in itertools.pairwise(result_phases) if p0 == phase]
+
+
+def test_a_grip_on_nothing_aborts_is_retried_once_and_never_carried() -> None:
+    """Fingers that close past the object (nothing holds them apart) abort the pick as
+    ``grip_missed`` without carrying; the object is targeted once more, then given up."""
+    result = run_episode(0.2, seed=2, duration_s=9.0, gripper=GripperSpec(grippable=False))
+    phases = [phase for _, phase in result.phases]
+    assert result.stats.aborted == {"grip_missed": 2}
+    assert result.stats.targeted == 1  # a retry is not a new target
+    assert sum(result.stats.completed_by_class.values()) == 0
+    assert Phase.CARRY not in phases
+    assert phases.count(Phase.CLOSE) == 2
+    assert phases[-1] in (Phase.RETURN, Phase.IDLE)
+    assert result.max_joint_limit_violation_rad == 0.0
+
+
+def test_a_gripped_object_is_carried_and_the_hand_leaves_once_the_fingers_clear_it() -> None:
+    """With slow fingers the release lasts until the measured opening exceeds the object's
+    width by ``release_clearance_m``, longer than ``release_s``."""
+    base = ControllerConfig()
+    config = replace(base, pick=replace(base.pick, release_s=0.05))
+    obj = ObjectSpec()
+    result = run_episode(
+        0.4, seed=2, duration_s=7.0, config=config, obj=obj, gripper=GripperSpec(speed_mps=0.05)
+    )
+    assert result.stats.completed_by_class == {"brick": 1}
+    assert result.stats.aborted == {}
+    dt_s = config.motion.control_period_s
+    release = next(t for t, p in result.phases if p == Phase.RELEASE)
+    leave = next(t for t, p in result.phases if p == Phase.RETURN and t > release)
+    clear = obj.width_m + config.pick.release_clearance_m
+    k = round(leave / dt_s)
+    assert result.openings_m[k] >= clear - 1e-9 > result.openings_m[k - 1]
+    # the fingers open at 0.05 m/s from the object's width: 0.2 s, after a command latency
+    assert leave - release > 0.2 > config.pick.release_s
+
+
+def test_the_release_ends_after_its_timeout_when_the_fingers_never_clear() -> None:
+    base = ControllerConfig()
+    config = replace(base, pick=replace(base.pick, release_s=0.1, release_timeout_s=0.2))
+    # fingers at 0.03 m/s need a third of a second to clear the object by 1 cm
+    result = run_episode(
+        0.4, seed=2, duration_s=7.0, config=config, gripper=GripperSpec(speed_mps=0.03)
+    )
+    assert result.stats.completed_by_class == {"brick": 1}
+    (span,) = _phase_spans(result.phases, Phase.RELEASE)
+    assert span == pytest.approx(0.2, abs=config.motion.control_period_s + 1e-9)
+
+
 def test_the_drop_point_is_the_nearest_to_the_tcp_inside_the_bin_less_for_long_objects() -> None:
     """The release point is the point nearest the TCP within ``drop_tolerance_m`` of the bin's
     drop point along x and y, less half the object's length: the base turns least, and no part of
@@ -128,8 +182,12 @@ def _drive(
     ticks: int,
     belt: tuple[float, float] = (0.4, 0.0),
     dt_s: float = 0.005,
+    *,
+    yaw_offset_rad: float = 0.0,
 ) -> list[Command]:
-    """Run the controller with an ideal arm; every joint command must be within the limits."""
+    """Run the controller with an ideal arm; every joint command must be within the limits.
+
+    The measured tool yaw is the arm's plus ``yaw_offset_rad`` (a wrist that lags)."""
     kin = controller.kinematics
     q = controller.q_ready
     commands: list[Command] = []
@@ -137,7 +195,7 @@ def _drive(
         t_s = k * dt_s
         pose = kin.fk(q)
         x, y, z = (float(v) for v in pose.translation)
-        measured = TcpMeasurement(position_m=(x, y, z), yaw_rad=0.0)
+        measured = TcpMeasurement(position_m=(x, y, z), yaw_rad=yaw_of(pose) + yaw_offset_rad)
         command = controller.update(t_s, measured, tracks_at(t_s), belt)
         q = np.asarray(command.joint_positions_rad)
         assert kin.within_limits(q)
@@ -228,3 +286,30 @@ def test_fast_object_from_upstream_is_met_inside_the_window() -> None:
     object_x = x0 + vx * first_descend.t_s
     assert object_x >= x_min
     assert abs(first_descend.setpoint.position_m[0] - object_x) < 0.02
+
+
+@pytest.mark.parametrize(
+    ("yaw_offset_rad", "descends"), [(0.0, True), (0.4, False), (math.pi, True), (-0.2, True)]
+)
+def test_the_descent_waits_for_the_measured_wrist_yaw(
+    yaw_offset_rad: float, descends: bool
+) -> None:
+    """A wrist measured 0.4 rad off the grasp yaw keeps the hand above the object; half a turn
+    off grips alike, and 0.2 rad is within ``descend_measured_yaw_rad``."""
+    config = ControllerConfig()
+    controller = PickController(config)
+    dt_s = config.motion.control_period_s
+    commands = _drive(
+        controller,
+        lambda t: (_track(-0.45, t, vx=0.2),),
+        ticks=300,
+        belt=(0.2, 0.0),
+        dt_s=dt_s,
+        yaw_offset_rad=yaw_offset_rad,
+    )
+    phases = {c.phase for c in commands}
+    assert Phase.APPROACH in phases
+    assert (Phase.DESCEND in phases) is descends
+    assert (Phase.CLOSE in phases) is (
+        descends and abs(math.remainder(yaw_offset_rad, math.pi)) < 0.05
+    )
