@@ -348,8 +348,9 @@ class PickConfig:
     through the lift, a gripper measured within ``grip_check_margin_m`` of its commanded opening
     has closed on nothing: the pick is aborted as ``grip_missed`` and the object may be targeted
     ``grip_retries`` more times. The hand leaves the bin ``release_s`` after opening, once the
-    measured opening exceeds the object's width by ``release_clearance_m`` (or the gripper is
-    fully open), and at the latest ``release_timeout_s`` after opening.
+    gripper is measured within ``release_open_margin_m`` of fully open (fingers that only
+    cleared the object's measured width by a centimetre still dragged long, irregular pieces
+    out of the bin), and at the latest ``release_timeout_s`` after opening.
     """
 
     approach_height_m: float = field(default=0.06, metadata=_meta("float"))
@@ -374,7 +375,7 @@ class PickConfig:
     close_measured_yaw_rad: float = field(default=0.05, metadata=_meta("float"))
     grip_check_margin_m: float = field(default=0.001, metadata=_meta("float"))
     grip_retries: int = field(default=1, metadata=_meta("int"))
-    release_clearance_m: float = field(default=0.01, metadata=_meta("float"))
+    release_open_margin_m: float = field(default=0.002, metadata=_meta("float"))
     release_timeout_s: float = field(default=0.5, metadata=_meta("float"))
     approach_space: str = field(default="cartesian", metadata=_meta("str"))
 
