@@ -347,10 +347,7 @@ class PickConfig:
     fingers down or shut across the object instead of on its sides). When the close ends, and
     through the lift, a gripper measured within ``grip_check_margin_m`` of its commanded opening
     has closed on nothing: the pick is aborted as ``grip_missed`` and the object may be targeted
-    ``grip_retries`` more times. The hand leaves the bin ``release_s`` after opening, once the
-    gripper is measured within ``release_open_margin_m`` of fully open (fingers that only
-    cleared the object's measured width by a centimetre still dragged long, irregular pieces
-    out of the bin), and at the latest ``release_timeout_s`` after opening.
+    ``grip_retries`` more times.
     """
 
     approach_height_m: float = field(default=0.06, metadata=_meta("float"))
@@ -375,8 +372,6 @@ class PickConfig:
     close_measured_yaw_rad: float = field(default=0.05, metadata=_meta("float"))
     grip_check_margin_m: float = field(default=0.001, metadata=_meta("float"))
     grip_retries: int = field(default=1, metadata=_meta("int"))
-    release_open_margin_m: float = field(default=0.002, metadata=_meta("float"))
-    release_timeout_s: float = field(default=0.5, metadata=_meta("float"))
     approach_space: str = field(default="cartesian", metadata=_meta("str"))
 
     def __post_init__(self) -> None:
@@ -397,12 +392,6 @@ class PickConfig:
             "pick.grasp_height_fraction",
             self.grasp_height_fraction,
             "must be in [0, 1]",
-        )
-        _require(
-            self.release_timeout_s >= self.release_s,
-            "pick.release_timeout_s",
-            self.release_timeout_s,
-            f"must not be shorter than release_s ({self.release_s})",
         )
         _require(
             self.close_overlap_s <= min(self.dwell_s, self.close_s),

@@ -63,8 +63,7 @@ class EpisodeResult:
 
     ``tracking_time_4mm_s`` is NaN when the TCP never stayed within 4 mm until the close ended;
     ``max_follow_error_m`` is the largest TCP-to-grasp-point distance during dwell and close;
-    ``release_tcp_m`` and ``release_yaw_rad`` are where the TCP was and how the tool was
-    turned when the gripper first opened over a bin;
+    ``release_tcp_m`` is where the TCP was when the gripper first opened over a bin;
     ``openings_m`` is the measured gripper opening at every tick (NaN without a gripper).
     """
 
@@ -74,7 +73,6 @@ class EpisodeResult:
     stats: PickStats
     max_joint_limit_violation_rad: float
     release_tcp_m: tuple[float, float, float] | None
-    release_yaw_rad: float = math.nan
     openings_m: tuple[float, ...] = ()
 
 
@@ -106,7 +104,6 @@ def run_episode(
     phases: list[tuple[float, Phase]] = []
     worst_violation = 0.0
     release_tcp_m: tuple[float, float, float] | None = None
-    release_yaw_rad = math.nan
     opening_m = cfg.robot.gripper_max_opening_m
     commanded_width_m = opening_m
     holding = False
@@ -167,7 +164,6 @@ def run_episode(
         history.append((t_s, command.phase, distance))
         if command.phase == Phase.RELEASE and release_tcp_m is None:
             release_tcp_m = measured.position_m
-            release_yaw_rad = measured.yaw_rad
     return EpisodeResult(
         tracking_time_4mm_s=_tracking_time(history, dt_s),
         max_follow_error_m=max(
@@ -177,7 +173,6 @@ def run_episode(
         stats=controller.stats(),
         max_joint_limit_violation_rad=worst_violation,
         release_tcp_m=release_tcp_m,
-        release_yaw_rad=release_yaw_rad,
         openings_m=tuple(openings),
     )
 

@@ -77,7 +77,7 @@ object itself. (A lead that could grow diverges when the arm is barely faster th
 class TcpMeasurement:
     """Measured tool: TCP ``position_m`` ``(x, y, z)`` in the world frame, ``yaw_rad``, and the
     gripper's ``opening_m`` (from the finger joints; NaN when not measured, which turns off the
-    grip check and the wait for the fingers to open at the release)."""
+    grip check)."""
 
     position_m: Vec3
     yaw_rad: float
@@ -644,10 +644,7 @@ class PickController:
                 self._set_phase(Phase.RELEASE, t_s)
             return goal, None
         if phase == Phase.RELEASE:
-            released_s = t_s - self._phase_start_s
-            if released_s >= pick.release_s and (
-                self._gripper_open() or released_s >= pick.release_timeout_s
-            ):
+            if t_s - self._phase_start_s >= pick.release_s:
                 self._completed += 1
                 if self._target is not None:
                     self._completed_by_class[self._target.class_name] += 1
@@ -693,15 +690,6 @@ class PickController:
             return False
         return opening - self._closing_width_m() < self._cfg.pick.grip_check_margin_m
 
-    def _gripper_open(self) -> bool:
-        """True when the gripper is measured within ``pick.release_open_margin_m`` of fully
-        open, or when the opening is not measured."""
-        opening = self._measured.opening_m
-        if not math.isfinite(opening):
-            return True
-        full = self._cfg.robot.gripper_max_opening_m
-        return opening >= full - self._cfg.pick.release_open_margin_m
-
     def _at_joint_goal(self, goal: JointGoal) -> bool:
         return bool(np.max(np.abs(self._commander.q - goal.q)) < 1e-4)
 
@@ -712,50 +700,31 @@ class PickController:
         base joint turned by the bearing from the TCP to the drop point, and the tool's yaw
         turns with it (either of the two yaws a parallel gripper allows, whichever leaves the
         last joint nearer its current angle): the carry is mostly a turn of the base joint and
-        the wrist hardly moves. An object longer than twice ``pick.drop_tolerance_m`` (which
-        fits the bins' axis-aligned squares in no direction) is first tried along a diagonal
-        of its bin, the one nearest that yaw: it reaches ``(length + width) / 2 / sqrt(2)``
-        along each axis there, and it does not fit lying at any other yaw.
+        the wrist hardly moves.
         """
         robot = self._cfg.robot
         target = self._target
-        class_name, length_m, width_m = (
-            ("", 0.0, 0.0)
-            if target is None
-            else (target.class_name, target.length_m, target.width_m)
-        )
+        class_name, length_m = ("", 0.0) if target is None else (target.class_name, target.length_m)
         base = robot.base_position_m
         q_now = np.array(self._commander.q)
         x, y, z, yaw_now = self._planner.state.position
-        options: list[tuple[float, bool]] = []  # (reach along x and y, along a diagonal)
-        if 0.5 * length_m > self._cfg.pick.drop_tolerance_m:
-            options.append(((length_m + width_m) / (2.0 * math.sqrt(2.0)), True))
-        options.append((0.5 * length_m, False))
+        drop = self._drop_point(class_name, (x, y, z), length_m)
+        turn = math.atan2(drop[1] - base[1], drop[0] - base[0]) - math.atan2(
+            y - base[1], x - base[0]
+        )
         lower, upper = float(self._kin.lower_rad[0]), float(self._kin.upper_rad[0])
+        turns = [turn + k * 2 * math.pi for k in (-1, 0, 1)]
+        inside = [a for a in turns if lower <= q_now[0] + a <= upper] or [turn]
+        turn = min(inside, key=abs)
+        seed = np.array(q_now)
+        seed[0] = np.clip(seed[0] + turn, lower, upper)
         best: FloatArray | None = None
-        drop = robot.ready_tcp_position_m
-        for reach_m, diagonal in options:
-            drop = self._drop_point(class_name, (x, y, z), reach_m)
-            turn = math.atan2(drop[1] - base[1], drop[0] - base[0]) - math.atan2(
-                y - base[1], x - base[0]
-            )
-            turns = [turn + k * 2 * math.pi for k in (-1, 0, 1)]
-            inside = [a for a in turns if lower <= q_now[0] + a <= upper] or [turn]
-            turn = min(inside, key=abs)
-            seed = np.array(q_now)
-            seed[0] = np.clip(seed[0] + turn, lower, upper)
-            yaw = yaw_now + turn
-            if diagonal:  # the nearest diagonal of the bin
-                quarter = 0.5 * math.pi
-                yaw = 0.25 * math.pi + quarter * round((yaw - 0.25 * math.pi) / quarter)
-            for candidate in (yaw, yaw + math.pi):
-                result = self._kin.solve(tool_pose(drop, candidate), seed)
-                if result.success and (
-                    best is None or abs(result.q[-1] - q_now[-1]) < abs(best[-1] - q_now[-1])
-                ):
-                    best = np.array(result.q)
-            if best is not None:
-                break
+        for yaw in (yaw_now + turn, yaw_now + turn + math.pi):
+            result = self._kin.solve(tool_pose(drop, yaw), seed)
+            if result.success and (
+                best is None or abs(result.q[-1] - q_now[-1]) < abs(best[-1] - q_now[-1])
+            ):
+                best = np.array(result.q)
         if best is not None:
             self._drop_q = best
         else:
@@ -765,21 +734,20 @@ class PickController:
             self._drop_q = self._commander.q
         self._set_phase(Phase.CARRY, t_s)
 
-    def _drop_point(self, class_name: str, tcp_m: Vec3, reach_m: float) -> Vec3:
-        """Where to release an object of ``class_name`` that reaches ``reach_m`` from the TCP
-        along x and y, carried from ``tcp_m``.
+    def _drop_point(self, class_name: str, tcp_m: Vec3, length_m: float) -> Vec3:
+        """Where to release an object of ``class_name``, ``length_m`` long, carried from ``tcp_m``.
 
-        Anywhere over the square of half-width ``pick.drop_tolerance_m`` less ``reach_m``
-        around the class's configured drop point (the bins are axis-aligned squares, so no part
-        of the object ends up over a wall): the point of it nearest the TCP, so the base turns
-        and the arm folds no more than it must. Raised to the TCP's height if that is higher.
-        Without a bin for the class, the ready position.
+        Anywhere over the square of half-width ``pick.drop_tolerance_m`` less half the object's
+        length around the class's configured drop point (the bins are axis-aligned squares, so
+        no part of the object ends up over a wall): the point of it nearest the TCP, so the base
+        turns and the arm folds no more than it must. Raised to the TCP's height if that is
+        higher. Without a bin for the class, the ready position.
         """
         configured = self._cfg.bins.get(class_name)
         if configured is None:
             return self._cfg.robot.ready_tcp_position_m
         bx, by, bz = configured
-        half = max(0.0, self._cfg.pick.drop_tolerance_m - reach_m)
+        half = max(0.0, self._cfg.pick.drop_tolerance_m - 0.5 * length_m)
         return (
             min(max(tcp_m[0], bx - half), bx + half),
             min(max(tcp_m[1], by - half), by + half),

@@ -46,10 +46,6 @@ def test_partial_file_keeps_other_defaults(tmp_path: Path) -> None:
         ("    scheduler:\n      class_priorities: {concrete: 1.0}\n", r"no priority for class"),
         ("    pick:\n      approach_space: diagonal\n", r"pick\.approach_space: 'diagonal'"),
         (
-            "    pick:\n      release_s: 0.3\n      release_timeout_s: 0.2\n",
-            r"pick\.release_timeout_s: 0\.2 is invalid, must not be shorter than release_s",
-        ),
-        (
             "    pick:\n      close_overlap_s: 0.3\n",
             r"pick\.close_overlap_s: 0\.3 is invalid, must not exceed dwell_s",
         ),

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable
 from dataclasses import replace
@@ -83,11 +82,6 @@ def test_full_pick_drops_into_the_class_bin() -> None:
     assert result.max_joint_limit_violation_rad == 0.0
 
 
-def _phase_spans(result_phases: tuple[tuple[float, Phase], ...], phase: Phase) -> list[float]:
-    """Durations of every stretch spent in ``phase``."""
-    return [t1 - t0 for (t0, p0), (t1, _) in itertools.pairwise(result_phases) if p0 == phase]
-
-
 def test_a_grip_on_nothing_aborts_is_retried_once_and_never_carried() -> None:
     """Fingers that close past the object (nothing holds them apart) abort the pick as
     ``grip_missed`` without carrying; the object is targeted once more, then given up."""
@@ -102,58 +96,13 @@ def test_a_grip_on_nothing_aborts_is_retried_once_and_never_carried() -> None:
     assert result.max_joint_limit_violation_rad == 0.0
 
 
-def test_a_gripped_object_is_carried_and_the_hand_leaves_once_the_gripper_is_open() -> None:
-    """With slow fingers the release lasts until the gripper is measured within
-    ``release_open_margin_m`` of fully open, longer than ``release_s``."""
-    base = ControllerConfig()
-    config = replace(base, pick=replace(base.pick, release_s=0.05))
-    obj = ObjectSpec()
-    result = run_episode(
-        0.4, seed=2, duration_s=7.0, config=config, obj=obj, gripper=GripperSpec(speed_mps=0.1)
-    )
+def test_a_gripped_object_passes_the_grip_check_and_is_carried_to_its_bin() -> None:
+    """Fingers stopped by the object stay wider than commanded: no ``grip_missed``."""
+    result = run_episode(0.4, seed=2, duration_s=6.5, gripper=GripperSpec())
     assert result.stats.completed_by_class == {"brick": 1}
     assert result.stats.aborted == {}
-    dt_s = config.motion.control_period_s
-    release = next(t for t, p in result.phases if p == Phase.RELEASE)
-    leave = next(t for t, p in result.phases if p == Phase.RETURN and t > release)
-    is_open = config.robot.gripper_max_opening_m - config.pick.release_open_margin_m
-    k = round(leave / dt_s)
-    assert result.openings_m[k] >= is_open - 1e-9 > result.openings_m[k - 1]
-    # the fingers open at 0.1 m/s from the object's width (5 cm) to 7.8 cm: 0.28 s
-    assert leave - release > 0.28 > config.pick.release_s
-
-
-def test_the_release_ends_after_its_timeout_when_the_fingers_never_clear() -> None:
-    base = ControllerConfig()
-    config = replace(base, pick=replace(base.pick, release_s=0.1, release_timeout_s=0.2))
-    # fingers at 0.03 m/s need almost a second to open from the object's width
-    result = run_episode(
-        0.4, seed=2, duration_s=7.0, config=config, gripper=GripperSpec(speed_mps=0.03)
-    )
-    assert result.stats.completed_by_class == {"brick": 1}
-    (span,) = _phase_spans(result.phases, Phase.RELEASE)
-    assert span == pytest.approx(0.2, abs=config.motion.control_period_s + 1e-9)
-
-
-@pytest.mark.parametrize(("length_m", "diagonal"), [(0.25, True), (0.12, False)])
-def test_an_object_too_long_for_the_bin_is_dropped_along_its_diagonal(
-    length_m: float, diagonal: bool
-) -> None:
-    """Longer than twice the drop tolerance, an object fits the square bin only along a
-    diagonal: the tool (along the object's long side) turns to one, over the bin's centre
-    (the object reaches (0.25 + 0.05) / 2 / sqrt(2) = 0.106 m > 0.08 m along x and y)."""
-    config = ControllerConfig()
-    obj = ObjectSpec(length_m=length_m)
-    result = run_episode(0.4, seed=2, duration_s=6.5, obj=obj)
-    assert result.stats.completed_by_class == {"brick": 1}
-    assert result.release_tcp_m is not None
-    off_axis = abs(math.remainder(result.release_yaw_rad, 0.5 * math.pi))
-    if diagonal:
-        assert off_axis == pytest.approx(0.25 * math.pi, abs=0.01)
-        bx, by, _ = config.bins["brick"]
-        assert result.release_tcp_m[:2] == pytest.approx((bx, by), abs=2e-3)
-    else:
-        assert off_axis < 0.25 * math.pi - 0.05  # the yaw the base turn gives, not a diagonal
+    width_m = ObjectSpec().width_m
+    assert min(result.openings_m) == pytest.approx(width_m, abs=1e-9)  # held apart by it
 
 
 def test_the_drop_point_is_the_nearest_to_the_tcp_inside_the_bin_less_for_long_objects() -> None:
@@ -168,10 +117,10 @@ def test_the_drop_point_is_the_nearest_to_the_tcp_inside_the_bin_less_for_long_o
     inside = (bx + 0.01, by - 0.02, bz + 0.1)  # within reach of every length below
     for length_m in (0.0, 0.06, 2 * tolerance, 0.3):
         half = max(0.0, tolerance - 0.5 * length_m)
-        assert controller._drop_point("brick", over_the_belt, 0.5 * length_m) == pytest.approx(
+        assert controller._drop_point("brick", over_the_belt, length_m) == pytest.approx(
             (bx + half, by + half, bz), abs=1e-12
         )
-        x, y, z = controller._drop_point("brick", inside, 0.5 * length_m)
+        x, y, z = controller._drop_point("brick", inside, length_m)
         assert (x, y) == pytest.approx((bx + min(0.01, half), by - min(0.02, half)), abs=1e-12)
         assert z == inside[2]  # never lower than the TCP: the arm does not dip to release
     assert controller._drop_point("gypsum", inside, 0.0) == config.robot.ready_tcp_position_m
