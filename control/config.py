@@ -341,13 +341,10 @@ class PickConfig:
     phases extrapolate it with the belt velocity). ``grip_squeeze_m`` is how much narrower than
     the object the gripper is commanded to close.
 
-    Checks on the measured tool (skipped when ``/joint_states`` carries no finger joints): the
-    descent waits until the measured tool yaw is within ``descend_measured_yaw_rad`` of the grasp
-    yaw, the close until it is within ``close_measured_yaw_rad`` (a lagging wrist would bring the
-    fingers down or shut across the object instead of on its sides). When the close ends, and
-    through the lift, a gripper measured within ``grip_check_margin_m`` of its commanded opening
-    has closed on nothing: the pick is aborted as ``grip_missed`` and the object may be targeted
-    ``grip_retries`` more times.
+    Grip check (skipped when ``/joint_states`` carries no finger joints): when the close ends,
+    and through the lift, a gripper measured within ``grip_check_margin_m`` of its commanded
+    opening has closed on nothing: the pick is aborted as ``grip_missed`` and the object may be
+    targeted ``grip_retries`` more times.
     """
 
     approach_height_m: float = field(default=0.06, metadata=_meta("float"))
@@ -368,8 +365,6 @@ class PickConfig:
     descend_yaw_lead_s: float = field(default=0.1, metadata=_meta("float"))
     lost_timeout_s: float = field(default=0.3, metadata=_meta("float"))
     grip_squeeze_m: float = field(default=0.01, metadata=_meta("float"))
-    descend_measured_yaw_rad: float = field(default=0.3, metadata=_meta("float"))
-    close_measured_yaw_rad: float = field(default=0.05, metadata=_meta("float"))
     grip_check_margin_m: float = field(default=0.001, metadata=_meta("float"))
     grip_retries: int = field(default=1, metadata=_meta("int"))
     approach_space: str = field(default="cartesian", metadata=_meta("str"))

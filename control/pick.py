@@ -84,11 +84,6 @@ class TcpMeasurement:
     opening_m: float = math.nan
 
 
-def yaw_difference_rad(a_rad: float, b_rad: float) -> float:
-    """``a - b`` wrapped to ``[-pi, pi)``."""
-    return (a_rad - b_rad + math.pi) % (2.0 * math.pi) - math.pi
-
-
 @dataclass(frozen=True, kw_only=True)
 class Command:
     """Everything the arm and gripper are told in one control tick.
@@ -593,7 +588,7 @@ class PickController:
             yaw_ready = (
                 yaw_error < pick.yaw_tolerance_rad
                 or self._yaw_remaining_s <= pick.descend_yaw_lead_s
-            ) and self._measured_yaw_within(target, pick.descend_measured_yaw_rad)
+            )
             if on_object and yaw_ready and self._arrived(target, pick.approach_height_m):
                 self._set_phase(Phase.DESCEND, t_s)
                 phase = Phase.DESCEND
@@ -608,11 +603,7 @@ class PickController:
             target, aim = self._following_target(t_s, belt_velocity_mps, 0.0)
             yaw_error = abs(self._planner.state.position[3] - target.position[3])
             dwelt = t_s - self._phase_start_s >= pick.dwell_s - pick.close_overlap_s
-            if (
-                dwelt
-                and yaw_error < pick.yaw_tolerance_rad
-                and self._measured_yaw_within(target, pick.close_measured_yaw_rad)
-            ):
+            if dwelt and yaw_error < pick.yaw_tolerance_rad:
                 self._set_phase(Phase.CLOSE, t_s)
             return target, aim
         if phase == Phase.CLOSE:
@@ -662,20 +653,6 @@ class PickController:
         ):
             self._set_phase(Phase.IDLE, t_s)
         return goal, None
-
-    def _measured_yaw_within(self, target: CartesianTarget, tolerance_rad: float) -> bool:
-        """True when the measured tool yaw is within ``tolerance_rad`` of the goal's (a grasp
-        yaw and the one half a turn from it grip alike); True when the yaw is not measured.
-
-        The arm's wrist can lag its commands by tenths of a radian after a fast turn (seen in
-        the twin); fingers that come down or close that far off the grasp yaw push the object
-        instead of gripping it.
-        """
-        measured = self._measured.yaw_rad
-        if not math.isfinite(measured):
-            return True
-        error = yaw_difference_rad(2.0 * measured, 2.0 * target.position[3])
-        return abs(0.5 * error) <= tolerance_rad
 
     def _closed_on_nothing(self) -> bool:
         """True when the gripper, commanded to close, is measured within

@@ -152,12 +152,8 @@ def _drive(
     ticks: int,
     belt: tuple[float, float] = (0.4, 0.0),
     dt_s: float = 0.005,
-    *,
-    yaw_offset_rad: float = 0.0,
 ) -> list[Command]:
-    """Run the controller with an ideal arm; every joint command must be within the limits.
-
-    The measured tool yaw is the arm's plus ``yaw_offset_rad`` (a wrist that lags)."""
+    """Run the controller with an ideal arm; every joint command must be within the limits."""
     kin = controller.kinematics
     q = controller.q_ready
     commands: list[Command] = []
@@ -165,7 +161,7 @@ def _drive(
         t_s = k * dt_s
         pose = kin.fk(q)
         x, y, z = (float(v) for v in pose.translation)
-        measured = TcpMeasurement(position_m=(x, y, z), yaw_rad=yaw_of(pose) + yaw_offset_rad)
+        measured = TcpMeasurement(position_m=(x, y, z), yaw_rad=yaw_of(pose))
         command = controller.update(t_s, measured, tracks_at(t_s), belt)
         q = np.asarray(command.joint_positions_rad)
         assert kin.within_limits(q)
@@ -256,30 +252,3 @@ def test_fast_object_from_upstream_is_met_inside_the_window() -> None:
     object_x = x0 + vx * first_descend.t_s
     assert object_x >= x_min
     assert abs(first_descend.setpoint.position_m[0] - object_x) < 0.02
-
-
-@pytest.mark.parametrize(
-    ("yaw_offset_rad", "descends"), [(0.0, True), (0.4, False), (math.pi, True), (-0.2, True)]
-)
-def test_the_descent_waits_for_the_measured_wrist_yaw(
-    yaw_offset_rad: float, descends: bool
-) -> None:
-    """A wrist measured 0.4 rad off the grasp yaw keeps the hand above the object; half a turn
-    off grips alike, and 0.2 rad is within ``descend_measured_yaw_rad``."""
-    config = ControllerConfig()
-    controller = PickController(config)
-    dt_s = config.motion.control_period_s
-    commands = _drive(
-        controller,
-        lambda t: (_track(-0.45, t, vx=0.2),),
-        ticks=300,
-        belt=(0.2, 0.0),
-        dt_s=dt_s,
-        yaw_offset_rad=yaw_offset_rad,
-    )
-    phases = {c.phase for c in commands}
-    assert Phase.APPROACH in phases
-    assert (Phase.DESCEND in phases) is descends
-    assert (Phase.CLOSE in phases) is (
-        descends and abs(math.remainder(yaw_offset_rad, math.pi)) < 0.05
-    )
