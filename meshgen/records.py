@@ -117,6 +117,37 @@ _OBJECT_FORMAT = (
 """:func:`_object_fields` as sorted compact JSON without the closing brace, for plain floats."""
 
 
+def _head_values(
+    r: ObjectRecord, where: str, density: float, key: tuple[int, int, int], seed: int
+) -> tuple[object, ...]:
+    """The values of :data:`_OBJECT_FORMAT` for one object, its texts JSON-escaped."""
+    text = encode_basestring_ascii
+    return (
+        r.area_change_ratio,
+        r.area_m2,
+        r.centroid_x_m,
+        r.centroid_y_m,
+        r.class_id,
+        text(r.class_name),
+        text(r.convex_path),
+        density,
+        r.height_m,
+        r.length_m,
+        r.mass_kg,
+        text(r.mesh_path),
+        r.n_convex_pieces,
+        text(r.object_id),
+        ",".join(map(text, r.repairs)),
+        *key,
+        seed,
+        text(r.source_image),
+        text(where),
+        r.volume_m3,
+        r.width_m,
+        r.yaw_rad,
+    )
+
+
 def object_json_text(
     record: ObjectRecord,
     *,
@@ -158,31 +189,7 @@ def object_json_text(
         and math.isfinite(sum(floats))
         and all(type(i) is int for i in ints)
     ):
-        text = encode_basestring_ascii
-        head = _OBJECT_FORMAT % (
-            r.area_change_ratio,
-            r.area_m2,
-            r.centroid_x_m,
-            r.centroid_y_m,
-            r.class_id,
-            text(r.class_name),
-            text(r.convex_path),
-            density_kg_m3,
-            r.height_m,
-            r.length_m,
-            r.mass_kg,
-            text(r.mesh_path),
-            r.n_convex_pieces,
-            text(r.object_id),
-            ",".join(map(text, r.repairs)),
-            *rng_key,
-            seed,
-            text(r.source_image),
-            text(source_where),
-            r.volume_m3,
-            r.width_m,
-            r.yaw_rad,
-        )
+        head = _OBJECT_FORMAT % _head_values(r, source_where, density_kg_m3, rng_key, seed)
     else:
         fields = _object_fields(
             record,
@@ -225,38 +232,13 @@ def objects_json_text(
     the per-object checks, calls and copies of the long point texts. Otherwise each entry is
     made on its own.
     """
-    text = encode_basestring_ascii
     values: list[object] = []
     try:
         for r, (where, density, key, footprint_json, polygon_json) in zip(
             records, extras, strict=True
         ):
-            values += (
-                r.area_change_ratio,
-                r.area_m2,
-                r.centroid_x_m,
-                r.centroid_y_m,
-                r.class_id,
-                text(r.class_name),
-                text(r.convex_path),
-                density,
-                r.height_m,
-                r.length_m,
-                r.mass_kg,
-                text(r.mesh_path),
-                r.n_convex_pieces,
-                text(r.object_id),
-                ",".join(map(text, r.repairs)),
-                *key,
-                seed,
-                text(r.source_image),
-                text(where),
-                r.volume_m3,
-                r.width_m,
-                r.yaw_rad,
-                footprint_json,
-                polygon_json,
-            )
+            values += _head_values(r, where, density, key, seed)
+            values += (footprint_json, polygon_json)
     except TypeError:  # a text field that is not a str: as object_json_text handles it
         values = []
     floats = list(chain.from_iterable(values[at::_ENTRY_WIDTH] for at in _ENTRY_FLOATS))
