@@ -164,41 +164,18 @@ def object_json_text(
     separators=(",", ":"))`` writes them, then ``footprint_json`` and ``polygon_json``: the
     JSON text of ``footprint_m`` (``(n, 2)`` metres, ``%.9f``) and ``polygon_px`` (``(m, 2)``
     pixels, ``%.3f``), which the pipeline formats for many objects at once
-    (:func:`meshgen.objtext.points_json_blocks`). When every float is a finite built-in
-    ``float`` (always, in the pipeline) the fields are formatted with one template: ``%r`` of
-    such a float is the ``float.__repr__`` that ``json`` writes, and text is escaped with the
-    function ``json.dumps`` uses for ``str``. Anything else goes through ``json.dumps``.
+    (:func:`meshgen.objtext.points_json_blocks`). The general route, for any value types;
+    :func:`objects_json_text` formats whole images of plain values with one template and falls
+    back to this.
     """
-    r = record
-    floats = (
-        r.area_change_ratio,
-        r.area_m2,
-        r.centroid_x_m,
-        r.centroid_y_m,
-        density_kg_m3,
-        r.height_m,
-        r.length_m,
-        r.mass_kg,
-        r.volume_m3,
-        r.width_m,
-        r.yaw_rad,
+    fields = _object_fields(
+        record,
+        source_where=source_where,
+        density_kg_m3=density_kg_m3,
+        seed=seed,
+        rng_key=rng_key,
     )
-    ints = (r.class_id, r.n_convex_pieces, *rng_key, seed)
-    if (
-        all(type(x) is float for x in floats)
-        and math.isfinite(sum(floats))
-        and all(type(i) is int for i in ints)
-    ):
-        head = _OBJECT_FORMAT % _head_values(r, source_where, density_kg_m3, rng_key, seed)
-    else:
-        fields = _object_fields(
-            record,
-            source_where=source_where,
-            density_kg_m3=density_kg_m3,
-            seed=seed,
-            rng_key=rng_key,
-        )
-        head = json.dumps(fields, sort_keys=True, separators=(",", ":"))[:-1] + ","
+    head = json.dumps(fields, sort_keys=True, separators=(",", ":"))[:-1] + ","
     return f'{head}"footprint_m":{footprint_json},"polygon_px":{polygon_json}}}'
 
 
