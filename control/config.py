@@ -6,7 +6,7 @@ The YAML file has the layout ROS 2 uses for node parameters::
       ros__parameters:
         robot: {urdf_path: franka_panda/panda.urdf, tcp_link: panda_grasptarget, ...}
         belt: {...}
-        bins: {concrete: [-0.60, 0.0, 0.15], ...}
+        bins: {concrete: [-0.60, 0.07, 0.15], ...}
         ...
 
 Every key is optional (the defaults describe the reference cell), unknown keys are errors, and
@@ -478,10 +478,10 @@ class NodeConfig:
 
 def _default_bins() -> dict[str, tuple[float, float, float]]:
     return {
-        "concrete": (-0.60, 0.0, 0.15),
-        "brick": (-0.33, 0.0, 0.15),
-        "wood": (0.33, 0.0, 0.15),
-        "rubber": (0.60, 0.0, 0.15),
+        "concrete": (-0.60, 0.07, 0.15),
+        "brick": (-0.33, 0.07, 0.15),
+        "wood": (0.33, 0.07, 0.15),
+        "rubber": (0.60, 0.07, 0.15),
     }
 
 

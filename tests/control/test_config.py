@@ -22,7 +22,7 @@ def test_default_yaml_matches_dataclass_defaults() -> None:
     config = load_config(DEFAULT_YAML)
     assert config == ControllerConfig()
     assert config.robot.gripper_max_opening_m == 0.08
-    assert config.bins["rubber"] == (0.60, 0.0, 0.15)
+    assert config.bins["rubber"] == (0.60, 0.07, 0.15)
     assert resolve_urdf_path(config.robot.urdf_path).is_file()
 
 

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from pathlib import Path
 
 import pytest
 
+from control.config import load_config
+from twin.config import CellConfig
 from twin.scenario import FaultLevel, Scenario
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "scenarios"
@@ -23,6 +26,27 @@ EXPECTED = {
     "fault_belt_stall",
     "fault_controller_restart",
 }
+
+
+@pytest.mark.parametrize("params", ["default", "throughput"])
+def test_controller_drops_over_the_twin_bins_and_the_bins_clear_the_belt(params: str) -> None:
+    """The controller's drop points (its own file, no import from the twin) must land in the
+    twin's default bins with the controller's drop tolerance to spare."""
+    cell = CellConfig()
+    config = load_config(SCENARIOS.parents[1] / "control" / "config" / f"{params}.yaml")
+    tolerance = config.pick.drop_tolerance_m
+    for bin_config in cell.bins:
+        x, y, z = config.bins[bin_config.class_name]
+        inner_half = 0.5 * bin_config.size_m - bin_config.wall_m
+        assert abs(x - bin_config.centre_x_m) + tolerance <= inner_half, bin_config
+        assert abs(y - bin_config.centre_y_m) + tolerance <= inner_half, bin_config
+        assert z > bin_config.top_z_m
+        belt_near_edge = cell.belt.centre_y_m - 0.5 * cell.belt.width_m
+        assert bin_config.centre_y_m + 0.5 * bin_config.size_m < belt_near_edge
+    edges = sorted(
+        (b.centre_x_m - 0.5 * b.size_m, b.centre_x_m + 0.5 * b.size_m) for b in cell.bins
+    )
+    assert all(a[1] <= b[0] for a, b in itertools.pairwise(edges))
 
 
 def test_every_scenario_file_loads_and_round_trips(tmp_path: Path) -> None:
