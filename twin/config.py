@@ -132,7 +132,11 @@ class RobotConfig:
 
     ``urdf`` is a path, or a path relative to ``pybullet_data`` when it does not exist as given.
     ``finger_open`` and ``finger_closed`` are the joint positions of each finger joint when the
-    gripper is fully open (``max_opening_m``) and closed.
+    gripper is fully open (``max_opening_m``) and closed. ``inertia_from_file`` takes the links'
+    inertia tensors from the URDF; by default PyBullet computes them from the collision shapes
+    and the URDF masses, because pybullet_data's Panda carries placeholder inertias (0.1 kg m^2
+    on every link, 10-100 times the identified ones) that made the 12 N m wrist joints lag a
+    feasible command by up to 0.7 rad.
     """
 
     name: str = "panda"
@@ -149,6 +153,7 @@ class RobotConfig:
     home_joint_positions: tuple[float, ...] = (0.0, -0.35, 0.0, -2.3, 0.0, 1.95, 0.785)
     position_gain: float = 0.1
     velocity_gain: float = 1.0
+    inertia_from_file: bool = False
 
     def __post_init__(self) -> None:
         _require(len(self.arm_joints) > 0, "robot.arm_joints", self.arm_joints, "must not be empty")
@@ -201,6 +206,7 @@ def xarm6_robot() -> RobotConfig:
         finger_closed=(0.85, 0.85),
         max_opening_m=0.085,
         home_joint_positions=(0.0, -0.4, -0.6, 0.0, 1.0, 0.0),
+        inertia_from_file=True,  # this URDF carries the manufacturer's inertias
     )
 
 

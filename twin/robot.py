@@ -43,7 +43,7 @@ class Robot:
                 basePosition=config.base_position_m,
                 baseOrientation=quat,
                 useFixedBase=True,
-                flags=pb.URDF_USE_INERTIA_FROM_FILE,
+                flags=pb.URDF_USE_INERTIA_FROM_FILE if config.inertia_from_file else 0,
                 physicsClientId=client,
             )
         except pb.error as exc:
