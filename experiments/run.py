@@ -41,7 +41,9 @@ when the output is a terminal.
 Metrics per episode:
 
 - ``picks``: successful picks (``pick_success``), ``placed_correct``: objects in their class bin;
-- ``targeted``: objects the controller committed to and finished with (completed or aborted);
+- ``targeted``: objects the controller committed to and finished with (completed or aborted),
+  except those it released into a bin so late that they were still falling when the episode
+  ended (the twin's ``landing_in_bins``: their fate is undecided);
 - ``success_rate`` = placed_correct / targeted; ``untargeted``: objects never targeted, by reason;
 - ``miss_rate``: the twin's missed / processed (objects that left the window unpicked);
 - ``throughput_per_min`` = placed_correct per simulated minute;
@@ -266,6 +268,8 @@ def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
     twin = json.loads((folder / "twin" / "summary.json").read_text(encoding="utf-8"))
     stats = _controller_stats(folder)
     targeted, untargeted = _pick_counts(stats)
+    # released into a bin just before the end, still falling: undecided, so not counted
+    targeted = max(0, targeted - len(twin.get("landing_in_bins", [])))
     scores = twin["scores"]
     placed_correct = int(scores["placed_correct"])
     minutes = float(twin["sim_seconds"]) / 60.0

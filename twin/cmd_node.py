@@ -168,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
             "wall_seconds": wall,
             "real_time_factor": twin.time_s / wall if wall > 0 else 0.0,
             "scores": dataclasses.asdict(scores),
+            "landing_in_bins": twin.landing_in_bins(),
             "tracking": tracking_summary(twin.targets.results),
             "published": dict(node.counters.published),
             "received_commands": node.counters.received_commands,

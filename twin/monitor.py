@@ -51,6 +51,10 @@ RELEASE_GAP_M = -0.5 * GRIP_TOLERANCE_M
 """Commanded minus measured opening above which a held object is let go: the gripper no longer
 presses. Between this and ``-GRIP_TOLERANCE_M`` a grip neither starts nor ends (no flicker)."""
 
+LANDING_S = 0.5
+"""An object released over a bin this recently and still above its top is landing (a 0.25 m
+fall takes 0.23 s)."""
+
 _MAX_SINKING_SPEED_MPS = 1.0
 """Bound on how fast the centre of mass of an object riding the belt can sink towards it."""
 
@@ -116,6 +120,7 @@ class _Record:
     constraint: int | None = None
     polled_step: int = -1
     next_poll_step: int = 0
+    released_step: int = -1
 
 
 class Monitor:
@@ -472,6 +477,7 @@ class Monitor:
             pb.removeConstraint(record.constraint, physicsClientId=self.client)
             record.constraint = None
         record.held = False
+        record.released_step = self._step
         if self._held is record:
             self._held = None
 
@@ -498,6 +504,24 @@ class Monitor:
         return vertices
 
     # -- ground truth -----------------------------------------------------------------------
+    def landing_in_bins(self) -> list[int]:
+        """Ids of objects released over a bin within the last ``LANDING_S`` that have not
+        reached it yet (below its top): their fate is not decided at this instant, so an episode
+        that ends now counts them neither placed nor lost. (An object left lying on a bin's rim
+        for longer is not landing.)"""
+        c = self.client
+        recent = self._step - LANDING_S * self.cell.physics.physics_hz
+        ids: list[int] = []
+        for record in self._active:
+            if record.held or record.in_bin or record.released_step < recent:
+                continue
+            (x, y, z), _ = pb.getBasePositionAndOrientation(record.body, physicsClientId=c)
+            for bin_config in self.cell.bins:
+                if bin_config.contains_xy(x, y) and z >= bin_config.top_z_m:
+                    ids.append(record.id)
+                    break
+        return ids
+
     def ground_truth(self) -> tuple[GroundTruth, ...]:
         """Every object that is on the belt, held, or in a bin (not those that fell off)."""
         out = []

@@ -403,6 +403,11 @@ class Twin:
         _, _, monitor, _ = self._started()
         return monitor.ground_truth()
 
+    def landing_in_bins(self) -> list[int]:
+        """Ids of released objects over a bin, still above its top (see :class:`Monitor`)."""
+        _, _, monitor, _ = self._started()
+        return monitor.landing_in_bins()
+
     @property
     def tcp_pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
         """TCP position and xyzw orientation after the last step (no new FK)."""

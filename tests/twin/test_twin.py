@@ -87,9 +87,21 @@ def test_scripted_pick_yields_overlap_contact_pick_and_correct_bin(
         waypoint = (bin_cfg.centre_x_m, 0.35, 0.3)
         _hold(twin, ArmCommand(_ik(twin, waypoint), gripper_width_m=closed_w), 1.0)
         _hold(twin, ArmCommand(_ik(twin, over), gripper_width_m=closed_w), 1.5)
-        _hold(twin, ArmCommand(_ik(twin, over), gripper_width_m=open_w), 1.5)
+        held_over_bin = twin.landing_in_bins()
+        twin.command(ArmCommand(_ik(twin, over), gripper_width_m=open_w))
+        landing = []
+        for _ in range(int(1.5 / twin.dt_s)):
+            twin.advance()
+            landing.append(twin.landing_in_bins())
         kinds = [e.type for e in twin.events if e.object_id == obj.id]
         scores = twin.scores()
+    # undecided only from the release until it drops below the bin's top
+    assert held_over_bin == []
+    assert [obj.id] in landing
+    assert landing[-1] == []
+    falling = [k for k, ids in enumerate(landing) if ids]
+    assert falling == list(range(falling[0], falling[-1] + 1))
+    assert falling[-1] * twin.dt_s < 0.5
     grasp_kinds = [
         k
         for k in kinds
