@@ -513,7 +513,7 @@ class Monitor:
         recent = self._step - LANDING_S * self.cell.physics.physics_hz
         ids: list[int] = []
         for record in self._active:
-            if record.held or record.in_bin or record.released_step < recent:
+            if record.held or record.in_bin or record.released_step < max(0.0, recent):
                 continue
             (x, y, z), _ = pb.getBasePositionAndOrientation(record.body, physicsClientId=c)
             for bin_config in self.cell.bins:
