@@ -298,6 +298,13 @@ class CellConfig:
     grasp: GraspConfig = field(default_factory=GraspConfig)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
 
+    def bin_at(self, x_m: float, y_m: float) -> BinConfig | None:
+        """The first bin whose inner area holds the point ``(x_m, y_m)``, if any."""
+        for bin_config in self.bins:
+            if bin_config.contains_xy(x_m, y_m):
+                return bin_config
+        return None
+
     def bin_for(self, class_name: str) -> BinConfig | None:
         """The bin that sorts ``class_name``, if any."""
         for bin_config in self.bins:

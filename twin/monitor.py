@@ -307,20 +307,16 @@ class Monitor:
                 )
                 record.next_poll_step = step + max(1, int(margin_m / reach_m))
                 continue
+            over = self.cell.bin_at(x, y)
             # -- release of a held object
             if record.held and self._grip_gap_m() > RELEASE_GAP_M:
                 self._release(record)
-                if not any(b.contains_xy(x, y) for b in self.cell.bins):
+                if over is None:
                     emit(EventType.PICK_DROPPED, record, position_m=list(pos))
             # -- fates
             bin_hit = None
-            over_bin = False
-            for bin_config in self.cell.bins:
-                if bin_config.contains_xy(x, y):
-                    over_bin = True
-                    if bin_config.floor_z_m - 0.05 < z < bin_config.top_z_m:
-                        bin_hit = bin_config
-                    break
+            if over is not None and over.floor_z_m - 0.05 < z < over.top_z_m:
+                bin_hit = over
             if bin_hit is not None and not record.held:
                 record.in_bin = True
                 self._deactivate(record)
@@ -331,7 +327,7 @@ class Monitor:
                     correct=bin_hit.class_name == record.placement.spec.class_name,
                 )
                 continue
-            falling_into_bin = over_bin and z > self.cell.physics.floor_z_m + 0.05
+            falling_into_bin = over is not None and z > self.cell.physics.floor_z_m + 0.05
             if z < belt.surface_z_m - 0.05 and not record.held and not falling_into_bin:
                 where = "belt_end" if x > belt.end_x_m else "side"
                 if record.in_workspace:
@@ -516,10 +512,9 @@ class Monitor:
             if record.held or record.in_bin or record.released_step < max(0.0, recent):
                 continue
             (x, y, z), _ = pb.getBasePositionAndOrientation(record.body, physicsClientId=c)
-            for bin_config in self.cell.bins:
-                if bin_config.contains_xy(x, y) and z >= bin_config.top_z_m:
-                    ids.append(record.id)
-                    break
+            over = self.cell.bin_at(x, y)
+            if over is not None and z >= over.top_z_m:
+                ids.append(record.id)
         return ids
 
     def ground_truth(self) -> tuple[GroundTruth, ...]:

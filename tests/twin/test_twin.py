@@ -275,14 +275,16 @@ def test_the_arm_follows_a_wrist_flip_at_the_datasheet_limits(
         vmax = np.array([2.175, 2.61, 2.61])  # datasheet velocity and acceleration limits
         accel = np.array([15.0, 15.0, 20.0])
         worst = np.zeros(start.size)
-        for k in range(150):  # 1.25 s of 120 Hz commands; the moves take at most 0.88 s
-            pos, vel = _trapezoid(np.abs(distance), vmax, accel, k / 120.0)
+        period_s = 1.0 / 120.0  # a controller's command period
+        steps = round(period_s / twin.dt_s)
+        for k in range(150):  # 1.25 s of commands; the moves take at most 0.88 s
+            pos, vel = _trapezoid(np.abs(distance), vmax, accel, k * period_s)
             q_cmd, qd_cmd = start.copy(), np.zeros(start.size)
             q_cmd[joints] += np.sign(distance) * pos
             qd_cmd[joints] = np.sign(distance) * vel
             twin.command(ArmCommand(tuple(q_cmd), tuple(qd_cmd)))
-            twin.advance()
-            twin.advance()
+            for _ in range(steps):
+                twin.advance()
             q, _ = twin.robot.joint_state()
             worst = np.maximum(worst, np.abs(q - q_cmd))
         assert worst.max() < 0.05, np.round(worst, 3)
