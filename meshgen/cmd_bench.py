@@ -36,7 +36,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     """Add the ``bench meshgen`` options."""
     parser.add_argument("dataset", type=Path, nargs="?", default=None, help="dataset folder")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--repeats", type=int, default=5, help="runs per variant (best kept)")
+    parser.add_argument("--repeats", type=int, default=10, help="runs per variant (best kept; 10)")
     parser.add_argument(
         "--tmp-dir", type=Path, default=None, help="where outputs go (default: system temp)"
     )

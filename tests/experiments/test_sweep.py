@@ -146,3 +146,17 @@ def test_a_bad_scenario_in_a_grid_fails_before_anything_runs(tmp_path: Path) -> 
     (tmp_path / "grid.yaml").write_text("scenarios: [bad.yaml]\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=r"bad\.yaml: .*system\.belt_speed_mps = 9\.0"):
         expand(Grid.load(tmp_path / "grid.yaml"), tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("flag", "value"), [("--rounds", "0"), ("--episodes", "0"), ("--workers", "1")]
+)
+def test_bench_sweep_rejects_a_pass_it_cannot_compare_before_running_anything(
+    flag: str, value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from twin.cli import main
+
+    assert main(["bench", "sweep", flag, value, "--json"]) == 2
+    err = capsys.readouterr().err
+    assert f"{flag} {value}" in err
+    assert "need rounds >= 1, episodes >= 1 and workers >= 2" in err
