@@ -104,9 +104,14 @@ class BinConfig:
             "must be above floor_z_m",
         )
 
+    @property
+    def inner_half_m(self) -> float:
+        """Half the side of the bin's inner area (inside the walls)."""
+        return 0.5 * self.size_m - self.wall_m
+
     def contains_xy(self, x_m: float, y_m: float) -> bool:
         """Whether a point lies over the bin's inner area."""
-        half = 0.5 * self.size_m - self.wall_m
+        half = self.inner_half_m
         return abs(x_m - self.centre_x_m) <= half and abs(y_m - self.centre_y_m) <= half
 
 

@@ -38,7 +38,7 @@ def test_controller_drops_over_the_twin_bins_and_the_bins_clear_the_belt(params:
     belt_near_edge = cell.belt.centre_y_m - 0.5 * cell.belt.width_m
     for bin_config in cell.bins:
         x, y, z = config.bins[bin_config.class_name]
-        inner_half = 0.5 * bin_config.size_m - bin_config.wall_m
+        inner_half = bin_config.inner_half_m
         assert abs(x - bin_config.centre_x_m) + tolerance <= inner_half, bin_config
         assert abs(y - bin_config.centre_y_m) + tolerance <= inner_half, bin_config
         assert z > bin_config.top_z_m
