@@ -15,6 +15,8 @@ SKIP_REASONS: dict[str, str] = {
     "bad_file": "the file is not in the expected layout",
     "missing_image_size": "no image header, annotation size or --image-size for this image",
     "duplicate_image": "another annotation file already gave this image stem",
+    "duplicate_image_id": "a COCO file gives one image id twice (the whole file is skipped)",
+    "unknown_image_id": "a COCO annotation's image_id is not among the file's images",
     "odd_coordinates": "a polygon has an odd number of coordinates",
     "not_a_number": "a value is not a finite number",
     "bad_class_id": "the class field is not a non-negative integer",

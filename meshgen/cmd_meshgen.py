@@ -6,7 +6,10 @@ Example::
 
 Every skipped object or file is printed to stderr as a warning naming file, line and reason.
 Exit status 0 when objects were produced, 1 when nothing was produced or, with ``--strict``,
-when anything was skipped.
+when anything was skipped, 2 on a usage error (an ``--out`` that may not be replaced, see
+:mod:`meshgen.outdir`), 130 when interrupted by Ctrl-C or SIGTERM: the summary of the images
+finished is still printed (with ``--json``: ``"complete": false``) and ``OUT`` is left as it
+was.
 """
 
 from __future__ import annotations
@@ -26,7 +29,12 @@ FORMAT_CHOICES = ("auto", "yolo", "coco", "labelme")
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the ``meshgen`` options."""
     parser.add_argument("dataset", type=Path, help="dataset folder (YOLO-seg, COCO or labelme)")
-    parser.add_argument("--out", type=Path, required=True, help="output folder (replaced)")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="output folder: must be empty, new or an earlier meshgen output (then replaced)",
+    )
     parser.add_argument("--format", dest="fmt", choices=FORMAT_CHOICES, default="auto")
     parser.add_argument("--belt-width", type=float, default=0.6, help="belt width in m")
     parser.add_argument("--image-size", default=None, help="WxH when nothing else gives it")
@@ -63,26 +71,43 @@ def config_from_args(args: argparse.Namespace) -> MeshgenConfig:
 def run(args: argparse.Namespace) -> int:
     """Mesh the dataset, print warnings, a summary (table or JSON), return the exit status."""
     from meshgen.errors import MeshgenError
-    from meshgen.pipeline import mesh_dataset, tty_progress
+    from meshgen.interrupts import terminate_as_interrupt
+    from meshgen.pipeline import RunInterrupted, mesh_dataset, tty_progress
 
     if args.workers < 1:
         msg = f"--workers must be >= 1, got {args.workers}"
         raise MeshgenError(msg)
     config = config_from_args(args)
     progress = tty_progress if sys.stderr.isatty() and not args.json else None
-    summary = mesh_dataset(args.dataset, args.out, config, workers=args.workers, progress=progress)
+    interrupted = False
+    with terminate_as_interrupt():
+        try:
+            summary = mesh_dataset(
+                args.dataset, args.out, config, workers=args.workers, progress=progress
+            )
+        except RunInterrupted as exc:
+            summary, interrupted = exc.summary, True
+            if progress is not None:
+                print(file=sys.stderr)  # end the progress bar's line
     for skip in summary.skips:
         print(f"warning: {skip.message()}", file=sys.stderr)
     if args.json:
-        print(json.dumps(summary.to_json(), sort_keys=True))
+        print(json.dumps({**summary.to_json(), "complete": summary.complete}, sort_keys=True))
     else:
-        print(f"meshgen: {summary.images} images, {summary.objects} objects -> {summary.out}")
+        counts = f"{summary.images} images, {summary.objects} objects"
+        if summary.complete:
+            print(f"meshgen: {counts} -> {summary.out}")
+        else:
+            print(f"meshgen: interrupted after {counts}; nothing written to {summary.out}")
         print(
             f"  format {summary.fmt}, {summary.ms_per_image:.2f} ms/image, "
             f"{summary.ms_per_object:.3f} ms/object"
         )
         for reason, count in summary.skipped.items():
             print(f"  skipped {count:4d}  {reason}")
+    if interrupted:
+        print("cdw-twin: interrupted", file=sys.stderr)
+        return 130
     if summary.objects == 0:
         return 1
     if args.strict and summary.skips:

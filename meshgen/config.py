@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from meshgen.classes import DEFAULT_CLASSES, ClassSpec
 from meshgen.errors import MeshgenError
+
+BELT_WIDTH_RANGE_M = (1e-3, 100.0)
+"""Accepted ``--belt-width`` values, in m: any real belt, and no width so extreme (inf, 1e300,
+1e-300) that the metric coordinates overflow or underflow."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -29,14 +34,25 @@ class MeshgenConfig:
 
     def __post_init__(self) -> None:
         """Reject values that cannot work, naming the option."""
+        low, high = BELT_WIDTH_RANGE_M
         checks = (
-            (self.belt_width_m > 0.0, f"--belt-width must be > 0, got {self.belt_width_m}"),
-            (self.simplify_mm >= 0.0, f"--simplify-mm must be >= 0, got {self.simplify_mm}"),
             (
-                self.border_margin_px >= 0.0,
-                f"--border-margin-px must be >= 0, got {self.border_margin_px}",
+                low <= self.belt_width_m <= high,  # False for nan
+                f"--belt-width must be a width in m from {low:g} to {high:g}, got "
+                + str(self.belt_width_m),
             ),
-            (self.min_area_mm2 >= 0.0, f"--min-area-mm2 must be >= 0, got {self.min_area_mm2}"),
+            (
+                0.0 <= self.simplify_mm < math.inf,
+                f"--simplify-mm must be finite and >= 0, got {self.simplify_mm}",
+            ),
+            (
+                0.0 <= self.border_margin_px < math.inf,
+                f"--border-margin-px must be finite and >= 0, got {self.border_margin_px}",
+            ),
+            (
+                0.0 <= self.min_area_mm2 < math.inf,
+                f"--min-area-mm2 must be finite and >= 0, got {self.min_area_mm2}",
+            ),
             (self.up in {"z", "y"}, f"--up must be z or y, got {self.up!r}"),
             (self.seed >= 0, f"--seed must be >= 0, got {self.seed}"),
             (bool(self.classes), "the class table is empty"),

@@ -1,7 +1,8 @@
-"""Output files: scene CSV/JSON rows, materials, index, and the atomic swap of the output folder.
+"""Output files: CSV and JSON text, materials, and the writers that put them in the staging folder.
 
-A run is built in a staging folder next to ``OUT`` and swapped in with ``os.replace`` only when
-complete, so a half-written output never looks finished and a rerun replaces the old one whole.
+The staging folder, its swap into place and the rules on what may be replaced live in
+:mod:`meshgen.outdir`. Every file is created with mode ``0o666`` minus the umask, like an
+ordinary ``open``.
 """
 
 from __future__ import annotations
@@ -9,13 +10,11 @@ from __future__ import annotations
 import json
 import os
 import queue
-import shutil
 import threading
 from pathlib import Path
 from typing import Any
 
 from meshgen.classes import ClassSpec
-from meshgen.errors import OutputError
 
 SCENE_COLUMNS: tuple[str, ...] = (
     "object_id",
@@ -50,8 +49,6 @@ INDEX_COLUMNS: tuple[str, ...] = (
 )
 """Columns of ``index.csv``, in order."""
 
-MARKERS: tuple[str, ...] = ("summary.json", "index.csv")
-
 
 def csv_field(value: object) -> str:
     """Format one CSV value: floats with 9 significant digits, text quoted when needed."""
@@ -70,17 +67,20 @@ def csv_text(columns: tuple[str, ...], rows: list[tuple[object, ...]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+FILE_MODE = 0o666
+"""Mode of every file meshgen writes, before the umask (what ``open`` gives)."""
 _WRITE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_CLOEXEC", 0)
 
 
 def write_text(path: Path | str, text: str) -> None:
     """Write ``text`` to ``path`` (UTF-8, ``\\n`` line ends) with one ``os.write`` of one buffer.
 
-    Files are written in place: atomicity is per output folder (see :func:`swap_in`), so the
-    files inside a staging folder need no temporary name each.
+    Files are written in place: atomicity is per output folder (see
+    :func:`meshgen.outdir.swap_in`), so the files inside a staging folder need no temporary name
+    each. The mode is :data:`FILE_MODE` minus the umask.
     """
     data = text.encode("utf-8")
-    fd = os.open(path, _WRITE_FLAGS, 0o644)
+    fd = os.open(path, _WRITE_FLAGS, FILE_MODE)
     try:
         view = memoryview(data)
         while view:
@@ -107,6 +107,9 @@ class FileSink:
     def close(self) -> None:
         """Finish all pending work (nothing to do here)."""
 
+    def cancel(self) -> None:
+        """Drop the work still pending and wait until none is under way (nothing to do here)."""
+
 
 class ThreadedFileSink(FileSink):
     """A :class:`FileSink` that hands the work to one helper thread of the same process.
@@ -119,12 +122,13 @@ class ThreadedFileSink(FileSink):
     def __init__(self) -> None:
         self._queue: queue.SimpleQueue[tuple[bool, str, str] | None] = queue.SimpleQueue()
         self._error: BaseException | None = None
+        self._cancelled = False
         self._thread = threading.Thread(target=self._run, name="meshgen-writer", daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
         while (item := self._queue.get()) is not None:
-            if self._error is not None:
+            if self._error is not None or self._cancelled:
                 continue
             is_dir, path, text = item
             try:
@@ -152,6 +156,17 @@ class ThreadedFileSink(FileSink):
             error, self._error = self._error, None
             raise error
 
+    def cancel(self) -> None:
+        """Drop the work still queued and wait for the thread to end; errors are dropped too.
+
+        Safe to call after :meth:`close` or after a :meth:`close` cut short by an interrupt.
+        """
+        self._cancelled = True
+        if self._thread.is_alive():
+            self._queue.put(None)
+            self._thread.join()
+        self._error = None
+
 
 def write_json(path: Path, data: Any) -> None:
     """Write ``data`` as compact JSON with sorted keys (byte-stable for equal data)."""
@@ -168,38 +183,3 @@ def mtl_text(classes: tuple[ClassSpec, ...]) -> str:
             f"Kd {r:.6f} {g:.6f} {b:.6f}\nKs 0.000000 0.000000 0.000000\nd 1.0\nillum 1"
         )
     return "\n\n".join(blocks) + "\n"
-
-
-def staging_dir(out: Path) -> Path:
-    """Create and return an empty staging folder next to ``out``."""
-    out = out.resolve()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = out.parent / f".{out.name}.staging-{os.getpid()}"
-    if staging.exists():
-        shutil.rmtree(staging)
-    staging.mkdir()
-    return staging
-
-
-def check_replaceable(out: Path) -> None:
-    """Raise :class:`OutputError` when ``out`` exists and is not an earlier meshgen output."""
-    if not out.exists():
-        return
-    if not out.is_dir():
-        msg = f"{out}: output path exists and is not a folder"
-        raise OutputError(msg)
-    if any(out.iterdir()) and not any((out / m).is_file() for m in MARKERS):
-        msg = f"{out}: refusing to replace a non-empty folder that is not a meshgen output"
-        raise OutputError(msg)
-
-
-def swap_in(staging: Path, out: Path) -> None:
-    """Replace ``out`` by the finished ``staging`` folder (old output removed afterwards)."""
-    out = out.resolve()
-    check_replaceable(out)
-    old = out.parent / f".{out.name}.old-{os.getpid()}"
-    if out.exists():
-        os.replace(out, old)
-    os.replace(staging, out)
-    if old.exists():
-        shutil.rmtree(old, ignore_errors=True)

@@ -11,7 +11,15 @@ out-and-back spikes A→B→A), make the ring counter-clockwise seen from +z, re
 self-intersections with GEOS ``make_valid`` keeping the largest polygonal part (holes dropped),
 optionally simplify with a tolerance (Douglas–Peucker, falling back to the topology-preserving
 variant where plain Douglas–Peucker does not give one valid polygon), and reject what is left
-when it is below the minimum area. Each change is recorded in ``repairs``.
+when it is below the minimum area. Each change is recorded in ``repairs``. A ring with fewer
+than three distinct non-collinear points, or a self-intersecting one with no area left, is
+rejected as ``degenerate``.
+
+The self-intersection repair records ``kept_area_ratio``: the area of the part kept over the
+area of the whole valid geometry GEOS makes of the outline (each region the outline encloses
+counted once), so it lies in (0, 1]: 1 when nothing was cut off, 0.5 for a bow-tie of two equal
+loops. The signed shoelace area of the input is not used as the reference: the loops of a
+self-intersecting ring cancel in it, down to zero for a symmetric bow-tie.
 
 :func:`build_footprints` treats all polygons of an image together: GEOS is called once per step
 (validity, simplification, convex hull) on an array of geometries and the measurements (area,
@@ -215,12 +223,16 @@ def _ragged_polygons(rings: list[FloatArray]) -> npt.NDArray[np.object_]:
 
 
 def _make_valid(ring: FloatArray, repairs: list[str]) -> FloatArray:
-    """Largest valid part of a self-intersecting CCW ring (holes dropped), as a CCW ring."""
-    before = abs(signed_area(ring))
-    fixed = _largest_part(shapely.make_valid(shapely.Polygon(ring)))
+    """Largest valid part of a self-intersecting CCW ring (holes dropped), as a CCW ring.
+
+    Records ``self_intersection_repaired:kept_area_ratio=r`` with ``r`` the kept part's area
+    over the area of everything ``make_valid`` returns (see the module docstring).
+    """
+    valid = shapely.make_valid(shapely.Polygon(ring))
+    fixed = _largest_part(valid)
     if fixed is None or fixed.area <= 0.0:
         raise FootprintRejected("degenerate", "self-intersecting polygon with no area left")
-    kept = fixed.area / before if before > 0 else 0.0
+    kept = fixed.area / valid.area  # lines and points have no area: valid.area >= fixed.area
     repairs.append(f"self_intersection_repaired:kept_area_ratio={kept:.4f}")
     if len(fixed.interiors):
         repairs.append(f"holes_dropped:{len(fixed.interiors)}")
@@ -445,8 +457,23 @@ def _min_area_rectangles(
     return [r if r is not None else min_area_rectangle(rings[i]) for i, r in enumerate(out)]
 
 
-def _convexity(rings: list[FloatArray]) -> list[bool]:
-    """:func:`is_convex` semantics (left turn or straight everywhere) for many rings at once."""
+def _extents(rings: list[FloatArray]) -> FloatArray:
+    """The longer bounding-box side of each of many ``(n_i, 2)`` rings, ``(m,) float``."""
+    sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=len(rings))
+    pts = np.concatenate(rings)
+    starts = np.cumsum(sizes) - sizes
+    span: FloatArray = np.maximum(
+        np.maximum.reduceat(pts[:, 0], starts) - np.minimum.reduceat(pts[:, 0], starts),
+        np.maximum.reduceat(pts[:, 1], starts) - np.minimum.reduceat(pts[:, 1], starts),
+    )
+    return span
+
+
+def _convexity(rings: list[FloatArray], span: FloatArray) -> list[bool]:
+    """:func:`is_convex` semantics (left turn or straight everywhere) for many rings at once.
+
+    ``span`` is :func:`_extents` of ``rings``.
+    """
     sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=len(rings))
     pts = np.concatenate(rings)
     ends = np.cumsum(sizes)
@@ -458,10 +485,6 @@ def _convexity(rings: list[FloatArray]) -> list[bool]:
     prv[starts] = ends - 1
     x, y = pts[:, 0], pts[:, 1]
     cross = (x - x[prv]) * (y[nxt] - y) - (y - y[prv]) * (x[nxt] - x)
-    span = np.maximum(
-        np.maximum.reduceat(pts[:, 0], starts) - np.minimum.reduceat(pts[:, 0], starts),
-        np.maximum.reduceat(pts[:, 1], starts) - np.minimum.reduceat(pts[:, 1], starts),
-    )
     tol = -CONVEX_REL_TOL * span * span
     ok = np.minimum.reduceat(cross - np.repeat(tol, sizes), starts) >= 0.0
     return [bool(v) for v in ok]
@@ -474,7 +497,11 @@ def _centroid_areas(rings: list[FloatArray]) -> FloatArray:
 
 
 def _centroids(rings: list[FloatArray]) -> list[tuple[float, float, float]]:
-    """Area and centroid ``(area_m2, cx, cy)`` of each open counter-clockwise ``(n, 2)`` ring."""
+    """Area and centroid ``(area_m2, cx, cy)`` of each open counter-clockwise ``(n, 2)`` ring.
+
+    A ring of zero shoelace area (collinear in floating point, though GEOS found it valid) gets
+    a centroid of nan without a warning; :func:`build_footprints` rejects such rings.
+    """
     sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=len(rings))
     pts = np.concatenate(rings)
     ends = np.cumsum(sizes)
@@ -487,8 +514,9 @@ def _centroids(rings: list[FloatArray]) -> list[tuple[float, float, float]]:
     qx, qy = x[nxt], y[nxt]
     cross = x * qy - qx * y
     area = 0.5 * np.add.reduceat(cross, starts)
-    cx = np.add.reduceat((x + qx) * cross, starts) / (6.0 * area)
-    cy = np.add.reduceat((y + qy) * cross, starts) / (6.0 * area)
+    six_area = np.where(area != 0.0, 6.0 * area, np.nan)
+    cx = np.add.reduceat((x + qx) * cross, starts) / six_area
+    cy = np.add.reduceat((y + qy) * cross, starts) / six_area
     cx += origin[:, 0]
     cy += origin[:, 1]
     return list(zip(area.tolist(), cx.tolist(), cy.tolist(), strict=True))
@@ -534,7 +562,9 @@ def build_footprints(
             polys = _ragged_polygons(final)
     measures = _centroids(final)
     rects = _min_area_rectangles(final, polys)
-    convex = _convexity(final)
+    spans = _extents(final)
+    convex = _convexity(final, spans)
+    flat = (0.5 * COLLINEAR_REL_TOL * spans * spans).tolist()
     results: list[Footprint | FootprintRejected] = []
     k = 0
     for item in repaired:
@@ -542,7 +572,10 @@ def build_footprints(
             results.append(item)
             continue
         area, cx, cy = measures[k]
-        if area < min_area_m2:
+        if not area > flat[k]:
+            msg = f"the outline encloses no area: its points are collinear (area {area:.3g} m^2)"
+            results.append(FootprintRejected("degenerate", msg))
+        elif area < min_area_m2:
             msg = f"area {area * 1e6:.2f} mm^2 < minimum {min_area_m2 * 1e6:.2f} mm^2"
             results.append(FootprintRejected("below_min_area", msg))
         else:

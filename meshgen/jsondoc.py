@@ -7,6 +7,10 @@ same Python values for every document orjson accepts, except integers outside th
 beyond strict JSON (``NaN``, ``Infinity``, numbers that overflow to infinity, lone surrogate
 escapes), and invalid UTF-8, a byte order mark and deep nesting.
 
+A UTF-8 byte order mark at the start of an annotation file is not part of the document: the
+loaders remove it first (:func:`without_bom`) on both routes (the standard one reads the text
+as ``utf-8-sig``), so a file saved with one decodes like the same file without it.
+
 :func:`loads_exact` therefore answers only when orjson's result is certainly ``json``'s: the
 document has no run of 19 digits and orjson accepts it. Otherwise it returns
 :data:`NOT_DECODED` and the caller takes the standard route (``read_text`` and ``json.loads``),
@@ -15,9 +19,13 @@ which also gives every error message exactly as before.
 
 from __future__ import annotations
 
+import codecs
 from typing import Any, Final
 
 import orjson
+
+UTF8_BOM: Final = codecs.BOM_UTF8
+"""The UTF-8 byte order mark, ``EF BB BF``."""
 
 LONG_DIGITS = 19
 """Digit runs at least this long may be integers orjson would not keep as ``int``
@@ -56,3 +64,8 @@ def loads_exact(data: bytes) -> Any:
         return orjson.loads(data)
     except orjson.JSONDecodeError:
         return NOT_DECODED
+
+
+def without_bom(data: bytes) -> bytes:
+    """``data`` without one leading UTF-8 byte order mark (``data`` itself when it has none)."""
+    return data[len(UTF8_BOM) :] if data.startswith(UTF8_BOM) else data

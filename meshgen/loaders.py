@@ -8,13 +8,20 @@ Layouts understood (``DATASET`` is the folder given on the command line):
   stem under ``DATASET/images/**`` or next to the label (header only), else from a labelme JSON
   with the same stem in the dataset, else from ``--image-size``.
 - COCO: one JSON with ``images``, ``annotations`` (polygon ``segmentation``) and ``categories``
-  at ``DATASET/*.json`` or ``DATASET/annotations/*.json``.
+  at ``DATASET/*.json`` or ``DATASET/annotations/*.json``. A file with ``images`` and
+  ``annotations`` whose ``images``, ``annotations`` or ``categories`` is not a list (or is
+  null, or missing), or which gives one image id twice, is skipped whole with the reason; an
+  annotation whose ``image_id`` is not among the images is skipped on its own.
 - labelme: ``DATASET/labelme/**/*.json`` or ``DATASET/*.json`` with ``shapes``,
   ``imageWidth`` and ``imageHeight``.
 
-``auto`` picks COCO, then YOLO with images, then labelme, then YOLO without images.
+``auto`` picks COCO (when some file is a COCO document: all three fields lists), then YOLO with
+images, then labelme (when ``DATASET/labelme/`` holds JSON or some ``DATASET/*.json`` has
+``shapes``), then YOLO without images, then labelme files that cannot be decoded (to report
+them). A stray JSON that is neither, next to YOLO labels, is ignored.
 Sizes are read per image from a real source, never assumed; an image file's header wins over an
-annotation's size fields.
+annotation's size fields. A UTF-8 byte order mark at the start of a label or JSON file is
+ignored.
 """
 
 from __future__ import annotations
@@ -31,11 +38,16 @@ import numpy as np
 from meshgen.annotations import ImageAnnotation, RawPolygon, Skip
 from meshgen.errors import DatasetError
 from meshgen.imagesize import IMAGE_SUFFIXES, read_image_size
-from meshgen.jsondoc import NOT_DECODED, loads_exact
+from meshgen.jsondoc import NOT_DECODED, loads_exact, without_bom
 
 FORMATS: tuple[str, ...] = ("auto", "yolo", "coco", "labelme")
 OUT_OF_RANGE_FRACTION = 0.05
 """Coordinates further than this fraction of the image size outside it are rejected."""
+NORMALISED_LIMIT = 1e6
+"""YOLO values beyond this are out of range before they are scaled to pixels (so that the
+scaling cannot overflow)."""
+COCO_FIELDS: tuple[str, ...] = ("images", "annotations", "categories")
+"""The top-level fields of a COCO document; each must be a list."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -91,36 +103,75 @@ def _json_files(folder: Path, recursive: bool) -> list[Path]:
 
 
 def _peek_json(path: Path) -> Any:
-    """The decoded JSON document at ``path``, or None when it cannot be read or decoded."""
+    """The decoded JSON document at ``path`` (a leading BOM ignored), or None when unreadable."""
     try:
-        data = loads_exact(path.read_bytes())
+        data = loads_exact(without_bom(path.read_bytes()))
         if data is NOT_DECODED:
-            data = json.loads(path.read_text(encoding="utf-8"))
+            data = json.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
         return None
     return data
 
 
-def _coco_files(dataset: Path) -> list[Path]:
+_JSON_KINDS: dict[type, str] = {
+    type(None): "null",
+    bool: "a boolean",
+    int: "a number",
+    float: "a number",
+    str: "a string",
+    dict: "an object",
+    list: "a list",
+}
+
+
+def coco_layout_problem(data: Any) -> str:
+    """Why ``data`` is not a COCO document ("" when it is): each of ``COCO_FIELDS`` a list."""
+    if not isinstance(data, dict):
+        return "the top level is not a JSON object"
+    for field in COCO_FIELDS:
+        if field not in data:
+            return f'field "{field}" is missing'
+        value = data[field]
+        if not isinstance(value, list):
+            return f'field "{field}" is {_JSON_KINDS.get(type(value), "not a list")}, not a list'
+    return ""
+
+
+def _coco_candidates(dataset: Path) -> list[tuple[Path, bool]]:
+    """JSON files with ``images`` and ``annotations``, each with whether it is a COCO document."""
     candidates = _json_files(dataset, False) + _json_files(dataset / "annotations", False)
     out = []
     for path in candidates:
         data = _peek_json(path)
         if isinstance(data, dict) and "annotations" in data and "images" in data:
-            out.append(path)
+            out.append((path, not coco_layout_problem(data)))
     return out
+
+
+def _labelme_candidates(dataset: Path) -> tuple[list[Path], bool]:
+    """The labelme files of ``dataset`` and whether any is a labelme document.
+
+    Files under ``DATASET/labelme/`` count as labelme documents unread. At the top level, JSON
+    with ``shapes`` is listed, and JSON that cannot be decoded too (so that parsing reports it),
+    but only the former makes the dataset look like a labelme one.
+    """
+    files = _json_files(dataset / "labelme", True)
+    if files:
+        return files, True
+    out = []
+    documents = False
+    for path in _json_files(dataset, False):
+        data = _peek_json(path)
+        if isinstance(data, dict) and "shapes" in data:
+            out.append(path)
+            documents = True
+        elif data is None:
+            out.append(path)
+    return out, documents
 
 
 def _labelme_files(dataset: Path) -> list[Path]:
-    files = _json_files(dataset / "labelme", True)
-    if files:
-        return files
-    out = []
-    for path in _json_files(dataset, False):
-        data = _peek_json(path)
-        if data is None or (isinstance(data, dict) and "shapes" in data):
-            out.append(path)  # unreadable JSON is kept so that parsing reports it
-    return out
+    return _labelme_candidates(dataset)[0]
 
 
 def load_yolo_names(dataset: Path) -> dict[int, str]:
@@ -167,13 +218,13 @@ def _labelme_size(path: Path) -> tuple[int, int] | None:
 
 def _detect(dataset: Path) -> tuple[str, list[Path]]:
     """The format ``auto`` resolves to, with the labelme files when that format is labelme."""
-    if _coco_files(dataset):
+    if any(valid for _, valid in _coco_candidates(dataset)):
         return "coco", []
     yolo = _yolo_label_files(dataset) if (dataset / "data.yaml").is_file() else []
     if yolo and _image_index(dataset):
         return "yolo", []
-    labelme = _labelme_files(dataset)
-    if labelme:
+    labelme, documents = _labelme_candidates(dataset)
+    if labelme and (documents or not yolo):
         return "labelme", labelme
     if yolo:
         return "yolo", []
@@ -220,7 +271,7 @@ def discover(
             for p in labelme_files or _labelme_files(dataset)
         ]
     else:
-        files = _coco_files(dataset)
+        files = [path for path, _ in _coco_candidates(dataset)]
         if not files:
             msg = f'{dataset}: no COCO JSON (with "images" and "annotations") found'
             raise DatasetError(msg)
@@ -271,7 +322,7 @@ def parse_yolo(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None,
     """Parse one YOLO-seg label file; bad lines become skips, good lines polygons."""
     name = _rel(source.path, root)
     try:
-        text = source.path.read_text(encoding="utf-8")
+        text = source.path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         return None, [Skip(file=name, where="", reason="unreadable_file", detail=str(exc))]
     if not text.strip():
@@ -318,8 +369,12 @@ def parse_yolo(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None,
         if len(values) < 6:
             bad("too_few_points", f"{len(values) // 2} point(s), need at least 3")
             continue
-        points = values.reshape(-1, 2) * np.array([width, height], dtype=np.float64)
-        problem = _check_range(points, width, height)
+        problem: str | None
+        if not np.abs(values).max() <= NORMALISED_LIMIT:  # also true for nan
+            problem = "out_of_range" if np.isfinite(values).all() else "not_a_number"
+        else:
+            points = values.reshape(-1, 2) * np.array([width, height], dtype=np.float64)
+            problem = _check_range(points, width, height)
         if problem is not None:
             detail = (
                 "non-finite value"
@@ -491,11 +546,11 @@ def _read_labelme(path: Path, name: str) -> tuple[Any, bool] | Skip:
         raw = path.read_bytes()
     except OSError:
         raw = b""  # the standard route below reports the error
-    data = loads_exact(raw) if raw else NOT_DECODED
+    data = loads_exact(without_bom(raw)) if raw else NOT_DECODED
     if data is not NOT_DECODED:
         return data, b"true" not in raw and b"false" not in raw
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         return Skip(file=name, where="", reason="unreadable_file", detail=str(exc))
     if not text.strip():
@@ -584,27 +639,51 @@ def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | No
 def parse_coco(
     path: Path, root: Path, images: dict[str, Path], image_size: tuple[int, int] | None
 ) -> tuple[list[ImageAnnotation], list[Skip]]:
-    """Parse a COCO polygon JSON into one annotation per image listed in it."""
+    """Parse a COCO polygon JSON into one annotation per image listed in it.
+
+    A file that is not a COCO document (:func:`coco_layout_problem`) or gives an image id twice
+    is skipped whole; annotations are skipped one by one (unknown image or category, bad
+    segmentation).
+    """
     name = _rel(path, root)
     data = _peek_json(path)
     if not isinstance(data, dict):
         return [], [Skip(file=name, where="", reason="unreadable_file", detail="invalid JSON")]
+    problem = coco_layout_problem(data)
+    if problem:
+        return [], [Skip(file=name, where="", reason="bad_file", detail=problem)]
+    known: dict[int, int] = {}  # image id -> position in images
+    for j, image in enumerate(data["images"]):
+        if isinstance(image, dict) and isinstance(image.get("id"), int):
+            first = known.setdefault(image["id"], j)
+            if first != j:
+                detail = f"image id {image['id']} is also the id of images[{first}]"
+                skip = Skip(
+                    file=name, where=f"images[{j}]", reason="duplicate_image_id", detail=detail
+                )
+                return [], [skip]
     categories: dict[int, str] = {}
-    for cat in data.get("categories", []):
+    for cat in data["categories"]:
         if isinstance(cat, dict) and isinstance(cat.get("id"), int):
             categories[cat["id"]] = str(cat.get("name"))
     skips: list[Skip] = []
     per_image: dict[int, list[tuple[int, dict[str, Any]]]] = {}
-    for i, ann in enumerate(data.get("annotations", [])):
+    for i, ann in enumerate(data["annotations"]):
         if not isinstance(ann, dict) or not isinstance(ann.get("image_id"), int):
             detail = "annotation without an integer image_id"
             skips.append(
                 Skip(file=name, where=f"annotations[{i}]", reason="bad_file", detail=detail)
             )
             continue
+        if ann["image_id"] not in known:
+            detail = f"image_id {ann['image_id']} is not the id of any entry of images"
+            skips.append(
+                Skip(file=name, where=f"annotations[{i}]", reason="unknown_image_id", detail=detail)
+            )
+            continue
         per_image.setdefault(ann["image_id"], []).append((i, ann))
     out: list[ImageAnnotation] = []
-    for j, image in enumerate(data.get("images", [])):
+    for j, image in enumerate(data["images"]):
         if not isinstance(image, dict) or not isinstance(image.get("id"), int):
             detail = "image entry without an integer id"
             skips.append(Skip(file=name, where=f"images[{j}]", reason="bad_file", detail=detail))

@@ -2,6 +2,7 @@
 
 Output layout (the twin reads it)::
 
+    OUT/.cdw-meshgen                   marker: a complete meshgen output (see ``meshgen.outdir``)
     OUT/index.csv                      one row per image (see ``export.INDEX_COLUMNS``)
     OUT/summary.json                   counts, skips by reason, timings, config
     OUT/materials.mtl                  one material per class
@@ -14,12 +15,17 @@ Output layout (the twin reads it)::
 are documented in :mod:`meshgen.footprint` (belt frame) and :mod:`meshgen.mesh` (mesh frame).
 Heights come from ``numpy.random.default_rng([seed, crc32(stem), k])``, so they do not depend on
 workers or on other objects, and equal seeds give byte-identical mesh, CSV and scene files.
+
+``OUT`` is replaced whole by a finished run, and only when it is empty or an earlier meshgen
+output (the rules are in :mod:`meshgen.outdir`). An interrupted run (Ctrl-C) leaves ``OUT`` as
+it was and raises :class:`RunInterrupted`, which carries the summary of the images finished.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import sys
 import time
 import zlib
@@ -39,11 +45,8 @@ from meshgen.export import (
     SCENE_COLUMNS,
     FileSink,
     ThreadedFileSink,
-    check_replaceable,
     csv_text,
     mtl_text,
-    staging_dir,
-    swap_in,
     write_json,
     write_text,
 )
@@ -52,8 +55,17 @@ from meshgen.footprint import (
     FootprintRejected,
     build_footprints,
 )
-from meshgen.loaders import ImageSource, discover, load_source
+from meshgen.interrupts import deferred_interrupts, ignore_interrupts
+from meshgen.loaders import DatasetListing, ImageSource, discover, load_source
 from meshgen.mesh import clear_text_caches
+from meshgen.outdir import (
+    check_location,
+    check_replaceable,
+    output_error,
+    staging_dir,
+    staging_path,
+    swap_in,
+)
 from meshgen.prisms import prism_texts
 from meshgen.ragged import split_rows
 from meshgen.records import EntryExtras, ObjectRecord, csv_row, objects_json_text
@@ -74,7 +86,11 @@ class ImageResult:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DatasetSummary:
-    """Result of :func:`mesh_dataset`; ``to_json`` is what ``--json`` prints."""
+    """Result of :func:`mesh_dataset`; ``to_json`` is summary.json.
+
+    ``complete`` is False for the summary an interrupted run carries (:class:`RunInterrupted`):
+    the counts are those of the images finished before the interrupt, and nothing was written.
+    """
 
     out: Path
     fmt: str
@@ -84,6 +100,7 @@ class DatasetSummary:
     elapsed_s: float
     workers: int
     config: MeshgenConfig
+    complete: bool = True
 
     @property
     def skipped(self) -> dict[str, int]:
@@ -407,6 +424,63 @@ def _process(
     return [(next(meshed) if ann is not None else None, skips) for ann, skips in loaded]
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """A run stopped by Ctrl-C (or SIGTERM under ``cdw-twin meshgen``).
+
+    ``summary`` counts the images finished before the interrupt (``complete`` False), or is the
+    full summary when the interrupt came after the output was already in place.
+    """
+
+    def __init__(self, summary: DatasetSummary) -> None:
+        super().__init__("meshgen run interrupted")
+        self.summary = summary
+
+
+def _summarise(
+    listing: DatasetListing,
+    results: list[tuple[ImageResult | None, list[Skip]]],
+    *,
+    out: Path,
+    config: MeshgenConfig,
+    workers: int,
+    start: float,
+    complete: bool,
+) -> tuple[DatasetSummary, list[tuple[object, ...]]]:
+    """The summary of ``results`` and the ``index.csv`` rows of the images meshed."""
+    skips: list[Skip] = list(listing.skips)
+    rows: list[tuple[object, ...]] = []
+    objects = 0
+    for result, file_skips in results:
+        skips.extend(file_skips)
+        if result is None:
+            continue
+        skips.extend(result.skips)
+        objects += len(result.records)
+        rows.append(
+            (
+                result.stem,
+                result.width_px,
+                result.height_px,
+                result.m_per_px,
+                len(result.records),
+                len(result.skips),
+                f"{result.stem}/scene.csv",
+            )
+        )
+    summary = DatasetSummary(
+        out=out,
+        fmt=listing.fmt,
+        images=len(rows),
+        objects=objects,
+        skips=tuple(skips),
+        elapsed_s=time.perf_counter() - start,
+        workers=workers,
+        config=config,
+        complete=complete,
+    )
+    return summary, rows
+
+
 def mesh_dataset(
     dataset: Path,
     out: Path,
@@ -416,15 +490,25 @@ def mesh_dataset(
 ) -> DatasetSummary:
     """Mesh every image of ``dataset`` into ``out`` (replaced atomically when done).
 
-    ``progress(done, total)`` is called after each image when given.
+    ``progress(done, total)`` is called after each batch of images when given. Raises
+    :class:`~meshgen.errors.OutputError` before any work when ``out`` may not be replaced or
+    cannot be created (:mod:`meshgen.outdir`), and :class:`RunInterrupted` on Ctrl-C, after
+    waiting for the files under way and removing the staging folder.
     """
     start = time.perf_counter()
     clear_text_caches()
     out = Path(out).resolve()
+    check_location(Path(dataset), out)
     check_replaceable(out)
-    listing = discover(Path(dataset), config.fmt, config.image_size_px)
-    staging = staging_dir(out)
+    listing = DatasetListing(fmt=config.fmt, sources=(), skips=())
+    staging = staging_path(out)
+    results: list[tuple[ImageResult | None, list[Skip]]] = []
+    sink: FileSink = FileSink()
+    pool: Any = None
+    swapped = False
     try:
+        listing = discover(Path(dataset), config.fmt, config.image_size_px)
+        staging_dir(out)
         write_text(staging / "materials.mtl", mtl_text(config.classes))
         sources = listing.sources
         total = len(sources)
@@ -432,61 +516,51 @@ def mesh_dataset(
         jobs = [
             (sources[i : i + size], Path(dataset), config, staging) for i in range(0, total, size)
         ]
-        results: list[tuple[ImageResult | None, list[Skip]]] = []
         if workers > 1 and len(jobs) > 1:
             from concurrent.futures import ProcessPoolExecutor
 
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                for chunk in pool.map(_process, jobs):
-                    results.extend(chunk)
-                    if progress is not None:
-                        progress(len(results), total)
+            pool = ProcessPoolExecutor(max_workers=workers, initializer=ignore_interrupts)
+            for chunk in pool.map(_process, jobs):
+                results.extend(chunk)
+                if progress is not None:
+                    progress(len(results), total)
+            pool.shutdown()
         else:
             sink = ThreadedFileSink()
-            try:
-                for job in jobs:
-                    results.extend(_process(job, sink))
-                    if progress is not None:
-                        progress(len(results), total)
-            finally:
-                sink.close()
-        skips: list[Skip] = list(listing.skips)
-        rows: list[tuple[object, ...]] = []
-        objects = 0
-        for result, file_skips in results:
-            skips.extend(file_skips)
-            if result is None:
-                continue
-            skips.extend(result.skips)
-            objects += len(result.records)
-            rows.append(
-                (
-                    result.stem,
-                    result.width_px,
-                    result.height_px,
-                    result.m_per_px,
-                    len(result.records),
-                    len(result.skips),
-                    f"{result.stem}/scene.csv",
-                )
-            )
-        write_text(staging / "index.csv", csv_text(INDEX_COLUMNS, rows))
-        summary = DatasetSummary(
-            out=out,
-            fmt=listing.fmt,
-            images=len(rows),
-            objects=objects,
-            skips=tuple(skips),
-            elapsed_s=time.perf_counter() - start,
-            workers=workers,
-            config=config,
+            for job in jobs:
+                results.extend(_process(job, sink))
+                if progress is not None:
+                    progress(len(results), total)
+            sink.close()
+        summary, rows = _summarise(
+            listing, results, out=out, config=config, workers=workers, start=start, complete=True
         )
+        write_text(staging / "index.csv", csv_text(INDEX_COLUMNS, rows))
         write_json(staging / "summary.json", summary.to_json())
-        swap_in(staging, out)
-    except BaseException:
-        import shutil
-
-        shutil.rmtree(staging, ignore_errors=True)
+        with deferred_interrupts():
+            swap_in(staging, out)
+            swapped = True
+    except BaseException as exc:
+        with deferred_interrupts(redeliver=False):
+            sink.cancel()
+            if pool is not None:
+                pool.shutdown(wait=True, cancel_futures=True)
+            if not swapped:
+                shutil.rmtree(staging, ignore_errors=True)
+        if isinstance(exc, KeyboardInterrupt):
+            if not swapped:
+                summary, _ = _summarise(
+                    listing,
+                    results,
+                    out=out,
+                    config=config,
+                    workers=workers,
+                    start=start,
+                    complete=False,
+                )
+            raise RunInterrupted(summary) from exc
+        if isinstance(exc, OSError) and str(exc.filename or "").startswith(str(staging)):
+            raise output_error(out, exc, "write the output") from exc
         raise
     return summary
 
@@ -508,6 +582,7 @@ __all__ = [
     "DatasetSummary",
     "ImageResult",
     "ObjectRecord",
+    "RunInterrupted",
     "mesh_dataset",
     "mesh_image",
     "mesh_images",

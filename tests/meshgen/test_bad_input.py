@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import csv
 import json
+import subprocess
+import sys
+import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -119,3 +124,71 @@ def test_exit_status(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
     assert summary["skipped"] == {"unknown_class_id": 1}
     assert "labels/img.txt:line 1: skipped (unknown_class_id)" in captured.err
     assert main(["meshgen", str(tmp_path / "missing"), "--out", str(tmp_path / "o5")]) == 2
+
+
+COLLINEAR_PX = [
+    [[296.1, 134.3], [318.1, 113.3], [384.1, 50.3]],
+    [[186.1, 57.3], [213.1, 77.3], [294.1, 137.3]],
+    [[149.1, 247.3], [89.1, 190.3], [129.1, 228.3]],
+    [[187.1, 188.3], [168.1, 208.3], [130.1, 248.3]],
+    [[300.0, 700.0], [350.0, 750.0], [400.0, 800.0], [350.0, 750.0]],
+]
+"""Collinear in pixels; in metres some are not quite (shoelace area 0 or ~1e-20 m^2)."""
+BOW_TIES_PX = [
+    ([[100.0, 500.0], [200.0, 600.0], [200.0, 500.0], [100.0, 600.0]], 0.5),
+    ([[500.0, 500.0], [600.0, 600.0], [600.0, 500.0], [500.0, 600.0000001]], 0.5),
+    ([[700.0, 700.0], [900.0, 800.0], [900.0, 700.0], [700.0, 750.0]], 0.8),
+]
+"""Self-intersecting outlines and the share of the enclosed area their largest loop holds."""
+
+
+def _degenerate_labelme(root: Path) -> Path:
+    shapes = [{"label": "brick", "points": pts} for pts in COLLINEAR_PX]
+    shapes += [{"label": "brick", "points": pts} for pts, _ in BOW_TIES_PX]
+    root.mkdir()
+    doc = {"shapes": shapes, "imageWidth": 1000, "imageHeight": 1000}
+    (root / "img.json").write_text(json.dumps(doc))
+    return root
+
+
+def test_degenerate_outlines_are_skipped_and_bow_ties_get_a_meaningful_ratio(
+    tmp_path: Path,
+) -> None:
+    data = _degenerate_labelme(tmp_path / "data")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        summary = mesh_dataset(data, tmp_path / "out", MeshgenConfig())
+    assert summary.skipped == {"degenerate": len(COLLINEAR_PX)}
+    assert [s.where for s in summary.skips] == [f"shape {i}" for i in range(len(COLLINEAR_PX))]
+    scene = json.loads((tmp_path / "out" / "img" / "scene.json").read_text())
+    assert len(scene["objects"]) == len(BOW_TIES_PX)
+    with (tmp_path / "out" / "img" / "scene.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    for obj, row, (_, expected) in zip(scene["objects"], rows, BOW_TIES_PX, strict=True):
+        (entry,) = [r for r in obj["repairs"] if r.startswith("self_intersection_repaired")]
+        assert entry in row["repairs"].split(";")
+        ratio = float(entry.split("kept_area_ratio=")[1])
+        assert ratio == pytest.approx(expected, abs=1e-3)
+
+
+def _overflowing_yolo(root: Path) -> Path:
+    text = "0 1e308 0.4 0.6 0.4 0.6 0.6\n0 0.4 -1e300 0.6 0.4 0.6 0.6\n" + GOOD + "\n"
+    return _yolo(root, {"img": text}, images=("img",))
+
+
+@pytest.mark.parametrize("make", [_degenerate_labelme, _overflowing_yolo])
+def test_no_runtime_warning_reaches_the_terminal(
+    tmp_path: Path, make: Callable[[Path], Path]
+) -> None:
+    data = make(tmp_path / "data")
+    command = [sys.executable, "-m", "twin.cli", "meshgen", str(data), "--out", str(tmp_path / "o")]
+    done = subprocess.run(command, capture_output=True, text=True, check=False, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "Warning" not in done.stderr
+    assert all(line.startswith("warning: ") for line in done.stderr.splitlines())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        summary = mesh_dataset(data, tmp_path / "o2", MeshgenConfig())
+    if make is _overflowing_yolo:
+        assert summary.skipped == {"out_of_range": 2}
+        assert summary.objects == 1

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
 
 from meshgen.classes import DEFAULT_CLASSES, load_class_table
-from meshgen.errors import ClassTableError
+from meshgen.config import MeshgenConfig
+from meshgen.errors import ClassTableError, MeshgenError
 from twin.cli import main
 
 
@@ -134,3 +136,25 @@ def test_bench_measures_in_ram_and_on_disk_by_default(
     assert disk["ms_per_object"] > 0
     assert disk["baseline_ms_per_object"] > 0
     assert disk["file_create_us"] > 0
+
+
+@pytest.mark.parametrize("width", ["inf", "-inf", "nan", "0", "-0.6", "1e200", "1e-300"])
+def test_unusable_belt_width_is_refused(
+    tmp_path: Path, width: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["sample", "--out", str(tmp_path / "s"), "--images", "2"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "o"
+    assert main(["meshgen", str(tmp_path / "s"), "--out", str(out), f"--belt-width={width}"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("cdw-twin: error: --belt-width must be")
+    assert len(err.splitlines()) == 1
+    assert not out.exists()
+    with pytest.raises(MeshgenError, match="--belt-width"):
+        MeshgenConfig(belt_width_m=float(width))
+
+
+@pytest.mark.parametrize("option", ["simplify_mm", "border_margin_px", "min_area_mm2"])
+def test_infinite_options_are_refused(option: str) -> None:
+    with pytest.raises(MeshgenError, match="must be finite"):
+        MeshgenConfig(**{option: math.inf})

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -120,3 +121,51 @@ def test_hertel_mehlhorn_on_comb() -> None:
     verts, faces = extrude(ring, tris, 1.0)
     assert len(verts) == 2 * len(ring)
     assert len(faces) == 4 * len(ring) - 4
+
+
+def _kept_area_ratio(repairs: tuple[str, ...]) -> float:
+    (entry,) = [r for r in repairs if r.startswith("self_intersection_repaired:")]
+    return float(entry.split("kept_area_ratio=")[1])
+
+
+@pytest.mark.parametrize("nudge", [0.0, 1e-12, 1e-9, 1e-6, -1e-6])
+def test_symmetric_bow_tie_keeps_half_of_the_enclosed_area(nudge: float) -> None:
+    """The two loops of a bow-tie cancel in its signed area (0 or ~1e-13 here): the ratio must
+    not be taken against that."""
+    ring = np.array([[0, 0], [0.1, 0.1], [0.1, 0], [0, 0.1 + nudge]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fp = build_footprint(ring, simplify_m=0.0, min_area_m2=0.0)
+    assert _kept_area_ratio(fp.repairs) == pytest.approx(0.5, abs=1e-4)
+    assert fp.area_m2 == pytest.approx(0.0025, rel=1e-4)
+
+
+def test_bow_tie_ratio_is_the_kept_loop_over_both_loops() -> None:
+    # the edges (0,0)-(0.2,0.1) and (0.2,0)-(0,0.05) cross at (0.2/3, 0.1/3): loops of area
+    # 0.05 * (0.2/3) / 2 and 0.1 * (0.2 - 0.2/3) / 2, i.e. 1/600 and 4/600
+    ring = np.array([[0, 0], [0.2, 0.1], [0.2, 0], [0, 0.05]])
+    fp = build_footprint(ring, simplify_m=0.0, min_area_m2=0.0)
+    assert fp.area_m2 == pytest.approx(4 / 600)
+    assert _kept_area_ratio(fp.repairs) == pytest.approx(0.8, abs=1e-4)
+
+
+@pytest.mark.parametrize(
+    "ring",
+    [
+        [[0, 0], [1, 1], [2, 2]],
+        [[0, 0], [1, 1], [2, 2], [3, 3], [1, 1]],
+        [[0, 0], [1, 0], [0, 0], [1, 0]],
+        [[0, 0], [0, 0], [0, 0]],
+        [[0, 0], [1, 1e-12], [2, 0]],
+        [[0, 0], [1, 1e-13], [1, 0], [0, 1e-13]],
+    ],
+)
+@pytest.mark.parametrize("simplify_m", [0.0, 1e-3])
+def test_collinear_outlines_are_rejected_as_degenerate(
+    ring: list[list[float]], simplify_m: float
+) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(FootprintRejected) as info:
+            build_footprint(np.array(ring) * 0.05, simplify_m=simplify_m, min_area_m2=0.0)
+    assert info.value.reason == "degenerate"

@@ -108,3 +108,59 @@ def test_unknown_format_and_empty_dataset(tmp_path: Path) -> None:
         discover(tmp_path)
     with pytest.raises(DatasetError, match="unknown format 'voc'"):
         discover(tmp_path, "voc")
+
+
+BOM = "\ufeff"
+SQUARE_YOLO = "1 0.40 0.40 0.60 0.40 0.60 0.60 0.40 0.60"
+
+
+def test_yolo_label_with_a_byte_order_mark_keeps_its_first_object(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    (data / "labels").mkdir(parents=True)
+    (data / "data.yaml").write_text("names: [concrete, brick]\n")
+    (data / "labels" / "img.txt").write_text(
+        f"{BOM}{SQUARE_YOLO}\n{SQUARE_YOLO.replace('0.60', '0.55')}\n", encoding="utf-8"
+    )
+    summary = mesh_dataset(data, tmp_path / "out", MeshgenConfig(image_size_px=(200, 100)))
+    assert summary.skips == ()
+    assert summary.objects == 2
+    assert (tmp_path / "out" / "img" / "img_000.obj").is_file()
+
+
+def _labelme_doc() -> str:
+    shape = {"label": "brick", "points": [[80, 40], [120, 40], [120, 60], [80, 60]]}
+    return json.dumps({"shapes": [shape], "imageWidth": 200, "imageHeight": 100})
+
+
+@pytest.mark.parametrize("route", ["orjson", "json"])
+@pytest.mark.parametrize("fmt", ["labelme", "coco"])
+def test_json_with_a_byte_order_mark_is_read(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, fmt: str, route: str
+) -> None:
+    from meshgen import jsondoc, loaders
+
+    if route == "json":  # the standard route, taken when orjson would not give json's result
+        monkeypatch.setattr(loaders, "loads_exact", lambda data: jsondoc.NOT_DECODED)
+    data = tmp_path / "data"
+    if fmt == "labelme":
+        (data / "labelme").mkdir(parents=True)
+        (data / "labelme" / "img.json").write_text(BOM + _labelme_doc(), encoding="utf-8")
+    else:
+        data.mkdir()
+        doc = {
+            "images": [{"id": 1, "file_name": "img.png", "width": 200, "height": 100}],
+            "annotations": [
+                {
+                    "id": 1,
+                    "image_id": 1,
+                    "category_id": 1,
+                    "segmentation": [[80, 40, 120, 40, 120, 60]],
+                }
+            ],
+            "categories": [{"id": 1, "name": "brick"}],
+        }
+        (data / "instances.json").write_text(BOM + json.dumps(doc), encoding="utf-8")
+    summary = mesh_dataset(data, tmp_path / "out", MeshgenConfig())
+    assert summary.fmt == fmt
+    assert summary.skips == ()
+    assert (summary.images, summary.objects) == (1, 1)
