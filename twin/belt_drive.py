@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import numbers
 import shutil
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -25,6 +26,46 @@ from twin.errors import FmuError
 
 _FLOAT_TYPES = {"Real", "Float64"}
 _INT_TYPES = {"Integer", "Int32"}
+INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
+"""Range of an FMI ``Int32`` (FMI 3) / ``Integer`` (FMI 2, a C ``int``) variable."""
+
+MAX_STEP_S = 1.0
+"""Longest communication step :meth:`BeltDrive.step` accepts, in seconds.
+
+The inputs are held constant over a step and the FMU integrates it with its own fixed internal
+step (1 ms for ours), so a step costs ``dt / internal step`` integrations and hides every
+setpoint and load change inside it. The twin steps at 1/240 s; a step longer than 1 s is longer
+than any dynamics of the cell (the PI speed loop settles in about 0.1 s, an object crosses the
+workspace in 1 to 2 s) and is a caller's mistake (milliseconds passed as seconds, a corrupt time
+stamp). Refusing it also bounds one call's cost: 1 s is 1000 internal steps of ours, well under
+a millisecond, where a step of a day would block the process for 86 million.
+"""
+
+
+def _as_float(value: object) -> float | None:
+    """``value`` as a float when it is a real number other than a bool, else None."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return None
+    try:
+        return float(value)
+    except (OverflowError, ValueError):
+        return None
+
+
+def _as_int(value: object) -> int | None:
+    """``value`` as an int when it is an integer (or an integral float), not a bool, else None."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return None
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    number = _as_float(value)
+    if number is None or not number.is_integer():
+        return None
+    return int(number)
+
+
+_NOT_A_NUMBER = "needs a real number (not a bool or a string)"
+_FINITE = "needs a finite number"
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,6 +104,21 @@ class BeltDrive:
     variable name before initialisation. Raises :class:`twin.errors.FmuError` naming the file and
     the variable for a missing or malformed FMU, an unknown mapped or parameter variable, or an
     FMU call that returns an error (with the FMU's logged message).
+
+    Values are checked by the wrapper before they reach the FMU, per variable type, because a
+    third party's FMU need not check them and a C call converts silently:
+
+    - ``Float64`` / ``Real`` parameters and inputs (and ``start_time_s``): a real number (int,
+      float, numpy scalar), not a bool or a string, and finite. FMI allows NaN and infinity in
+      a Float64, but no quantity of a belt drive can be one, and an unchecked NaN would be
+      integrated into the belt speed the twin moves its objects with.
+    - ``Int32`` / ``Integer`` parameters: an integer (or an integral float), not a bool, within
+      ``[INT32_MIN, INT32_MAX]``; outside it the C call would wrap it silently.
+    - Parameters of any other type cannot be set through the wrapper.
+
+    :meth:`step` takes ``0 < dt_s <= MAX_STEP_S``. A refused value raises FmuError naming the
+    variable and the value, and leaves the FMU untouched: the next good call proceeds as if the
+    bad one never happened.
     """
 
     def __init__(
@@ -83,7 +139,11 @@ class BeltDrive:
         self._slave: Any = None
         self._initialized = False
         self._closed = False
-        self._time_s = float(start_time_s)
+        start = _as_float(start_time_s)
+        if start is None or not math.isfinite(start):
+            msg = f"{self.path}: start_time_s = {start_time_s!r} is invalid: {_FINITE}"
+            raise FmuError(msg)
+        self._time_s = start
         try:
             self._open(parameters or {})
         except BaseException:
@@ -130,18 +190,60 @@ class BeltDrive:
                 msg = f"{self.path}: parameter {name!r} is not a variable of the FMU"
                 raise FmuError(msg)
             if variable.type in _FLOAT_TYPES:
-                float_params.append((variable.valueReference, float(value)))
-            elif variable.type in _INT_TYPES and float(value).is_integer():
-                int_params.append((variable.valueReference, int(value)))
+                float_params.append((variable.valueReference, self._float_parameter(name, value)))
+            elif variable.type in _INT_TYPES:
+                int_params.append((variable.valueReference, self._int_parameter(name, value)))
             else:
                 msg = (
-                    f"{self.path}: parameter {name!r} = {value!r} does not fit type {variable.type}"
+                    f"{self.path}: parameter {name!r} is of type {variable.type}, which the "
+                    f"wrapper cannot set (only Float64/Real and Int32/Integer)"
                 )
                 raise FmuError(msg)
         self._unzip_dir = extract(str(self.path))
         self._instantiate(description)
         self._bind(inputs, outputs)
         self._initialize(float_params, int_params)
+
+    def _float_parameter(self, name: str, value: object) -> float:
+        number = _as_float(value)
+        if number is None or not math.isfinite(number):
+            what = _NOT_A_NUMBER if number is None else _FINITE
+            msg = f"{self.path}: parameter {name!r} = {value!r} is invalid: Float64 {what}"
+            raise FmuError(msg)
+        return number
+
+    def _int_parameter(self, name: str, value: object) -> int:
+        number = _as_int(value)
+        if number is None:
+            msg = f"{self.path}: parameter {name!r} = {value!r} is invalid: Int32 needs an integer"
+            raise FmuError(msg)
+        if not INT32_MIN <= number <= INT32_MAX:
+            msg = (
+                f"{self.path}: parameter {name!r} = {value!r} is invalid: outside the Int32 range "
+                f"[{INT32_MIN}, {INT32_MAX}]"
+            )
+            raise FmuError(msg)
+        return number
+
+    def _input(self, name: str, value: object) -> float:
+        """A refused-or-converted input value (the slow path of :meth:`step`)."""
+        number = _as_float(value)
+        if number is None or not math.isfinite(number):
+            what = _NOT_A_NUMBER if number is None else _FINITE
+            msg = f"{self.path}: input {name} = {value!r} is invalid: Float64 {what}"
+            raise FmuError(msg)
+        return number
+
+    def _step_size(self, dt_s: object) -> float:
+        """A refused-or-converted step size (the slow path of :meth:`step`)."""
+        number = _as_float(dt_s)
+        if number is None or not 0.0 < number <= MAX_STEP_S:
+            msg = (
+                f"{self.path}: step dt_s = {dt_s!r} is invalid: needs a number in "
+                f"(0, {MAX_STEP_S}] s (MAX_STEP_S)"
+            )
+            raise FmuError(msg)
+        return number
 
     def _resolve(self, variables: Mapping[str, Any], field: str, name: str) -> int:
         variable = variables.get(name)
@@ -293,10 +395,19 @@ class BeltDrive:
         return self._state
 
     def step(self, dt_s: float, setpoint_mps: float, load_mass_kg: float) -> BeltState:
-        """Hold the inputs over ``dt_s`` seconds, advance the FMU and return its outputs."""
+        """Hold the inputs over ``dt_s`` seconds, advance the FMU and return its outputs.
+
+        ``0 < dt_s <= MAX_STEP_S``; the inputs are finite numbers (see the class docstring).
+        """
         if self._closed:
             msg = f"{self.path}: step() called after close()"
             raise FmuError(msg)
+        if not (type(dt_s) is float and 0.0 < dt_s <= MAX_STEP_S):
+            dt_s = self._step_size(dt_s)
+        if not (type(setpoint_mps) is float and math.isfinite(setpoint_mps)):
+            setpoint_mps = self._input(self.mapping.speed_setpoint, setpoint_mps)
+        if self._n_in > 1 and not (type(load_mass_kg) is float and math.isfinite(load_mass_kg)):
+            load_mass_kg = self._input(str(self.mapping.load_mass), load_mass_kg)
         values = self._in_values
         values[0] = setpoint_mps
         if self._n_in > 1:

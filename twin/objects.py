@@ -9,6 +9,7 @@ as principal moments plus the rotation of the principal frame, which is what PyB
 from __future__ import annotations
 
 import csv
+import json
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -141,12 +142,40 @@ def _parse_object(path: Path, line: int, row: dict[str, str], classes: Iterable[
     )
 
 
-def load_dataset(out_dir: Path, classes: Iterable[str]) -> tuple[ImageLayout, ...]:
-    """Read a meshgen output folder: every image's layout, in ``index.csv`` order."""
-    known = tuple(classes)
+def dataset_class_table(dataset_dir: Path) -> tuple[str, ...]:
+    """The class table meshgen used for ``dataset_dir`` (``summary.json``, ``config.classes``).
+
+    Every object of the output has one of these classes (meshgen skips any other). Raises
+    :class:`SceneError` naming the file when it is missing or has no class table.
+    """
+    path = dataset_dir / "summary.json"
+    try:
+        summary = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        msg = f"{path}: no such file (every meshgen output has one)"
+        raise SceneError(msg) from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        msg = f"{path}: cannot read: {exc}"
+        raise SceneError(msg) from None
+    config = summary.get("config") if isinstance(summary, dict) else None
+    table = config.get("classes") if isinstance(config, dict) else None
+    if not isinstance(table, dict) or not table:
+        msg = f"{path}: no class table (config.classes)"
+        raise SceneError(msg)
+    return tuple(str(name) for name in table)
+
+
+def load_dataset(out_dir: Path, classes: Iterable[str] | None = None) -> tuple[ImageLayout, ...]:
+    """Read a meshgen output folder: every image's layout, in ``index.csv`` order.
+
+    Every object's class must be one of ``classes`` (default: the dataset's own class table,
+    :func:`dataset_class_table`).
+    """
     index_path = out_dir / "index.csv"
+    rows = _read_csv(index_path)
+    known = tuple(dataset_class_table(out_dir) if classes is None else classes)
     layouts = []
-    for line, row in _read_csv(index_path):
+    for line, row in rows:
         for key in ("image", "width_px", "height_px", "m_per_px", "scene_csv"):
             if not row.get(key):
                 msg = f"{index_path}:{line}: missing field {key!r}"

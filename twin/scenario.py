@@ -32,7 +32,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 import yaml
 
-from twin.dataclass_io import from_data, to_data
+from twin.dataclass_io import from_data, load_yaml_strict, to_data
 from twin.errors import ConfigError
 from twin.fileio import write_atomic
 from twin.perception import PerceptionConfig
@@ -225,9 +225,17 @@ class FaultLevel:
         return any(start <= time_s < end for start, end in self.belt_stall)
 
 
+def _is_folder_name(name: str) -> bool:
+    """Whether ``name`` is one path part that stays inside its parent folder."""
+    return bool(name.strip(".")) and not any(c in name for c in ("/", "\\", "\0"))
+
+
 @dataclass(frozen=True)
 class Scenario:
     """One episode's definition. ``dataset`` is a meshgen output folder or ``builtin``.
+
+    ``name`` names the run folder (``runs/<name>-<stamp>``), so it is one plain path part: not
+    empty or only dots, without ``/``, ``\\`` or NUL (hence never absolute, never ``..``).
 
     ``controller`` names the controller's ROS 2 parameter file (checked by ``cdw-twin run``
     before anything starts): a file name without ``.yaml`` in ``control/config/``, or a path.
@@ -246,7 +254,13 @@ class Scenario:
     faults: FaultLevel = field(default_factory=FaultLevel)
 
     def __post_init__(self) -> None:
-        _check(bool(self.name), "name", self.name, "must not be empty")
+        _check(
+            _is_folder_name(self.name),
+            "name",
+            self.name,
+            "must be a plain folder name (not empty or only dots, no '/', '\\' or NUL): "
+            "runs go to runs/<name>-<stamp>",
+        )
         _check(bool(self.controller), "controller", self.controller, "must not be empty")
         _check(self.seed >= 0, "seed", self.seed, "must be >= 0")
         _check(
@@ -262,12 +276,9 @@ class Scenario:
 
     @classmethod
     def from_yaml(cls, text: str, where: str = "scenario") -> Scenario:
-        """Parse YAML text; errors name ``where`` and the key."""
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            msg = f"{where}: not valid YAML: {exc}"
-            raise ConfigError(msg) from None
+        """Parse YAML text; errors name ``where`` and the key (and the line of a key given
+        twice, which is an error rather than the last one winning)."""
+        data = load_yaml_strict(text, where)
         if data is None:
             data = {}
         if not isinstance(data, dict):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -158,3 +160,53 @@ def test_min_height_lets_only_tall_enough_objects_onto_the_belt() -> None:
     heights = [p.height_m for b in stream for p in b.placements]
     assert len(heights) == tall
     assert min(heights) >= 0.02
+
+
+@pytest.mark.parametrize(
+    ("text", "pattern"),
+    [
+        ("name: a\nseed: 1\nname: b\n", r":3: duplicate key 'name' \(first on line 1\)"),
+        (
+            "system:\n  belt_speed_mps: 0.3\n  prefill_m: 1.0\n  belt_speed_mps: 0.5\n",
+            r":4: duplicate key 'belt_speed_mps' \(first on line 2\)",
+        ),
+        (
+            "physics: {friction: {wood: [0.4, 0.5], wood: [0.5, 0.6]}}",
+            r":1: duplicate key 'wood' \(first on line 1\)",
+        ),
+        ("faults:\n  belt_stall: [[1, 2]]\nfaults: {}\n", r":3: duplicate key 'faults'"),
+    ],
+)
+def test_duplicate_keys_are_refused_with_key_and_line(
+    tmp_path: Path, text: str, pattern: str
+) -> None:
+    path = tmp_path / "dup.yaml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=re.escape(str(path)) + pattern):
+        Scenario.load(path)
+
+
+def test_a_key_repeated_in_different_mappings_is_fine() -> None:
+    text = (
+        "objects: {height_ranges_m: {wood: [0.02, 0.05]}}\n"
+        "physics: {friction: {wood: [0.4, 0.5]}}\n"
+    )
+    scenario = Scenario.from_yaml(text)
+    assert scenario.objects.height_ranges_m == {"wood": (0.02, 0.05)}
+    assert scenario.physics.friction == {"wood": (0.4, 0.5)}
+
+
+@pytest.mark.parametrize(
+    "name", ["", ".", "..", "...", "../escape", "a/../../b", "/tmp/abs", "a/b", "a\\b", "a\0b"]
+)
+def test_a_name_that_would_leave_the_runs_folder_is_refused(name: str) -> None:
+    with pytest.raises(ConfigError, match=r"name = .*: must be a plain folder name"):
+        Scenario(name=name)
+    text = "name: " + json.dumps(name)
+    with pytest.raises(ConfigError, match=r"where\.yaml: name = .*: must be a plain folder name"):
+        Scenario.from_yaml(text, where="where.yaml")
+
+
+@pytest.mark.parametrize("name", ["dense", "speed_0.4", "v1..2", ".hidden", "run 2"])
+def test_plain_names_are_accepted(name: str) -> None:
+    assert Scenario(name=name).name == name

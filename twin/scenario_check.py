@@ -1,0 +1,260 @@
+"""Check a scenario against its dataset and its cell, completely, before anything starts.
+
+:class:`twin.scenario.Scenario` checks each value on its own when it is built; what needs the
+dataset or the cell is checked here, once per run, so that a mistake is one line naming the
+scenario file and the key instead of a traceback from a process that already started, or an
+episode that runs without objects. Checked:
+
+- ``dataset``: an existing meshgen output folder (``index.csv`` and the ``.cdw-meshgen`` marker,
+  or, for outputs written before the marker existed, an ``index.csv`` with meshgen's header);
+- ``robot``: a known robot (:data:`twin.config.ROBOTS`);
+- ``objects.classes``, ``objects.height_ranges_m``, ``physics.friction`` and
+  ``physics.restitution``: every class they name is a class the dataset has. Values left at
+  their defaults are exempt: the defaults name the built-in sample's four classes, which a
+  dataset need not all have;
+- ``objects.images``: every name is an image of the dataset that has objects;
+- the object filters (``objects.images``, ``classes``, ``max_width_m``, ``min_height_m``, in the
+  order :class:`twin.stream.Stream` applies them) leave at least one object; the error names the
+  filter that emptied the selection. An object whose height is re-sampled counts as kept when its
+  class's range reaches ``min_height_m``. ``max_objects`` (at least 1) only caps the stream;
+- ``system.prefill_m``: at most the belt's run from the infeed to its end, the farthest the
+  stream can have been carried while still on the belt;
+- fault and schedule times: every ``faults.detection_dropout`` and ``faults.belt_stall`` window,
+  ``faults.controller_restart_at_s`` time and ``system.speed_schedule`` time within
+  ``[0, duration_s]``.
+
+The dataset is read with :func:`twin.objects.load_dataset` (every ``scene.csv`` once; meshes are
+only checked to exist, never loaded), with the class table meshgen recorded in ``summary.json``.
+
+Example::
+
+    scenario, dataset = build_scenario(args)
+    check_scenario(scenario, dataset, where=str(args.scenario or "scenario"))
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from meshgen.outdir import MARKER_NAME, is_meshgen_output
+from twin.config import ROBOTS, CellConfig
+from twin.errors import ConfigError, SceneError
+from twin.objects import ImageLayout, ObjectSpec, load_dataset
+from twin.scenario import CLASS_NAMES, PhysicsLevel, Scenario
+
+"""File meshgen writes into every output folder it completes (``meshgen.outdir.MARKER_NAME``)."""
+
+_SHOWN = 8
+"""How many names an error message lists before it abbreviates."""
+
+
+@dataclass(frozen=True)
+class Selection:
+    """What the scenario's object filters keep of the dataset in one pass over its images.
+
+    ``classes``: the classes the dataset's objects have (sorted). ``images``: the images with at
+    least one kept object, in dataset order. ``objects``: how many objects one pass keeps (before
+    ``objects.max_objects`` caps the stream).
+    """
+
+    classes: tuple[str, ...]
+    images: tuple[str, ...]
+    objects: int
+
+
+def check_scenario(
+    scenario: Scenario,
+    dataset_dir: Path,
+    *,
+    where: str,
+    cell: CellConfig | None = None,
+) -> Selection:
+    """Check ``scenario`` against the meshgen output ``dataset_dir`` and ``cell``.
+
+    ``where`` names the scenario (its file) in the messages; ``cell`` defaults to
+    ``CellConfig()``. Raises :class:`ConfigError` (one line: ``where``, the key, the value and
+    what is wrong) at the first problem; returns what the object filters keep.
+    """
+    cell = cell if cell is not None else CellConfig()
+    _check_robot(scenario, where)
+    _check_times(scenario, where)
+    _check_prefill(scenario, cell, where)
+    layouts = _read_dataset(dataset_dir, where)
+    classes = tuple(sorted({spec.class_name for lay in layouts for spec in lay.objects}))
+    _check_class_names(scenario, classes, where)
+    _check_images(scenario, layouts, where)
+    return _select(scenario, layouts, classes, where)
+
+
+def _fail(where: str, key: str, value: object, what: str) -> ConfigError:
+    msg = f"{where}: {key} = {value!r}: {what}"
+    return ConfigError(msg)
+
+
+def _names(names: Iterable[str]) -> str:
+    items = list(names)
+    shown = ", ".join(repr(n) for n in items[:_SHOWN])
+    return shown + (f", ... ({len(items)} in all)" if len(items) > _SHOWN else "")
+
+
+def _check_robot(scenario: Scenario, where: str) -> None:
+    if scenario.robot not in ROBOTS:
+        raise _fail(where, "robot", scenario.robot, f"unknown robot (known: {sorted(ROBOTS)})")
+
+
+def _check_times(scenario: Scenario, where: str) -> None:
+    duration = scenario.duration_s
+    within = f"must lie within the episode, [0, {duration:g}] s (duration_s)"
+    faults = scenario.faults
+    for key, windows in (
+        ("faults.detection_dropout", faults.detection_dropout),
+        ("faults.belt_stall", faults.belt_stall),
+    ):
+        for i, (start_s, end_s) in enumerate(windows):
+            if not 0.0 <= start_s <= end_s <= duration:
+                raise _fail(where, f"{key}[{i}]", [start_s, end_s], within)
+    for i, t_s in enumerate(faults.controller_restart_at_s):
+        if not 0.0 <= t_s <= duration:
+            raise _fail(where, f"faults.controller_restart_at_s[{i}]", t_s, within)
+    for i, (t_s, speed) in enumerate(scenario.system.speed_schedule):
+        if not 0.0 <= t_s <= duration:
+            raise _fail(where, f"system.speed_schedule[{i}]", [t_s, speed], within)
+
+
+def _check_prefill(scenario: Scenario, cell: CellConfig, where: str) -> None:
+    belt = cell.belt
+    run_m = round(belt.end_x_m - belt.infeed_x_m, 9)
+    if scenario.system.prefill_m > run_m:
+        what = (
+            f"must be at most {run_m:g} m, the belt's run from the infeed to its end "
+            "(belt.end_x_m - belt.infeed_x_m): farther, the stream is carried off the belt"
+        )
+        raise _fail(where, "system.prefill_m", scenario.system.prefill_m, what)
+
+
+def _check_meshgen_folder(dataset_dir: Path, where: str) -> Path:
+    def refuse(what: str) -> ConfigError:
+        return ConfigError(f"{where}: dataset = '{dataset_dir}': {what}")
+
+    if not dataset_dir.exists():
+        raise refuse("no such folder")
+    if not dataset_dir.is_dir():
+        raise refuse("not a folder")
+    index = dataset_dir / "index.csv"
+    if not index.is_file():
+        raise refuse("no index.csv: not a meshgen output folder (make one with `cdw-twin meshgen`)")
+    if is_meshgen_output(dataset_dir):
+        return index
+    from meshgen.export import INDEX_COLUMNS
+
+    try:
+        with index.open(encoding="utf-8", newline="") as handle:
+            header = tuple(handle.readline().rstrip("\r\n").split(","))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise refuse(f"cannot read index.csv: {exc}") from None
+    if header != INDEX_COLUMNS:
+        raise refuse(
+            f"neither a {MARKER_NAME} marker nor meshgen's index.csv header "
+            f"({','.join(INDEX_COLUMNS)}): not a meshgen output folder"
+        )
+    return index
+
+
+def _read_dataset(dataset_dir: Path, where: str) -> tuple[ImageLayout, ...]:
+    _check_meshgen_folder(dataset_dir, where)
+    try:
+        return load_dataset(dataset_dir)
+    except SceneError as exc:
+        msg = f"{where}: dataset = '{dataset_dir}': {exc}"
+        raise ConfigError(msg) from None
+
+
+def _check_class_names(scenario: Scenario, classes: tuple[str, ...], where: str) -> None:
+    known = set(classes)
+    lacks = f"names a class the dataset lacks (its classes: {_names(classes)})"
+    objects = scenario.objects
+    if objects.classes != CLASS_NAMES:
+        for i, name in enumerate(objects.classes):
+            if name not in known:
+                raise _fail(where, f"objects.classes[{i}]", name, lacks)
+    for name in objects.height_ranges_m:
+        if name not in known:
+            raise _fail(where, "objects.height_ranges_m", name, f"key {lacks}")
+    defaults = PhysicsLevel()
+    for key, table, default in (
+        ("physics.friction", scenario.physics.friction, defaults.friction),
+        ("physics.restitution", scenario.physics.restitution, defaults.restitution),
+    ):
+        for name in _changed_keys(table, default):
+            if name not in known:
+                raise _fail(where, key, name, f"key {lacks}")
+
+
+def _changed_keys(
+    table: Mapping[str, tuple[float, float]], default: Mapping[str, tuple[float, float]]
+) -> list[str]:
+    return [name for name, rng in table.items() if default.get(name) != tuple(rng)]
+
+
+def _check_images(scenario: Scenario, layouts: tuple[ImageLayout, ...], where: str) -> None:
+    present = {lay.image for lay in layouts}
+    unmatched = [name for name in scenario.objects.images if name not in present]
+    if unmatched:
+        what = (
+            f"{_names(unmatched)} match no image with objects in the dataset "
+            f"({len(layouts)} images: {_names(lay.image for lay in layouts)})"
+        )
+        raise _fail(where, "objects.images", list(scenario.objects.images), what)
+
+
+def _tallest_m(scenario: Scenario, spec: ObjectSpec) -> float:
+    """The tallest the object can enter: the top of its class's range when re-sampled."""
+    objects = scenario.objects
+    if objects.resample_heights and spec.class_name in objects.height_ranges_m:
+        return objects.height_ranges_m[spec.class_name][1]
+    return spec.height_m
+
+
+def _select(
+    scenario: Scenario, layouts: tuple[ImageLayout, ...], classes: tuple[str, ...], where: str
+) -> Selection:
+    objects = scenario.objects
+    wanted = set(objects.images)
+    kept = [
+        (lay.image, spec)
+        for lay in layouts
+        if not wanted or lay.image in wanted
+        for spec in lay.objects
+    ]
+    before = kept
+    kept = [(image, spec) for image, spec in before if spec.class_name in objects.classes]
+    if not kept:
+        present = sorted({spec.class_name for _, spec in before})
+        what = f"leaves no object: the {len(before)} objects it filters have classes {present}"
+        raise _fail(where, "objects.classes", list(objects.classes), what)
+    if objects.max_width_m is not None:
+        limit_m = objects.max_width_m
+        before = kept
+        kept = [(i, s) for i, s in before if min(s.width_m, s.length_m) <= limit_m]
+        if not kept:
+            narrowest = min(min(s.width_m, s.length_m) for _, s in before)
+            what = (
+                f"leaves no object: the narrowest of the {len(before)} objects the filters "
+                f"before it keep is {narrowest:.3g} m across"
+            )
+            raise _fail(where, "objects.max_width_m", limit_m, what)
+    if objects.min_height_m is not None:
+        floor_m = objects.min_height_m
+        before = kept
+        kept = [(i, s) for i, s in before if _tallest_m(scenario, s) >= floor_m]
+        if not kept:
+            tallest = max(_tallest_m(scenario, s) for _, s in before)
+            what = (
+                f"leaves no object: the tallest of the {len(before)} objects the filters "
+                f"before it keep is {tallest:.3g} m tall"
+            )
+            raise _fail(where, "objects.min_height_m", floor_m, what)
+    images = tuple(dict.fromkeys(image for image, _ in kept))
+    return Selection(classes=classes, images=images, objects=len(kept))
