@@ -119,6 +119,7 @@ TOPICS: tuple[TopicSpec, ...] = (
         latched=True,
         depth=1,
     ),
+    TopicSpec(name="/cell/bins", msgtype="cdw_interfaces/msg/SortingBins", latched=True, depth=1),
     TopicSpec(name="/ping", msgtype="cdw_interfaces/msg/Ping", depth=100),
     TopicSpec(name="/ping/echo", msgtype="cdw_interfaces/msg/Ping", depth=100),
 )

@@ -39,15 +39,30 @@ def validate_joint_command(
     upper: np.ndarray,
     velocity_limit: np.ndarray,
 ) -> JointTarget | Rejected:
-    """Check a one-point joint trajectory against the arm; reorder it to the arm's joints."""
+    """Check a one-point joint trajectory against the arm; reorder it to the arm's joints.
+
+    Every arm joint named exactly once (any order, no other joint), as many positions, and
+    velocities either absent or one per joint; all finite; each position within
+    ``[lower, upper]`` and each velocity within ``[-velocity_limit, velocity_limit]`` (1e-6
+    tolerance). The first violation rejects the whole command, its detail naming the joint,
+    the value and the limit.
+    """
     if len(names) != len(arm_joints) or len(positions) != len(arm_joints):
         return Rejected(
             "wrong_joint_count",
             f"{len(names)} names and {len(positions)} positions for {len(arm_joints)} arm joints",
         )
-    if sorted(names) != sorted(arm_joints):
-        unknown = sorted(set(names) - set(arm_joints))
-        return Rejected("unknown_joint", f"joint names {unknown} are not the arm's")
+    seen: set[str] = set()
+    for name in names:
+        if name in seen:
+            return Rejected("duplicate_joint", f"duplicate joint name {name!r}")
+        seen.add(name)
+    if seen != set(arm_joints):
+        unknown = sorted(seen - set(arm_joints))
+        return Rejected(
+            "unknown_joint",
+            f"joint names {unknown} are not the arm's (the arm's are {list(arm_joints)})",
+        )
     if velocities and len(velocities) != len(positions):
         return Rejected(
             "wrong_joint_count", f"{len(velocities)} velocities for {len(positions)} positions"
@@ -62,7 +77,8 @@ def validate_joint_command(
         j = int(bad[0])
         return Rejected(
             "beyond_limits",
-            f"{arm_joints[j]} = {q[j]:.4f} rad outside [{lower[j]:.4f}, {upper[j]:.4f}]",
+            f"{arm_joints[j]} position {q[j]:.4f} rad outside its limits"
+            f" [{lower[j]:.4f}, {upper[j]:.4f}]",
         )
     qd: tuple[float, ...] | None = None
     if velocities:
@@ -74,7 +90,8 @@ def validate_joint_command(
             j = int(over[0])
             return Rejected(
                 "beyond_limits",
-                f"{arm_joints[j]} velocity {v[j]:.3f} beyond {velocity_limit[j]:.3f}",
+                f"{arm_joints[j]} velocity {v[j]:.4f} rad/s outside its limit"
+                f" [-{velocity_limit[j]:.4f}, {velocity_limit[j]:.4f}]",
             )
         qd = tuple(float(x) for x in v)
     return JointTarget(positions=tuple(float(x) for x in q), velocities=qd)

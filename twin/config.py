@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from twin.belt_drive import MAX_STEP_S
 from twin.errors import ConfigError
 
 
@@ -69,7 +70,12 @@ class BeltConfig:
 
 @dataclass(frozen=True)
 class WorkspaceConfig:
-    """The pick window on the belt (an x interval over the full belt width)."""
+    """The pick window on the belt (an x interval over the full belt width).
+
+    An object is in it while it lies on the belt with its centre of mass's x in
+    ``[min_x_m, max_x_m]``; a grasp is credited (``pick_success``) only there, and an object
+    that leaves it downstream unpicked is ``missed`` (see :mod:`twin.monitor`).
+    """
 
     min_x_m: float = -0.35
     max_x_m: float = 0.35
@@ -259,7 +265,12 @@ class PhysicsConfig:
             "must be positive",
         )
         if self.fmu_step_s is not None:
-            _require(self.fmu_step_s > 0, "physics.fmu_step_s", self.fmu_step_s, "must be positive")
+            _require(
+                0 < self.fmu_step_s <= MAX_STEP_S,
+                "physics.fmu_step_s",
+                self.fmu_step_s,
+                f"must be in (0, {MAX_STEP_S}] s (the belt drive's longest step)",
+            )
         _require(
             self.solver_iterations >= 1,
             "physics.solver_iterations",

@@ -13,7 +13,8 @@ from typing import Any
 
 
 class EventType(StrEnum):
-    """Every kind of event the twin reports."""
+    """Every kind of event the twin reports (each with its ``data`` keys and when it fires:
+    ``docs/interfaces.md``, section Events)."""
 
     SPAWNED = "spawned"
     ENTERED_WORKSPACE = "entered_workspace"

@@ -6,10 +6,14 @@ TCP volume has overlapped the object continuously for the dwell time (0.6 s defa
 fingers touch it from opposite sides (contact normals pointing against each other) while the
 gripper presses: its commanded opening is narrower than its measured one (by more than
 ``GRIP_TOLERANCE_M``; the fingers stop on the object while the target lies inside it, whatever
-the object's width). The object is then held by a fixed constraint to the TCP link; it is
-released once the gripper no longer presses: commanded no narrower than measured, within half
-the tolerance (so a jaw-wide object, which holds the fingers at full opening where commanding
-"open" cannot exceed the measured opening, is let go too).
+the object's width) *and* the object is in the pick window at that step: on the belt with its
+centre of mass's x in ``[min_x_m, max_x_m]`` (``CellConfig.workspace``). A grasp that completes
+outside the window (past it, or off the belt, e.g. an object dragged along by the fingers) is
+not a pick; an object that left the window downstream unpicked is ``missed``. The object is
+then held by a fixed constraint to the TCP link; it is released once the gripper no longer
+presses: commanded no narrower than measured, within half the tolerance (so a jaw-wide object,
+which holds the fingers at full opening where commanding "open" cannot exceed the measured
+opening, is let go too).
 
 Fates and events:
 
@@ -387,9 +391,10 @@ class Monitor:
                 for link in sorted(links - record.arm_links):
                     emit(EventType.UNINTENDED_CONTACT, record, link=self._link_name(link))
             record.arm_links = links
-            # -- pick success
+            # -- pick success: only in the pick window (on the belt, centre of mass inside)
             if (
                 self._held is None
+                and in_ws
                 and record.overlap_since is not None
                 and time_s - record.overlap_since >= self.cell.grasp.dwell_s - 1e-9
                 and self._opposite(touching)

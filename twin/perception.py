@@ -10,6 +10,14 @@ other class). The frame is released ``latency_s`` after capture, stamped with it
 ``PerceptionConfig.zero_noise()`` gives the exact ground truth with no delay, drop or confusion.
 All randomness comes from the generator passed in (the scenario's seed tree).
 
+Confidence, as a real detector's: higher on average when the class is right than when it is
+wrong. A correct class's confidence is drawn from Beta(k m, k (1 - m)) with mean
+``m = confidence_correct_mean`` (0.9) and concentration ``k = confidence_concentration`` (20);
+a misclassified one's from the same with ``m = confidence_wrong_mean`` (0.55). A mean of 1 gives
+exactly 1 (the zero-noise camera's). The draws come from a child generator spawned from the one
+passed in (``Generator.spawn``), one draw per reported detection, so positions, drops and
+classes of a seed do not depend on the confidence model.
+
 Detection dropout (an injected fault): a frame captured inside a ``[start_s, end_s)`` dropout
 window is never released. Its random numbers are drawn all the same, so the frames outside the
 windows are exactly those of the same seed without dropout.
@@ -43,9 +51,15 @@ class PerceptionConfig:
     latency_s: float = 0.03
     drop_rate: float = 0.02
     misclassification_rate: float = 0.01
+    confidence_correct_mean: float = 0.9
+    confidence_wrong_mean: float = 0.55
+    confidence_concentration: float = 20.0
 
     def __post_init__(self) -> None:
         checks = (
+            ("confidence_correct_mean", 0 < self.confidence_correct_mean <= 1),
+            ("confidence_wrong_mean", 0 < self.confidence_wrong_mean <= 1),
+            ("confidence_concentration", self.confidence_concentration > 0),
             ("rate_hz", self.rate_hz > 0),
             ("fov_max_x_m", self.fov_max_x_m > self.fov_min_x_m),
             ("position_noise_m", self.position_noise_m >= 0),
@@ -61,14 +75,24 @@ class PerceptionConfig:
 
     @classmethod
     def zero_noise(cls) -> PerceptionConfig:
-        """Exact ground truth, no latency, no drops, no confusion."""
+        """Exact ground truth, no latency, no drops, no confusion; confidence 1."""
         return cls(
             position_noise_m=0.0,
             yaw_noise_rad=0.0,
             latency_s=0.0,
             drop_rate=0.0,
             misclassification_rate=0.0,
+            confidence_correct_mean=1.0,
+            confidence_wrong_mean=1.0,
         )
+
+    def draw_confidence(self, rng: np.random.Generator, *, correct: bool) -> float:
+        """A detection's confidence: Beta with the mean of a correct or a wrong class."""
+        mean = self.confidence_correct_mean if correct else self.confidence_wrong_mean
+        if mean >= 1.0:
+            return 1.0
+        k = self.confidence_concentration
+        return float(rng.beta(k * mean, k * (1.0 - mean)))
 
 
 @dataclass(frozen=True)
@@ -126,6 +150,7 @@ class Perception:
         self.surface_z_m = surface_z_m
         self.every_n_steps = max(1, round(1.0 / (config.rate_hz * dt_s)))
         self.rng = rng
+        (self._confidence_rng,) = rng.spawn(1)  # its own stream: the others stay as they were
         self._queue: deque[DetectionFrame] = deque()
 
     def capture_due(self, step: int) -> bool:
@@ -157,10 +182,11 @@ class Perception:
             if confuse < cfg.misclassification_rate and len(self.classes) > 1:
                 others = [c for c in self.classes if c != name]
                 name = others[int(pick * len(others))]
+            confidence = cfg.draw_confidence(self._confidence_rng, correct=name == obj.class_name)
             detections.append(
                 Detection(
                     class_name=name,
-                    confidence=1.0,
+                    confidence=confidence,
                     x_m=x + cfg.position_noise_m * float(noise[0]),
                     y_m=y + cfg.position_noise_m * float(noise[1]),
                     z_m=max(self.surface_z_m, obj.position_m[2] - seen.below_m),

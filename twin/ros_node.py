@@ -7,7 +7,11 @@ is echoed at once, from inside the step loop.
 
 With a tap (:data:`Tap`), every message the node publishes is serialized once, published as
 those bytes and handed to the tap; every message it subscribes to arrives as bytes, goes to the
-tap and is deserialized for its callback. The tap sees the whole contract, both directions.
+tap and is deserialized for its callback. The tap sees the whole contract, both directions, but
+the latched ``/cell/bins`` (static configuration, published once at start).
+
+``/events`` carries every event the twin logs, in the order of :attr:`twin.sim.Twin.events`:
+the monitor's, rejected commands, controller timeouts and injected faults alike.
 
 Modes: ``realtime`` paces the physics to the wall clock; ``lockstep`` steps tick k+1 only when the
 controller has acknowledged tick k (see the LockstepTick/StepAck handshake in the docs).
@@ -33,11 +37,13 @@ from cdw_interfaces.msg import (
     ObjectStateArray,
     PickTarget,
     Ping,
+    SortingBin,
+    SortingBins,
     SortingEvent,
     SortingPriorities,
     StepAck,
 )
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import Point, PoseStamped
 from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -128,6 +134,7 @@ class TwinNode(Node):
         self.last_ack_tick = -1
         self._tick_counts: Counter[str] = Counter()
         self._last_stamp_ns: dict[str, int] = {}
+        self._events_sent = 0
         self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
         self.pub_joints = self.create_publisher(JointState, "/joint_states", STATE_QOS)
         self.pub_tcp = self.create_publisher(PoseStamped, "/tcp_pose", STATE_QOS)
@@ -138,6 +145,7 @@ class TwinNode(Node):
         self.pub_echo = self.create_publisher(Ping, "/ping/echo", STREAM_QOS)
         self.pub_tick = self.create_publisher(LockstepTick, "/lockstep/tick", STREAM_QOS)
         self.pub_faults = self.create_publisher(String, "/twin/faults", STREAM_QOS)
+        self.pub_bins = self.create_publisher(SortingBins, "/cell/bins", LATCHED_QOS)
         self._command_subs = (
             self._subscribe(
                 JointTrajectory, "/arm_controller/joint_trajectory", self._on_trajectory, STATE_QOS
@@ -154,6 +162,7 @@ class TwinNode(Node):
         self._arm_names = list(twin.cell.robot.arm_joints)
         self._joint_names = self._arm_names + list(twin.cell.robot.finger_joints)
         self._limits = robot.limits
+        self._send(self.pub_bins, self.bins_message())  # latched, once
 
     # -- the wire: every message in or out also goes to the tap (the episode's recording) ---
     def _send(self, publisher: Any, msg: Any) -> None:
@@ -191,7 +200,8 @@ class TwinNode(Node):
         text = f"{topic}: rejected ({rejected.reason}): {rejected.detail}"
         self.get_logger().error(text)
         self._send(self.pub_faults, String(data=text))
-        self.publish_event(self.twin.record_fault(rejected.reason, text))
+        self.twin.record_fault(rejected.reason, text)
+        self.publish_new_events()
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         stamp = msg.header.stamp
@@ -303,7 +313,7 @@ class TwinNode(Node):
         stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         self._last_stamp_ns[topic] = max(self._last_stamp_ns.get(topic, -1), stamp_ns)
 
-    def publish_step(self, events: list[Event]) -> None:
+    def publish_step(self) -> None:
         """Publish everything due after a physics step."""
         twin = self.twin
         step = twin.step_count
@@ -340,8 +350,7 @@ class TwinNode(Node):
             self._tap is not None or self.pub_gt.get_subscription_count() > 0
         ):
             self.publish_ground_truth(stamp)
-        for event in events:
-            self.publish_event(event)
+        self.publish_new_events()
         if self.lockstep:
             counts, last = self._tick_counts, self._last_stamp_ns
             self._send(
@@ -358,6 +367,23 @@ class TwinNode(Node):
                 ),
             )
         self._tick_counts = Counter()
+
+    def bins_message(self) -> SortingBins:
+        """``/cell/bins``: every bin of the cell (``CellConfig.bins``), stamped now."""
+        msg = SortingBins()
+        msg.header.stamp = to_time(self.twin.time_s)
+        msg.header.frame_id = "world"
+        for b in self.twin.cell.bins:
+            msg.bins.append(
+                SortingBin(
+                    class_name=b.class_name,
+                    position=Point(x=b.centre_x_m, y=b.centre_y_m, z=b.top_z_m),
+                    inner_half_m=b.inner_half_m,
+                    size_m=b.size_m,
+                    floor_z_m=b.floor_z_m,
+                )
+            )
+        return msg
 
     def publish_belt(self, stamp: TimeMsg) -> None:
         """``/conveyor/state``."""
@@ -425,6 +451,13 @@ class TwinNode(Node):
             msg.objects.append(state)
         self._send(self.pub_gt, msg)
 
+    def publish_new_events(self) -> None:
+        """``/events``: every event the twin logged since the last call, in log order."""
+        events = self.twin.events
+        for event in events[self._events_sent :]:
+            self.publish_event(event)
+        self._events_sent = len(events)
+
     def publish_event(self, event: Event) -> None:
         """``/events``."""
         msg = SortingEvent(
@@ -454,15 +487,15 @@ def run_loop(
     if node.lockstep:
         _lockstep(node, spin_once, duration, ack_timeout_s, start_timeout_s)
         return
-    node.publish_step([])
+    node.publish_step()
     period = twin.dt_s / realtime_factor
     next_wall = time.perf_counter()
     while twin.time_s < duration - 1e-9:
         spin_once(timeout_sec=0.0)
         _serve_until(spin_once, next_wall)
-        events = twin.advance()
+        twin.advance()
         spin_once(timeout_sec=0.0)
-        node.publish_step(events)
+        node.publish_step()
         next_wall += period
         if next_wall < time.perf_counter() - 0.25:
             next_wall = time.perf_counter()
@@ -498,10 +531,8 @@ def _lockstep(
         spin_once(timeout_sec=0.05)
     controller_alive = node.peers_matched()
     if not controller_alive:
-        node.publish_event(
-            twin.record_fault("controller_timeout", "no controller subscribed before the start")
-        )
-    node.publish_step([])
+        twin.record_fault("controller_timeout", "no controller subscribed before the start")
+    node.publish_step()
     acks_at_loss = -1
     lost_at_s: float | None = None if controller_alive else 0.0
     next_wall = time.perf_counter()
@@ -520,16 +551,15 @@ def _lockstep(
                 spin_once(timeout_sec=min(remaining, 0.05))
             ok = node.tick_ready(tick)
             if ok and lost_at_s is not None:
-                node.publish_event(twin.record_controller_resumed(twin.time_s - lost_at_s))
+                twin.record_controller_resumed(twin.time_s - lost_at_s)
+                node.publish_new_events()
                 lost_at_s = None
             if not ok and controller_alive:
                 node.counters.lockstep_timeouts += 1
-                node.publish_event(
-                    twin.record_fault(
-                        "controller_timeout",
-                        f"no acknowledgement of tick {tick} within {wait_s} s",
-                    )
+                twin.record_fault(
+                    "controller_timeout", f"no acknowledgement of tick {tick} within {wait_s} s"
                 )
+                node.publish_new_events()
                 lost_at_s = twin.time_s
             if not ok:
                 # every command received so far has been applied; a restarted controller's
@@ -543,8 +573,8 @@ def _lockstep(
             next_wall += twin.dt_s
             _serve_until(spin_once, next_wall)
             spin_once(timeout_sec=0.0)
-        events = twin.advance()
-        node.publish_step(events)
+        twin.advance()
+        node.publish_step()
 
 
 def make_executor() -> Any:

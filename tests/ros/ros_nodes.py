@@ -82,10 +82,25 @@ def sample_messages(token: int) -> dict[str, Any]:
         ),
         "/rt/event": cdw.SortingEvent(
             header=header,
-            type="binned",
+            type="placed_in_bin",
             object_id=token,
             class_name="métal",
             detail=json.dumps({"bin": "metal", "x_m": 1.5, "token": token}),
+        ),
+        "/rt/bins": cdw.SortingBins(
+            header=header,
+            bins=[
+                cdw.SortingBin(
+                    class_name="wood",
+                    position=Point(x=0.33, y=0.07, z=-0.1),
+                    inner_half_m=0.11,
+                    size_m=0.24,
+                    floor_z_m=-0.4,
+                ),
+                cdw.SortingBin(
+                    class_name="béton", position=Point(x=-0.6, y=float(token)), size_m=1.0
+                ),
+            ],
         ),
         "/rt/belt": cdw.BeltState(
             header=header,

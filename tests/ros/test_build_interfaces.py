@@ -35,6 +35,8 @@ def test_every_message_of_the_contract_is_defined(build_script: ModuleType) -> N
         "ObjectStateArray",
         "PickTarget",
         "Ping",
+        "SortingBin",
+        "SortingBins",
         "SortingEvent",
         "SortingPriorities",
         "StepAck",

@@ -165,6 +165,7 @@ def test_every_topic_flows_and_bad_commands_are_rejected_and_counted(
         DetectionArray,
         ObjectStateArray,
         Ping,
+        SortingBins,
         SortingEvent,
         SortingPriorities,
     )
@@ -215,6 +216,7 @@ def test_every_topic_flows_and_bad_commands_are_rejected_and_counted(
             ("/events", SortingEvent, EVENT_QOS),
             ("/ping/echo", Ping, STREAM_QOS),
             ("/twin/faults", String, STREAM_QOS),
+            ("/cell/bins", SortingBins, LATCHED_QOS),
         ):
             node.create_subscription(kind, topic, keep(topic), qos)
         arm = node.create_publisher(JointTrajectory, "/arm_controller/joint_trajectory", STATE_QOS)
@@ -246,6 +248,14 @@ def test_every_topic_flows_and_bad_commands_are_rejected_and_counted(
         )
         arm.publish(point([math.nan, *HOME[1:]]))
         arm.publish(point([0.0, 3.5, *HOME[2:]]))
+        duplicate = [*arm_names[:6], arm_names[0]]
+        arm.publish(
+            JointTrajectory(joint_names=duplicate, points=[JointTrajectoryPoint(positions=HOME)])
+        )
+        too_fast = JointTrajectoryPoint(
+            positions=list(HOME), velocities=[0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0]
+        )
+        arm.publish(JointTrajectory(joint_names=arm_names, points=[too_fast]))
         gripper.publish(Float64(data=0.5))
         setpoint.publish(Float64(data=-0.3))
         setpoint.publish(Float64(data=50.0))
@@ -269,6 +279,7 @@ def test_every_topic_flows_and_bad_commands_are_rejected_and_counted(
         "/events",
         "/ping/echo",
         "/twin/faults",
+        "/cell/bins",
     ):
         assert got.get(topic), f"nothing on {topic}"
     assert len(got["/ping/echo"]) == 20
@@ -277,11 +288,29 @@ def test_every_topic_flows_and_bad_commands_are_rejected_and_counted(
     summary = _summary(out)
     assert summary["rejected_commands"] == {
         "wrong_joint_count": 1,
+        "duplicate_joint": 1,
         "not_finite": 1,
-        "beyond_limits": 2,
+        "beyond_limits": 3,
         "bad_setpoint": 2,
         "unknown_class": 1,
     }
     assert summary["final_state"]["joint_positions"] == pytest.approx(HOME, abs=2e-3)
     assert got["/conveyor/state"][-1].setpoint_mps == pytest.approx(0.4)
-    assert len(got["/twin/faults"]) == 7
+    faults = [msg.data for msg in got["/twin/faults"]]
+    assert len(faults) == 9
+    assert (
+        "/arm_controller/joint_trajectory: rejected (duplicate_joint):"
+        " duplicate joint name 'panda_joint1'"
+    ) in faults
+    assert (
+        "/arm_controller/joint_trajectory: rejected (beyond_limits):"
+        " panda_joint4 velocity 3.0000 rad/s outside its limit [-2.1750, 2.1750]"
+    ) in faults
+    fault_events = [json.loads(m.detail) for m in got["/events"] if m.type == "fault"]
+    assert [e["detail"] for e in fault_events] == faults
+    assert [b.class_name for b in got["/cell/bins"][0].bins] == [
+        "concrete",
+        "brick",
+        "wood",
+        "rubber",
+    ]

@@ -1,0 +1,100 @@
+"""The pick window: a grasp is a pick only where the object's centre of mass is inside it."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pybullet as pb
+import pytest
+from twin_helpers import box_px
+
+from twin.events import EventType
+from twin.scenario import Scenario, SystemLevel
+from twin.sim import ArmCommand, Twin
+
+ONE_BOX = {"img": [(1, box_px(500, 500, 100, 50))]}  # brick, 60 x 30 mm footprint
+
+
+def _ik(twin: Twin, position: tuple[float, float, float]) -> tuple[float, ...]:
+    assert twin.robot is not None
+    robot = twin.robot
+    q = pb.calculateInverseKinematics(
+        robot.body,
+        robot.tcp_link,
+        position,
+        pb.getQuaternionFromEuler([np.pi, 0.0, 0.0]),
+        maxNumIterations=200,
+        residualThreshold=1e-6,
+        physicsClientId=twin.client,
+    )
+    return tuple(q[: len(robot.arm_joints)])
+
+
+def _hold(twin: Twin, command: ArmCommand, seconds: float) -> None:
+    end = twin.time_s + seconds
+    twin.command(command)
+    while twin.time_s < end - 1e-9:
+        twin.advance()
+
+
+@pytest.mark.parametrize(
+    ("beyond_end_m", "credited"),
+    [(-0.024, True), (0.024, False)],
+    ids=["inside-the-window", "just-past-the-window"],
+)
+def test_a_grasp_is_credited_only_inside_the_pick_window(
+    mesh_polygons: Callable[..., Path], beyond_end_m: float, credited: bool
+) -> None:
+    """The object is parked on the stopped belt 24 mm before or after the window's end (0.35 m)
+    and grasped by the book (dwell, opposite finger contacts, pressing): the grasp just past
+    the window is no pick (it was credited at x = 0.374 m), the one inside still is."""
+    meshes = mesh_polygons(ONE_BOX)
+    scenario = Scenario(
+        duration_s=30.0,
+        system=SystemLevel(belt_speed_mps=0.0, prefill_m=1.7, repeat_images=False),
+    )
+    with Twin(scenario, dataset_dir=meshes) as twin:
+        obs, _ = twin.reset(seed=0)
+        (obj,) = obs.objects
+        assert twin._monitor is not None
+        body = twin._monitor.body_of(obj.id)
+        assert body is not None
+        (_, y, z), orientation = pb.getBasePositionAndOrientation(body, physicsClientId=twin.client)
+        end_m = twin.cell.workspace.max_x_m
+
+        def park(x_m: float) -> None:  # as the belt would carry it there, then stopped
+            pb.resetBasePositionAndOrientation(
+                body, (x_m, y, z + 0.001), orientation, physicsClientId=twin.client
+            )
+            _hold(twin, ArmCommand(twin.cell.robot.home_joint_positions), 0.5)
+
+        park(end_m - 0.024)  # inside: it enters the window
+        x = end_m + beyond_end_m
+        park(x)
+        grasp_z = z + 0.5 * obj.height_m - 0.02  # 2 cm below the top: the palm stays clear
+        _hold(twin, ArmCommand(_ik(twin, (x, y, grasp_z + 0.3)), gripper_width_m=0.08), 2.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, grasp_z + 0.1)), gripper_width_m=0.08), 1.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, grasp_z)), gripper_width_m=0.08), 1.0)
+        _hold(twin, ArmCommand(_ik(twin, (x, y, grasp_z)), gripper_width_m=0.0), 0.5)
+        (gt,) = twin.observe_objects()
+        events = [e for e in twin.events if e.object_id == obj.id]
+        scores = twin.scores()
+    kinds = [e.type for e in events]
+    assert EventType.ENTERED_WORKSPACE in kinds
+    # the grasp itself happened either way: overlap for the dwell, both fingers on the object
+    assert EventType.TCP_OVERLAP_START in kinds
+    assert kinds.count(EventType.FINGER_CONTACT) == 2
+    assert gt.position_m[0] == pytest.approx(x, abs=0.01)
+    if credited:
+        (pick,) = [e for e in events if e.type is EventType.PICK_SUCCESS]
+        assert pick.data["position_m"][0] <= twin.cell.workspace.max_x_m
+        assert gt.held
+        assert (scores.picked, scores.missed) == (1, 0)
+    else:
+        assert EventType.PICK_SUCCESS not in kinds
+        assert not gt.held
+        # it left the window downstream unpicked: a miss
+        assert EventType.MISSED in kinds
+        assert (scores.picked, scores.missed) == (0, 1)
