@@ -7,12 +7,15 @@ Examples::
 
 The node uses sim time (``/clock``) in both modes. On shutdown it writes its counters (pick
 statistics, rejected detections, skipped commands, control-loop timing) as JSON to
-``--stats-out`` (atomically: a temporary file renamed into place).
+``--stats-out`` (atomically: a temporary file renamed into place, with the permissions an
+ordinary ``open`` gives, 0666 minus the umask). Started by ``cdw-twin run`` (the environment
+names the runner in ``CDW_TWIN_PARENT_PID``), it gets SIGTERM when the runner dies.
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import os
 import signal
@@ -24,6 +27,12 @@ from typing import Any
 
 DEFAULT_PARAMS = Path(__file__).resolve().parent / "config" / "default.yaml"
 """The reference cell's parameter file."""
+
+PARENT_PID_VARIABLE = "CDW_TWIN_PARENT_PID"
+"""Environment variable naming the process this node must not outlive (set by ``cdw-twin run``;
+the same name as ``twin.cmd_node.PARENT_PID_VARIABLE``, which this package does not import)."""
+
+_PR_SET_PDEATHSIG = 1
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -45,11 +54,50 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def die_with_parent(variable: str = PARENT_PID_VARIABLE) -> None:
+    """Get SIGTERM when the process named by ``variable`` (our parent) dies (Linux only).
+
+    ``prctl(PR_SET_PDEATHSIG)``; a parent that died before the call no longer is our parent,
+    and we send ourselves the signal. The variable is removed from our environment. Does
+    nothing when it is not set (a controller started by hand).
+    """
+    value = os.environ.pop(variable, None)
+    if value is None or not sys.platform.startswith("linux"):
+        return
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
+        errno = ctypes.get_errno()
+        msg = f"prctl(PR_SET_PDEATHSIG) failed: {os.strerror(errno)}"
+        raise OSError(errno, msg)
+    if os.getppid() != int(value):
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
+def _umask() -> int:
+    """The process's umask, read without changing it where Linux shows it (``os.umask`` sets
+    it to 0 for an instant, which other threads creating files would see)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def write_json_atomic(path: Path, data: Any) -> None:
-    """Write ``data`` as JSON to ``path`` via a temporary file in the same directory."""
+    """Write ``data`` as JSON to ``path`` via a temporary file in the same directory.
+
+    The file gets the permissions an ordinary ``open`` would give it (0666 minus the umask),
+    not the 0600 of a temporary file, like every other file of a run folder.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             json.dump(data, handle, indent=2, sort_keys=True, allow_nan=False)
             handle.write("\n")
@@ -88,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
     previous = {sig: signal.signal(sig, _request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
     node: ControllerNode | None = None
     try:
+        die_with_parent()
         try:
             node = ControllerNode(config, lockstep=args.lockstep)
         except ControlError as exc:

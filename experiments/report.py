@@ -206,7 +206,12 @@ def load_runs(paths: Sequence[Path]) -> RunData:
         if dataset not in datasets:
             datasets.append(dataset)
         folders = sorted(p for p in run_dir.glob("ep[0-9]*") if p.is_dir())
-        episodes.extend(_episode(run_dir, f, run, notes) for f in folders)
+        for folder in folders:
+            episode = _episode(run_dir, folder, run, notes)
+            if episode.summary is not None and episode.summary.get("complete") is False:
+                notes.append(f"{folder}: the episode did not finish (failed or stopped); left out")
+                continue
+            episodes.append(episode)
     return RunData(tuple(run_dirs), tuple(episodes), tuple(datasets), tuple(notes))
 
 

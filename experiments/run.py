@@ -12,19 +12,38 @@ controller's parameter file (the scenario's ``controller``) is copied next to it
 (unless it is the built-in one): ``cdw-twin run RUN/scenario.yaml`` reruns it as it ran, from
 any folder, whatever the shipped parameter files become. Each
 episode gets its own ROS domain (claimed with a lock, LOCALHOST discovery). The run folder holds
-one folder per episode (the twin's ``twin/events.jsonl`` and ``twin/summary.json``, the
-recording of every topic ``recording.mcap``, written by the twin node itself from the bytes it
-sends and receives (``recording.mcap.partial`` while it runs, or after a crash; see
-:mod:`experiments.record`), the controller's stats ``controller.json``, every process's log),
-``episodes.json`` and
+one folder per episode (the twin's episode log ``twin/``: ``events.jsonl``, ``status.json``,
+``summary.json``, ``telemetry.json``, see :mod:`twin.episode_log`; the recording of every topic
+``recording.mcap``, written by the twin node itself from the bytes it sends and receives
+(``recording.mcap.partial`` while it runs, or after a crash; see :mod:`experiments.record`); the
+controller's stats ``controller.json``; every process's log), ``episodes.json`` and
 ``episodes.csv`` with the per-episode metrics, and ``run.json`` with their means, the dataset
 and the scenario path.
 
-``run.json`` says ``"complete": false`` until every episode has finished. A run stopped early
-(Ctrl-C, SIGTERM, a twin that crashed or left no summary) keeps the episodes finished so far in
+``run.json`` says ``"complete": false`` until every episode has finished successfully. A run
+stopped early (Ctrl-C, SIGTERM, a failed episode) keeps the episodes finished so far in
 ``episodes.json``/``episodes.csv`` (each written atomically), stays ``"complete": false`` and
 gains ``"stopped": "<reason>"``; the command then exits non-zero (130 when interrupted, 1 when an
-episode failed). The unfinished episode's folder keeps whatever its processes wrote.
+episode failed) and ``--json`` still prints the result of the finished episodes (with
+``"complete": false`` and ``"stopped"``). The unfinished episode's folder keeps whatever its
+processes wrote (the twin streams its ``events.jsonl`` and writes its ``summary.json`` with
+``"complete": false`` when stopped).
+
+An episode fails when its twin or its controller exits before the twin has finished the
+episode (a crash, a ``kill -9``; a controller stopped on purpose for a planned restart does not
+count), or when the twin leaves no complete ``summary.json``. The run stops at the first failed
+episode. A failed episode is a row of ``episodes.json`` (and ``episodes.csv``) with
+``"failed": true`` and a one-line ``"reason"`` (``controller exited with signal SIGKILL at sim
+12.3 s``, ``twin exited with signal SIGKILL, no summary.json``) and no metrics; it is left out of
+the means. ``run.json`` gives ``"episodes"`` (the successful episodes, those averaged),
+``"failed"`` (their count) and ``"failures"`` (``episode 0 (seed 5) failed: <reason>``).
+
+No process outlives the runner: the twin and the controller ask the kernel for SIGTERM when
+the runner dies, however it dies (``prctl(PR_SET_PDEATHSIG)``, set by each of them at start
+from the ``CDW_TWIN_PARENT_PID`` the runner passes), and they stay in the runner's process
+group, so a signal to the group (Ctrl-C in a terminal) reaches every process at once. On that
+SIGTERM the twin writes its episode folder (``"complete": false``) and the controller its
+counters.
 
 Controller restarts (the scenario's ``faults.controller_restart_at_s``): the runner watches the
 twin's ``/clock`` with a tiny best-effort subscriber of its own, in the episode's domain, and
@@ -72,6 +91,7 @@ from types import FrameType
 from typing import IO, TYPE_CHECKING, Any, Literal
 
 from experiments.stats import mean_of
+from twin.cmd_node import PARENT_PID_VARIABLE
 from twin.errors import CdwTwinError
 from twin.fileio import write_atomic
 
@@ -98,14 +118,29 @@ METRIC_KEYS = (
     "injected_faults",
     "controller_restarts",
 )
-"""The columns of ``episodes.csv``, in order."""
+"""The metric columns of ``episodes.csv``, in order."""
+
+EPISODE_COLUMNS = (*METRIC_KEYS, "failed", "reason")
+"""The columns of ``episodes.csv``: the metrics, whether the episode failed and why."""
 
 STOP_GRACE_S = 15.0
 POLL_S = 0.1
 
 
 class EpisodeFailedError(CdwTwinError):
-    """An episode ended without a complete twin summary (crash, bad exit, lost output)."""
+    """An episode failed: its twin or controller exited early, or no complete twin summary.
+
+    ``reason`` is the one-line cause (``controller exited with signal SIGKILL at sim 12.3 s``);
+    the message names the episode and, for a twin failure, adds the tail of the twin's log.
+    """
+
+    def __init__(self, episode: EpisodeSpec, reason: str, log_tail: str = "") -> None:
+        self.episode = episode
+        self.reason = reason
+        msg = failure_text(episode.index, episode.seed, reason)
+        if log_tail:
+            msg += f"; twin log tail:\n{log_tail}"
+        super().__init__(msg)
 
 
 class EpisodeCancelledError(CdwTwinError):
@@ -154,6 +189,33 @@ class EpisodeSpec:
 
 Progress = Callable[[float, float], None]
 """Called with (sim seconds, wall seconds) while an episode runs."""
+
+
+def failure_text(index: int, seed: int, reason: str) -> str:
+    """How ``run.json`` and ``sweep.json`` list a failed episode."""
+    return f"episode {index} (seed {seed}) failed: {reason}"
+
+
+def exit_text(returncode: int) -> str:
+    """A process's exit status in words: ``code 1`` or ``signal SIGKILL``."""
+    if returncode < 0:
+        try:
+            return f"signal {signal.Signals(-returncode).name}"
+        except ValueError:
+            return f"signal {-returncode}"
+    return f"code {returncode}"
+
+
+def failed_row(episode: EpisodeSpec, mode: str, reason: str) -> dict[str, Any]:
+    """The ``episodes.json`` row of a failed episode: no metrics, ``failed`` and ``reason``."""
+    return {
+        "episode": episode.index,
+        "seed": episode.seed,
+        "mode": mode,
+        "complete": False,
+        "failed": True,
+        "reason": reason,
+    }
 
 
 def controller_params(value: str, scenario_dir: Path | None) -> Path:
@@ -303,6 +365,7 @@ def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
         "injected_faults": injected,
         "controller_restarts": max(0, len(stats) - 1),
         "complete": bool(twin["complete"]),
+        "failed": False,
     }
 
 
@@ -362,6 +425,14 @@ def _stop(procs: list[subprocess.Popen[bytes]]) -> None:
             proc.wait()
 
 
+def _sim_seconds(summary: Path) -> float | None:
+    """The twin's last sim time from its ``summary.json``, None without one."""
+    try:
+        return float(json.loads(summary.read_text(encoding="utf-8"))["sim_seconds"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def run_episode(
     options: RunOptions,
     episode: EpisodeSpec,
@@ -371,32 +442,44 @@ def run_episode(
 ) -> dict[str, Any]:
     """Run one closed-loop episode in its own ROS domain; returns its metrics.
 
-    Raises :class:`EpisodeFailedError` when the twin ends without a complete summary and
+    Raises :class:`EpisodeFailedError` when the controller exits while the twin still runs
+    (other than for a planned restart), or the twin ends without a complete summary, and
     :class:`EpisodeCancelledError` when ``cancel`` is set; every process is stopped either way.
+
+    The calling thread starts the processes and waits for them to end before it returns: each
+    process gets SIGTERM when the thread that started it exits (``PR_SET_PDEATHSIG``), so the
+    processes must not outlive it (a sweep's worker threads run one episode after another).
     """
     from twin.ros_isolation import clean_stale_fastdds_shm, ros_domain
 
     episode.folder.mkdir(parents=True, exist_ok=True)
     clean_stale_fastdds_shm()
     restarts = sorted(options.restart_at_s)
+    controller_exit: int | None = None
+    watch: ClockWatch | None = None
     with ros_domain() as domain, ExitStack() as stack:
-        env = {**os.environ, **domain.env}
+        env = {**os.environ, **domain.env, PARENT_PID_VARIABLE: str(os.getpid())}
+        started: list[subprocess.Popen[bytes]] = []
 
         def start(name: str, cmd: list[str]) -> subprocess.Popen[bytes]:
             log: IO[bytes] = stack.enter_context((episode.folder / f"{name}.log").open("ab"))
-            return subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
+            proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
+            started.append(proc)
+            return proc
 
-        twin = start("twin", twin_command(options, episode))
-        controller = start("controller", controller_command(options, episode))
-        watch = ClockWatch(domain.domain_id) if restarts or progress else None
-        wall0 = time.monotonic()
         try:
-            while (code := twin.poll()) is None:
+            twin = start("twin", twin_command(options, episode))
+            controller = start("controller", controller_command(options, episode))
+            watch = ClockWatch(domain.domain_id) if restarts or progress else None
+            wall0 = time.monotonic()
+            while twin.poll() is None:
                 if cancel is not None and cancel.wait(POLL_S):
                     msg = f"episode {episode.index} (seed {episode.seed}) cancelled"
                     raise EpisodeCancelledError(msg)
                 if cancel is None:
                     time.sleep(POLL_S)
+                if controller.poll() is not None:
+                    break
                 if watch is None:
                     continue
                 sim_s = watch.poll()
@@ -407,42 +490,87 @@ def run_episode(
                     _stop([controller])
                     instance = len(options.restart_at_s) - len(restarts)
                     controller = start("controller", controller_command(options, episode, instance))
+            # exited by itself (the runner stops it only below): unplanned, whenever it was
+            controller_exit = controller.poll()
         finally:
             if watch is not None:
                 watch.close()
-            _stop([controller, twin])
+            _stop(started)
+    code = twin.returncode
     summary = episode.folder / "twin" / "summary.json"
+    if (controller_exit is not None or code != 0) and cancel is not None and cancel.is_set():
+        # a Ctrl-C reaches the whole process group: the processes may have stopped first
+        msg = f"episode {episode.index} (seed {episode.seed}) cancelled"
+        raise EpisodeCancelledError(msg)
+    if controller_exit is not None:
+        # the twin stops within a step of its SIGTERM, a poll period after the controller died
+        lost_s = _sim_seconds(summary)
+        if lost_s is None and watch is not None:
+            lost_s = watch.time_s
+        reason = f"controller exited with {exit_text(controller_exit)}"
+        if lost_s is not None:
+            reason += f" at sim {lost_s:.1f} s"
+        raise EpisodeFailedError(episode, reason)
     if code != 0 or not summary.is_file():
         log = (episode.folder / "twin.log").read_text(errors="replace")[-2000:]
-        msg = (
-            f"episode {episode.index} (seed {episode.seed}) failed: twin exit {code}"
-            f"{'' if summary.is_file() else ', no summary.json'}; twin log tail:\n{log}"
-        )
-        raise EpisodeFailedError(msg)
+        reason = f"twin exited with {exit_text(code)}"
+        if not summary.is_file():
+            reason += ", no summary.json"
+        raise EpisodeFailedError(episode, reason, log)
     metrics = episode_metrics(episode.folder, options.mode)
     if not metrics["complete"]:
-        msg = f"episode {episode.index} (seed {episode.seed}): the twin stopped before the end"
-        raise EpisodeFailedError(msg)
-    return metrics
+        reason = (
+            f"the twin stopped before the end, at sim {_sim_seconds(summary) or 0.0:.1f} "
+            f"of {options.duration_s:.1f} s"
+        )
+        raise EpisodeFailedError(episode, reason)
+    return {"episode": episode.index, **metrics}
+
+
+def succeeded(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows of episodes that did not fail (the ones metrics are aggregated over)."""
+    return [r for r in rows if not r.get("failed")]
+
+
+def failures(rows: list[dict[str, Any]]) -> list[str]:
+    """:func:`failure_text` of every failed row."""
+    return [
+        failure_text(int(r.get("episode", -1)), int(r["seed"]), str(r.get("reason")))
+        for r in rows
+        if r.get("failed")
+    ]
 
 
 def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Means over episodes of every numeric metric."""
+    """Means over the successful episodes of every numeric metric (failed ones left out)."""
     keys = [k for k in METRIC_KEYS if k not in ("mode", "seed", "speed_mps")]
-    return {k: mean_of([r.get(k) for r in rows]) for k in keys}
+    good = succeeded(rows)
+    return {k: mean_of([r.get(k) for r in good]) for k in keys}
 
 
 def write_tables(
     out: Path, rows: list[dict[str, Any]], complete: bool, extra: dict[str, Any]
 ) -> dict[str, Any]:
-    """``episodes.json``, ``episodes.csv`` and ``run.json`` (atomically)."""
+    """``episodes.json``, ``episodes.csv`` and ``run.json`` (atomically).
+
+    ``rows`` may hold failed episodes (:func:`failed_row`): they are listed in the tables, and
+    counted in ``run.json`` as ``failed`` with their ``failures``, never in the means.
+    """
     write_atomic(out / "episodes.json", json.dumps(rows, indent=2) + "\n")
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(METRIC_KEYS), extrasaction="ignore")
+    writer = csv.DictWriter(buffer, fieldnames=list(EPISODE_COLUMNS), extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
     write_atomic(out / "episodes.csv", buffer.getvalue())
-    summary = {"complete": complete, "episodes": len(rows), **extra, "mean": aggregate(rows)}
+    failed = failures(rows)
+    summary = {
+        "complete": complete,
+        "episodes": len(succeeded(rows)),
+        "failed": len(failed),
+        "failures": failed,
+        **extra,
+        "mean": aggregate(rows),
+    }
     write_atomic(out / "run.json", json.dumps(summary, indent=2) + "\n")
     return summary
 
@@ -531,7 +659,11 @@ def run(args: argparse.Namespace) -> int:
             try:
                 metrics = run_episode(options, episode, progress=progress)
             except EpisodeFailedError as exc:
-                stopped, code = str(exc), 1
+                row = failed_row(episode, args.mode, exc.reason)
+                row["speed_mps"] = scenario.system.belt_speed_mps
+                rows.append(row)
+                stopped, code = failure_text(i, episode.seed, exc.reason), 1
+                print(f"cdw-twin run: {exc}", file=sys.stderr)
                 break
             finally:
                 if tty:
@@ -545,26 +677,31 @@ def run(args: argparse.Namespace) -> int:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
     if stopped is not None:
-        write_tables(out, rows, complete=False, extra={**extra, "stopped": stopped})
-        print(
-            f"cdw-twin run: stopped after {len(rows)}/{args.episodes} episodes: {stopped}\n"
-            f"cdw-twin run: the finished episodes are in {out / 'episodes.json'} "
-            "(run.json says complete: false)",
-            file=sys.stderr,
-        )
-        return code
-    summary = write_tables(out, rows, complete=True, extra=extra)
+        extra = {**extra, "stopped": stopped}
+    summary = write_tables(out, rows, complete=stopped is None, extra=extra)
+    good = succeeded(rows)
     result = {
         **summary["mean"],
         "speed_mps": scenario.system.belt_speed_mps,
         "mode": args.mode,
-        "episodes": len(rows),
+        "complete": summary["complete"],
+        "episodes": summary["episodes"],
+        "failed": summary["failed"],
         "out": str(out),
-        "untargeted": rows[-1]["untargeted"] if rows else {},
+        "untargeted": good[-1]["untargeted"] if good else {},
     }
+    if stopped is not None:
+        result["stopped"] = stopped
+        result["failures"] = summary["failures"]
+        print(
+            f"cdw-twin run: stopped after {len(good)}/{args.episodes} episodes: {stopped}\n"
+            f"cdw-twin run: the finished episodes are in {out / 'episodes.json'} "
+            "(run.json says complete: false)",
+            file=sys.stderr,
+        )
     if args.json:
         print(json.dumps(result))
-    else:
+    elif stopped is None:
         for key, value in result.items():
             print(f"{key:>28}: {value}")
-    return 0
+    return code

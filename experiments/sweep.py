@@ -22,9 +22,17 @@ means with 95 % confidence intervals:
   across the episodes (placed_correct of targeted; missed of processed), which stay inside
   [0, 1] and are meaningful with few episodes.
 
+A grid's ``seeds`` must be distinct: a seed run twice in a cell would count one sample as two
+and narrow the interval for nothing.
+
 An interrupted sweep (Ctrl-C, SIGTERM) stops the running episodes, keeps every finished one in
-its cell's tables and writes ``"complete": false`` with ``"stopped"``; so does a sweep in which
-an episode failed (the other episodes still run).
+its cell's tables and writes ``"complete": false`` with ``"stopped"`` (``--json`` prints it,
+and the command exits 130); so does a sweep in which an episode failed (the other episodes
+still run; exit 1). A failed episode (see :mod:`experiments.run`: its twin or controller died,
+or the twin left no complete summary) is a row of its cell's ``episodes.json`` with
+``"failed": true`` and its ``"reason"``, is listed in its cell's ``failures`` and counted in
+``failed``, and is left out of every mean and interval: a cell's ``episodes`` counts only the
+episodes that succeeded.
 """
 
 from __future__ import annotations
@@ -123,6 +131,13 @@ class Grid:
             if seed < 0:
                 msg = f"seeds[{i}] = {seed}: must be >= 0"
                 raise ConfigError(msg)
+        repeated = sorted({seed for seed in self.seeds if self.seeds.count(seed) > 1})
+        if repeated:
+            msg = (
+                f"seeds = {list(self.seeds)}: seed(s) {', '.join(map(str, repeated))} repeated; "
+                "every seed of a cell must be distinct (a repeat fakes a narrower interval)"
+            )
+            raise ConfigError(msg)
 
     @classmethod
     def load(cls, path: Path) -> Grid:
@@ -206,6 +221,15 @@ def expand(grid: Grid, base: Path) -> list[Cell]:
     return unique
 
 
+def _own_dataset(grid: Grid, grid_path: Path, cell: Cell) -> Path | None:
+    """The dataset a cell names (the grid's, else its scenario's), None for the built-in one."""
+    if grid.dataset is not None:
+        return (grid_path.parent / grid.dataset).resolve()
+    if cell.scenario.dataset != "builtin":
+        return (cell.scenario_path.parent / cell.scenario.dataset).resolve()
+    return None
+
+
 def student_t_interval(values: Sequence[float]) -> tuple[float | None, float | None, float | None]:
     """Mean and 95 % Student t interval of ``values`` (interval None for fewer than 2)."""
     from scipy import stats
@@ -225,9 +249,12 @@ def aggregate_cell(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Per-metric ``{mean, ci95_low, ci95_high, n}`` and pooled Wilson intervals of the rates.
 
     ``rows`` are :func:`experiments.run.episode_metrics` dicts; a metric that is None in an
-    episode (e.g. no settled pursuit) leaves that episode out of that metric only.
+    episode (e.g. no settled pursuit) leaves that episode out of that metric only. Failed
+    episodes (``"failed": true``) are counted in ``failed`` and left out of everything else.
     """
-    out: dict[str, Any] = {"episodes": len(rows), "metrics": {}, "wilson": {}}
+    failed = sum(1 for r in rows if r.get("failed"))
+    rows = [r for r in rows if not r.get("failed")]
+    out: dict[str, Any] = {"episodes": len(rows), "failed": failed, "metrics": {}, "wilson": {}}
     for key in CI_METRICS:
         values = [float(r[key]) for r in rows if r.get(key) is not None]
         mean, low, high = student_t_interval(values)
@@ -248,7 +275,7 @@ def aggregate_cell(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 def sweep_csv(cells: Sequence[dict[str, Any]]) -> str:
     """``sweep.csv``: one row per cell, mean and interval of every metric."""
-    header = ["cell", "scenario", "mode", "speed_mps", "duration_s", "episodes"]
+    header = ["cell", "scenario", "mode", "speed_mps", "duration_s", "episodes", "failed"]
     for key in CI_METRICS:
         header += [f"{key}_mean", f"{key}_ci95_low", f"{key}_ci95_high"]
     for rate in WILSON_RATES:
@@ -265,6 +292,7 @@ def sweep_csv(cells: Sequence[dict[str, Any]]) -> str:
             cell["speed_mps"],
             cell["duration_s"],
             agg["episodes"],
+            agg.get("failed", 0),
         ]
         for key in CI_METRICS:
             m = agg["metrics"][key]
@@ -303,12 +331,15 @@ def run_sweep(
         EpisodeSpec,
         RunOptions,
         controller_params,
+        failed_row,
+        failure_text,
         raise_interrupt,
         run_episode,
         write_run_scenario,
         write_tables,
     )
     from twin.builtin import builtin_dataset
+    from twin.scenario_check import check_scenario
 
     if workers < 1:
         msg = f"--workers = {workers}: must be >= 1"
@@ -319,16 +350,16 @@ def run_sweep(
         cell.name: controller_params(cell.scenario.controller, cell.scenario_path.parent)
         for cell in cells
     }
+    own_datasets = {cell.name: _own_dataset(grid, grid_path, cell) for cell in cells}
+    datasets = {name: own or builtin_dataset() for name, own in own_datasets.items()}
+    for cell in cells:
+        check_scenario(cell.scenario, datasets[cell.name], where=str(cell.scenario_path))
     out.mkdir(parents=True, exist_ok=True)
     states: list[_CellState] = []
     jobs: list[tuple[_CellState, RunOptions, EpisodeSpec]] = []
     for cell in cells:
-        own_dataset: Path | None = None
-        if grid.dataset is not None:
-            own_dataset = (grid_path.parent / grid.dataset).resolve()
-        elif cell.scenario.dataset != "builtin":
-            own_dataset = (cell.scenario_path.parent / cell.scenario.dataset).resolve()
-        dataset = own_dataset if own_dataset is not None else builtin_dataset()
+        own_dataset = own_datasets[cell.name]
+        dataset = datasets[cell.name]
         folder = out / cell.name
         scenario_file, cell_params = write_run_scenario(
             cell.scenario, params[cell.name], folder, own_dataset
@@ -367,6 +398,7 @@ def run_sweep(
         rows_out = []
         for st in states:
             rows = [st.rows[k] for k in sorted(st.rows)]
+            agg = aggregate_cell(rows)
             rows_out.append(
                 {
                     "cell": st.cell.name,
@@ -376,9 +408,10 @@ def run_sweep(
                     "speed_mps": st.cell.scenario.system.belt_speed_mps,
                     "duration_s": st.cell.scenario.duration_s,
                     "overrides": st.cell.overrides,
-                    "complete": len(rows) == len(st.cell.seeds),
+                    "complete": agg["episodes"] == len(st.cell.seeds),
+                    "failed": agg["failed"],
                     "failures": st.failures,
-                    "aggregate": aggregate_cell(rows),
+                    "aggregate": agg,
                 }
             )
         data: dict[str, Any] = {
@@ -386,7 +419,8 @@ def run_sweep(
             "grid": str(grid_path),
             "workers": workers,
             "episodes_planned": len(jobs),
-            "episodes": sum(len(st.rows) for st in states),
+            "episodes": sum(c["aggregate"]["episodes"] for c in rows_out),
+            "failed": sum(c["failed"] for c in rows_out),
             "wall_s": time.monotonic() - wall0,
             "cells": rows_out,
         }
@@ -402,7 +436,7 @@ def run_sweep(
 
     def finish_cell(st: _CellState, final: bool) -> None:
         rows = [st.rows[k] for k in sorted(st.rows)]
-        done = len(rows) == len(st.cell.seeds)
+        done = sum(1 for r in rows if not r.get("failed")) == len(st.cell.seeds)
         extra = dict(st.extra)
         if not done and final and (st.failures or stopped):
             extra["stopped"] = "; ".join(st.failures + stopped)
@@ -416,19 +450,22 @@ def run_sweep(
         except EpisodeCancelledError:
             return
         except EpisodeFailedError as exc:
+            row = failed_row(episode, options.mode, exc.reason)
+            row["speed_mps"] = state.cell.scenario.system.belt_speed_mps
             with lock:
-                state.failures.append(str(exc).splitlines()[0])
+                state.rows[episode.index] = row
+                state.failures.append(failure_text(episode.index, episode.seed, exc.reason))
                 finish_cell(state, final=False)
                 write_all(False)
             if not quiet:
-                print(f"FAILED {state.cell.name} seed {episode.seed}", file=sys.stderr)
+                print(f"FAILED {state.cell.name}: {exc}", file=sys.stderr)
             return
         metrics["speed_mps"] = state.cell.scenario.system.belt_speed_mps
         with lock:
             state.rows[episode.index] = metrics
             finish_cell(state, final=False)
             write_all(False)
-            done = sum(len(st.rows) for st in states)
+            done = sum(len(st.rows) for st in states)  # finished, failed or not
         if not quiet:
             print(
                 f"[{done}/{len(jobs)}] {state.cell.name} seed {episode.seed}: "

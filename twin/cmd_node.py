@@ -5,9 +5,13 @@ Example (two shells, same ``ROS_DOMAIN_ID``)::
     cdw-twin twin-node --speed 0.4 --duration 60 --mode realtime --out runs/ep0
     cdw-twin controller
 
-The episode log (``events.jsonl``, ``summary.json``) and the node's telemetry
-(``telemetry.json``: round-trip latency, step rate, belt setpoint and speed; see
-:mod:`twin.telemetry`) go to ``--out`` when the episode ends, also when it is interrupted.
+The episode log goes to ``--out`` (see :mod:`twin.episode_log`): the folder and its
+``status.json`` exist from the start, ``events.jsonl`` is appended as events happen (flushed at
+least every 0.5 s of wall time, so even ``kill -9`` keeps every event up to the last second),
+and ``summary.json`` and the node's telemetry (``telemetry.json``: round-trip latency, step
+rate, belt setpoint and speed; see :mod:`twin.telemetry`) are written when the episode ends.
+Ctrl-C (SIGINT) or SIGTERM ends the episode at the next step: the node writes the folder with
+``"complete": false`` in ``summary.json``, closes the recording and exits with status 130.
 ``--record OUT.mcap`` writes every message the node publishes or receives (every topic of
 ``docs/interfaces.md``) as the bytes on the wire, from inside the node: no recorder process to
 start, match and feed (``cdw-twin run`` records its episodes this way; ``cdw-twin record`` is
@@ -17,17 +21,74 @@ the stand-alone recorder for a cell the twin does not run).
 from __future__ import annotations
 
 import argparse
+import ctypes
 import dataclasses
+import os
 import signal
+import sys
 import time
+from contextlib import ExitStack
 from pathlib import Path
 from types import FrameType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from experiments.record import McapRecording
+    from twin.episode_log import EventLog
     from twin.scenario import Scenario
     from twin.sim import Twin
+
+PARENT_PID_VARIABLE = "CDW_TWIN_PARENT_PID"
+"""Environment variable naming the process this node must not outlive (set by ``cdw-twin run``)."""
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+"""Signals that end the episode early (its folder written, exit status 130)."""
+
+_PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(variable: str = PARENT_PID_VARIABLE) -> None:
+    """Get SIGTERM when the process named by ``variable`` (our parent) dies (Linux only).
+
+    ``prctl(PR_SET_PDEATHSIG)`` asks the kernel to send the signal when the parent thread that
+    started us exits, however it exits (``kill -9`` included). The parent may have died before
+    the call: then our parent id is no longer the one named, and we send ourselves the
+    signal. The variable is removed so that processes we start do not inherit it. Does nothing
+    when the variable is not set (a node started by hand).
+    """
+    value = os.environ.pop(variable, None)
+    if value is None or not sys.platform.startswith("linux"):
+        return
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
+        errno = ctypes.get_errno()
+        msg = f"prctl(PR_SET_PDEATHSIG) failed: {os.strerror(errno)}"
+        raise OSError(errno, msg)
+    if os.getppid() != int(value):
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
+class EpisodeStopped(Exception):  # noqa: N818 (a request, not an error)
+    """A stop signal arrived; raised between two callback passes of the step loop."""
+
+
+class StoppableExecutor:
+    """An executor whose ``spin_once`` raises :class:`EpisodeStopped` once ``stop`` is set.
+
+    The signal handler only records the signal; the step loop is left at its next callback
+    pass, never from inside a callback or a physics step, so the twin's state, events and
+    recording stay consistent.
+    """
+
+    def __init__(self, executor: Any, stop: list[int]) -> None:
+        self.executor = executor
+        self._stop = stop
+
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        """Serve callbacks as the wrapped executor does, unless a stop was requested."""
+        if self._stop:
+            raise EpisodeStopped
+        self.executor.spin_once(timeout_sec=timeout_sec)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -61,6 +122,7 @@ def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path]:
     """The scenario with command-line overrides, and the dataset folder."""
     from twin.builtin import builtin_dataset
     from twin.scenario import Scenario
+    from twin.scenario_check import check_scenario
 
     scenario = Scenario.load(args.scenario) if args.scenario else Scenario()
     system = scenario.system
@@ -86,6 +148,7 @@ def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path]:
             dataset = (args.scenario.parent / dataset).resolve()
     else:
         dataset = builtin_dataset()
+    check_scenario(scenario, dataset, where=str(args.scenario or "default scenario"))
     return scenario, dataset
 
 
@@ -114,73 +177,125 @@ def _open_recording(out: Path | None) -> McapRecording | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run one episode as a ROS 2 node."""
-    import rclpy
-    from rclpy.utilities import try_shutdown
+    """Run one episode as a ROS 2 node; 130 when SIGINT or SIGTERM ended it early."""
+    stop: list[int] = []
 
-    from twin.episode_log import tracking_summary, write_episode
-    from twin.fileio import write_atomic
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        del frame
+        stop.append(signum)
+
+    previous = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
+    try:
+        die_with_parent()
+        interrupted = _run_episode(args, stop)
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    return 130 if interrupted else 0
+
+
+def _run_episode(args: argparse.Namespace, stop: list[int]) -> bool:
+    """The episode; True when a stop signal ended it before its duration."""
+    from twin.episode_log import start_episode_folder, write_status
     from twin.perception import PerceptionConfig
     from twin.ros_isolation import clean_stale_fastdds_shm, local_ros_defaults
-    from twin.ros_node import TwinNode, make_executor, run_loop
     from twin.sim import Twin
 
     scenario, dataset = build_scenario(args)
     perception = PerceptionConfig.zero_noise() if args.perception == "zero" else None
     local_ros_defaults()
     clean_stale_fastdds_shm()
-    stop = {"requested": False}
+    out: Path | None = args.out
+    log = None
+    if out is not None:
+        log = start_episode_folder(out, scenario=scenario.name, seed=scenario.seed)
+    try:
+        with ExitStack() as stack:
+            if log is not None:
+                stack.enter_context(log)
+            twin = stack.enter_context(
+                Twin(
+                    scenario,
+                    dataset_dir=dataset,
+                    perception=perception,
+                    event_sink=None if log is None else log.append,
+                )
+            )
+            return _serve(args, twin, stop, log)
+    except BaseException as exc:
+        if out is not None:
+            write_status(out, "failed", error=f"{type(exc).__name__}: {exc}")
+        raise
 
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        stop["requested"] = True
-        raise KeyboardInterrupt
 
-    signal.signal(signal.SIGTERM, on_signal)
-    with Twin(scenario, dataset_dir=dataset, perception=perception) as twin:
-        twin.reset()
-        recording = _open_recording(args.record)
-        rclpy.init()
-        node = TwinNode(
-            twin,
-            lockstep=args.mode == "lockstep",
-            tap=None if recording is None else recording.write,
+def _serve(args: argparse.Namespace, twin: Twin, stop: list[int], log: EventLog | None) -> bool:
+    """Run the twin node until the episode ends or a stop signal; write the episode folder."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+    from rclpy.utilities import try_shutdown
+
+    from twin.episode_log import tracking_summary, write_status, write_summary
+    from twin.fileio import write_atomic
+    from twin.ros_node import TwinNode, make_executor, run_loop
+
+    scenario = twin.scenario
+    twin.reset()
+    recording = _open_recording(args.record)
+    # rclpy's own SIGINT handler would shut the context down under the step loop
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    node = TwinNode(
+        twin,
+        lockstep=args.mode == "lockstep",
+        tap=None if recording is None else recording.write,
+    )
+    executor = make_executor()
+    executor.add_node(node)
+    wall0 = time.perf_counter()
+    interrupted = False
+    try:
+        run_loop(node, StoppableExecutor(executor, stop), ack_timeout_s=args.ack_timeout)
+    except EpisodeStopped:
+        interrupted = True
+    wall = time.perf_counter() - wall0
+    if recording is not None:
+        recording.close()
+    if log is not None:
+        log.close()
+    twin.targets.finish(twin.time_s)
+    scores = twin.scores()
+    summary = {
+        "scenario": scenario.name,
+        "seed": scenario.seed,
+        "mode": args.mode,
+        "belt_speed_mps": scenario.system.belt_speed_mps,
+        "complete": not interrupted,
+        "sim_seconds": twin.time_s,
+        "wall_seconds": wall,
+        "real_time_factor": twin.time_s / wall if wall > 0 else 0.0,
+        "scores": dataclasses.asdict(scores),
+        "landing_in_bins": twin.landing_in_bins(),
+        "tracking": tracking_summary(twin.targets.results),
+        "published": dict(node.counters.published),
+        "received_commands": node.counters.received_commands,
+        "rejected_commands": dict(node.counters.rejected or {}),
+        "lockstep_timeouts": node.counters.lockstep_timeouts,
+        "priorities": list(node.priorities),
+        "final_state": _final_state(twin),
+        **node.telemetry.summary(),
+    }
+    if interrupted:
+        summary["stopped_by"] = signal.Signals(stop[0]).name
+    out: Path | None = args.out
+    if out is not None:
+        write_atomic(out / "telemetry.json", node.telemetry.to_json())
+        write_summary(out, summary)
+        write_status(
+            out,
+            "interrupted" if interrupted else "finished",
+            scenario=scenario.name,
+            seed=scenario.seed,
+            sim_seconds=twin.time_s,
         )
-        executor = make_executor()
-        executor.add_node(node)
-        wall0 = time.perf_counter()
-        interrupted = False
-        try:
-            run_loop(node, executor, ack_timeout_s=args.ack_timeout)
-        except KeyboardInterrupt:
-            interrupted = True
-        wall = time.perf_counter() - wall0
-        if recording is not None:
-            recording.close()
-        twin.targets.finish(twin.time_s)
-        scores = twin.scores()
-        summary = {
-            "scenario": scenario.name,
-            "seed": scenario.seed,
-            "mode": args.mode,
-            "belt_speed_mps": scenario.system.belt_speed_mps,
-            "complete": not interrupted,
-            "sim_seconds": twin.time_s,
-            "wall_seconds": wall,
-            "real_time_factor": twin.time_s / wall if wall > 0 else 0.0,
-            "scores": dataclasses.asdict(scores),
-            "landing_in_bins": twin.landing_in_bins(),
-            "tracking": tracking_summary(twin.targets.results),
-            "published": dict(node.counters.published),
-            "received_commands": node.counters.received_commands,
-            "rejected_commands": dict(node.counters.rejected or {}),
-            "lockstep_timeouts": node.counters.lockstep_timeouts,
-            "priorities": list(node.priorities),
-            "final_state": _final_state(twin),
-            **node.telemetry.summary(),
-        }
-        if args.out is not None:
-            write_atomic(args.out / "telemetry.json", node.telemetry.to_json())
-            write_episode(args.out, twin.events, summary)
-        node.destroy_node()
-        try_shutdown()  # a SIGTERM may have shut the context down already
-    return 130 if interrupted and stop["requested"] else 0
+    node.destroy_node()
+    try_shutdown()
+    return interrupted

@@ -1,14 +1,26 @@
 """The episode log a twin run leaves behind: events, scores, counters, tracking results.
 
-Files (each written atomically, so a file that exists is complete):
-``events.jsonl`` (one event per line), ``summary.json`` (scores, tracking, counters, timing).
+Files:
+
+- ``events.jsonl``: one event per line (:meth:`Event.to_json`), appended while the episode runs
+  by :class:`EventLog` and flushed at least every ``flush_interval_s`` of wall time (0.5 s), so
+  a killed process leaves every event up to its last second; the lines are the events in the
+  order of :attr:`twin.sim.Twin.events`;
+- ``status.json``: written when the episode starts (``"state": "running"``) and again when it
+  ends (``"finished"`` or ``"interrupted"``); a folder whose status still says ``running`` and
+  that has no ``summary.json`` belongs to a process that was killed;
+- ``summary.json``: scores, tracking, counters, timing, written atomically when the episode
+  ends (``"complete": false`` when it was interrupted). A folder without it is incomplete.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import threading
 from collections.abc import Iterable
 from pathlib import Path
+from types import TracebackType
 from typing import Any
 
 import numpy as np
@@ -16,6 +28,12 @@ import numpy as np
 from twin.events import Event
 from twin.fileio import write_atomic
 from twin.target_metric import TrackingResult
+
+DEFAULT_FLUSH_INTERVAL_S = 0.5
+"""Wall seconds between two flushes of :class:`EventLog` (at most)."""
+
+EPISODE_END_FILES = ("summary.json", "telemetry.json")
+"""Files an episode writes when it ends: removed when a new episode starts in the folder."""
 
 
 def tracking_summary(results: Iterable[TrackingResult]) -> dict[str, Any]:
@@ -32,7 +50,83 @@ def tracking_summary(results: Iterable[TrackingResult]) -> dict[str, Any]:
     }
 
 
-def write_episode(out: Path, events: Iterable[Event], summary: dict[str, Any]) -> None:
-    """Write ``events.jsonl`` and ``summary.json`` into ``out``."""
-    write_atomic(out / "events.jsonl", "".join(e.to_json() + "\n" for e in events))
+class EventLog:
+    """``events.jsonl`` written as the events happen: append-only, flushed by wall time.
+
+    :meth:`append` (the twin's ``event_sink``) only queues the event's line; a background
+    thread writes and flushes the queue every ``flush_interval_s`` of wall time, so the step
+    loop never waits for the disk and there is no fsync. :meth:`close` writes what is left.
+    Opening truncates an older log of the same path.
+    """
+
+    def __init__(self, path: Path, *, flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.path = path
+        self._handle = path.open("w", encoding="utf-8")
+        self._interval_s = flush_interval_s
+        self._pending: list[str] = []
+        self._queue_lock = threading.Lock()
+        self._write_lock = threading.Lock()
+        self._closing = threading.Event()
+        self._thread = threading.Thread(target=self._flush_loop, name="events.jsonl", daemon=True)
+        self._thread.start()
+
+    def __enter__(self) -> EventLog:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def append(self, event: Event) -> None:
+        """Queue one event's line; it is on disk within ``flush_interval_s``."""
+        line = event.to_json() + "\n"
+        with self._queue_lock:
+            self._pending.append(line)
+
+    def flush(self) -> None:
+        """Write and flush every queued line now."""
+        with self._write_lock:
+            with self._queue_lock:
+                lines, self._pending = self._pending, []
+            if lines and not self._handle.closed:
+                self._handle.write("".join(lines))
+                self._handle.flush()
+
+    def _flush_loop(self) -> None:
+        while not self._closing.wait(self._interval_s):
+            self.flush()
+
+    def close(self) -> None:
+        """Stop the flushing thread, write what is left and close the file."""
+        if self._handle.closed:
+            return
+        self._closing.set()
+        self._thread.join()
+        self.flush()
+        self._handle.close()
+
+
+def write_status(out: Path, state: str, **fields: Any) -> None:
+    """Write ``status.json``: the episode's ``state`` and whether it is ``complete``."""
+    data = {"state": state, "complete": state == "finished", "pid": os.getpid(), **fields}
+    write_atomic(out / "status.json", json.dumps(data, indent=2, sort_keys=True) + "\n")
+
+
+def start_episode_folder(out: Path, **fields: Any) -> EventLog:
+    """Prepare ``out`` for a new episode: remove the end files of an older one, write
+    ``status.json`` (``running``) and open the streaming ``events.jsonl``."""
+    out.mkdir(parents=True, exist_ok=True)
+    for name in EPISODE_END_FILES:
+        (out / name).unlink(missing_ok=True)
+    write_status(out, "running", **fields)
+    return EventLog(out / "events.jsonl")
+
+
+def write_summary(out: Path, summary: dict[str, Any]) -> None:
+    """Write ``summary.json`` (atomically) into ``out``."""
     write_atomic(out / "summary.json", json.dumps(summary, indent=2, sort_keys=True) + "\n")

@@ -8,6 +8,15 @@ from pathlib import Path
 
 
 def _umask() -> int:
+    """The process's umask, read without changing it where Linux shows it (``os.umask`` sets
+    it to 0 for an instant, which other threads creating files would see)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
     mask = os.umask(0)
     os.umask(mask)
     return mask

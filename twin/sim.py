@@ -20,6 +20,10 @@ Injected faults (the scenario's ``faults``): inside a ``belt_stall`` window the 
 setpoint of 0 whatever was commanded (``setpoint_mps`` keeps the commanded value); inside a
 ``detection_dropout`` window no detection frame is released. Each window's start and end is
 logged as a ``fault`` event with ``kind`` ``injected_belt_stall`` / ``injected_detection_dropout``.
+
+Every event the twin logs is also handed, as it is logged, to its ``event_sink`` when one is set
+(e.g. :meth:`twin.episode_log.EventLog.append`): a caller streams the episode's events to disk
+as they happen, so a killed process still leaves them behind.
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ import math
 import os
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
@@ -105,8 +109,16 @@ class Observation:
     events: tuple[Event, ...] = field(default=())
 
 
+EventSink = Callable[[Event], None]
+"""Called with every event the twin logs, in the order of :attr:`Twin.events`."""
+
+
 class Twin:
-    """The conveyor twin. One PyBullet client and one FMU instance per ``Twin``."""
+    """The conveyor twin. One PyBullet client and one FMU instance per ``Twin``.
+
+    ``event_sink`` (also settable as the attribute of that name) receives every event as it
+    is appended to :attr:`events`; it sees the events of every episode (every :meth:`reset`).
+    """
 
     def __init__(
         self,
@@ -120,6 +132,7 @@ class Twin:
         perception_enabled: bool = True,
         realtime: bool = False,
         gui: bool = False,
+        event_sink: EventSink | None = None,
     ) -> None:
         if cell is None:
             if scenario.robot not in ROBOTS:
@@ -138,7 +151,7 @@ class Twin:
         self.perception: Perception | None = None
         self.targets = TargetTracker()
         self._released: list[DetectionFrame] = []
-        self.layouts: tuple[ImageLayout, ...] = load_dataset(dataset_dir, scenario.objects.classes)
+        self.layouts: tuple[ImageLayout, ...] = load_dataset(dataset_dir)
         self._cache_dir, self._cache = collision_cache_dir()
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
         self._drive: BeltDrive | None = None
@@ -151,6 +164,7 @@ class Twin:
         self.setpoint_mps = scenario.system.belt_speed_mps
         self._belt_state = BeltState(0.0, 0.0, 0.0, 0.0, 0.0)
         self._events: list[Event] = []
+        self.event_sink = event_sink
         self._wall_start = 0.0
         self._realtime_factor = 1.0
 
@@ -287,7 +301,11 @@ class Twin:
         pb.stepSimulation(physicsClientId=self.client)
         self.step_count += 1
         new = monitor.update(self.step_count, self.time_s)
-        self._events.extend(new)
+        if new:
+            self._events.extend(new)
+            if self.event_sink is not None:
+                for event in new:
+                    self.event_sink(event)
         if self.targets.active:
             for event in new:
                 if event.type is EventType.PICK_SUCCESS:
@@ -437,6 +455,8 @@ class Twin:
         """Log an event about no object, now."""
         event = Event(time_s=self.time_s, step=self.step_count, type=kind, object_id=0, data=data)
         self._events.append(event)
+        if self.event_sink is not None:
+            self.event_sink(event)
         return event
 
     def scores(self) -> Scores:

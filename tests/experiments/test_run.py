@@ -6,6 +6,7 @@ import csv
 import importlib.util
 import json
 import signal
+import stat
 import subprocess
 import sys
 import time
@@ -44,8 +45,17 @@ def test_two_episodes_end_to_end(builtin_meshes: Path, tmp_path: Path) -> None:
         text=True,
         timeout=120,
         check=False,
+        umask=0o002,
     )
     assert done.returncode == 0, done.stderr[-3000:]
+    # every file of the run folder has the mode an ordinary open gives under that umask
+    modes = {
+        str(p.relative_to(out)): stat.S_IMODE(p.stat().st_mode)
+        for p in out.rglob("*")
+        if p.is_file()
+    }
+    assert {"ep000/controller.json", "ep000/twin/summary.json", "run.json"} <= set(modes)
+    assert {name: mode for name, mode in modes.items() if mode != 0o664} == {}
     assert "episode 2/2 (seed 6)" in done.stdout
     run = _json(out / "run.json")
     assert run["complete"] is True
@@ -151,7 +161,7 @@ def test_interrupt_keeps_the_finished_episodes_and_says_incomplete(
     scenario.write_text(SCENARIO, encoding="utf-8")
     out = tmp_path / "run"
     proc = subprocess.Popen(
-        _cli(scenario, "--episodes", 3, "--dataset", builtin_meshes, "--out", out),
+        _cli(scenario, "--episodes", 3, "--dataset", builtin_meshes, "--out", out, "--json"),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -164,7 +174,7 @@ def test_interrupt_keeps_the_finished_episodes_and_says_incomplete(
             time.sleep(0.2)
         time.sleep(1.0)
         proc.send_signal(signal.SIGINT)
-        _, stderr = proc.communicate(timeout=60)
+        stdout, stderr = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -172,7 +182,12 @@ def test_interrupt_keeps_the_finished_episodes_and_says_incomplete(
     assert "stopped after 1/3 episodes" in stderr
     run = _json(out / "run.json")
     assert run["complete"] is False
-    assert run["stopped"].startswith("interrupted")
+    assert run["stopped"] == "interrupted (SIGINT)"
+    # --json prints what finished: the first episode's metrics, flagged incomplete
+    printed = json.loads(stdout)
+    assert (printed["complete"], printed["stopped"]) == (False, "interrupted (SIGINT)")
+    assert (printed["episodes"], printed["failed"], printed["out"]) == (1, 0, str(out))
+    assert printed["picks"] == run["mean"]["picks"] == _json(out / "episodes.json")[0]["picks"]
     rows = _json(out / "episodes.json")
     assert [r["seed"] for r in rows] == [0]
     assert _json(out / "ep000" / "twin" / "summary.json")["complete"] is True

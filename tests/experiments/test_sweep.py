@@ -160,3 +160,24 @@ def test_bench_sweep_rejects_a_pass_it_cannot_compare_before_running_anything(
     err = capsys.readouterr().err
     assert f"{flag} {value}" in err
     assert "need rounds >= 1, episodes >= 1 and workers >= 2" in err
+
+
+def test_a_grid_with_a_repeated_seed_is_refused_before_anything_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A seed twice in a cell would count one sample as two (a narrower interval for nothing)."""
+    from twin.cli import main
+
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(
+        f"scenarios: [{SCENARIOS / 'default.yaml'}]\nseeds: [1, 1, 2]\n", encoding="utf-8"
+    )
+    with pytest.raises(ConfigError, match=r"seeds = \[1, 1, 2\]: seed\(s\) 1 repeated") as info:
+        Grid.load(grid)
+    assert str(info.value).startswith(f"{grid}: ")
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(grid), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"cdw-twin: error: {grid}: seeds = [1, 1, 2]: seed(s) 1 repeated")
+    assert err.count("\n") == 1
+    assert not out.exists()
