@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from experiments.report import FIGURES, ReportError, wilson_interval, write_report
+from experiments.report import FIGURES, ReportError, load_runs, wilson_interval, write_report
 
 CHROMIUM = Path("/usr/bin/chromium")
 PROBE_SCRIPT = (
@@ -157,3 +157,19 @@ def test_wilson_interval_contains_the_estimate_and_stays_in_unit_range(k: int, n
 def test_wilson_interval_known_value() -> None:
     # 50 of 100 at 95 %: 0.5 +- 0.0962 (Wilson)
     assert wilson_interval(50, 100) == pytest.approx((0.4038, 0.5962), abs=1e-4)
+
+
+def test_an_episode_that_did_not_finish_is_left_out_with_a_note(
+    run_dir: Path, tmp_path: Path
+) -> None:
+    """A failed or stopped episode (``complete: false``) never enters the report's numbers."""
+    copy = tmp_path / "run_copy"
+    shutil.copytree(run_dir, copy)
+    shutil.copytree(copy / "ep000", copy / "ep001")
+    summary_path = copy / "ep001" / "twin" / "summary.json"
+    summary = json.loads(summary_path.read_text(encoding="utf-8"))
+    summary["complete"] = False
+    summary_path.write_text(json.dumps(summary), encoding="utf-8")
+    data = load_runs([copy])
+    assert [ep.folder.name for ep in data.episodes] == ["ep000"]
+    assert any("ep001" in note and "did not finish" in note for note in data.notes)
