@@ -15,24 +15,18 @@ names the runner in ``CDW_TWIN_PARENT_PID``), it gets SIGTERM when the runner di
 from __future__ import annotations
 
 import argparse
-import ctypes
 import json
-import os
 import signal
 import sys
-import tempfile
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from interfaces.fileio import write_atomic
+from interfaces.lifecycle import die_with_parent
+
 DEFAULT_PARAMS = Path(__file__).resolve().parent / "config" / "default.yaml"
 """The reference cell's parameter file."""
-
-PARENT_PID_VARIABLE = "CDW_TWIN_PARENT_PID"
-"""Environment variable naming the process this node must not outlive (set by ``cdw-twin run``;
-the same name as ``twin.cmd_node.PARENT_PID_VARIABLE``, which this package does not import)."""
-
-_PR_SET_PDEATHSIG = 1
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -54,57 +48,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def die_with_parent(variable: str = PARENT_PID_VARIABLE) -> None:
-    """Get SIGTERM when the process named by ``variable`` (our parent) dies (Linux only).
-
-    ``prctl(PR_SET_PDEATHSIG)``; a parent that died before the call no longer is our parent,
-    and we send ourselves the signal. The variable is removed from our environment. Does
-    nothing when it is not set (a controller started by hand).
-    """
-    value = os.environ.pop(variable, None)
-    if value is None or not sys.platform.startswith("linux"):
-        return
-    libc = ctypes.CDLL(None, use_errno=True)
-    if libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
-        errno = ctypes.get_errno()
-        msg = f"prctl(PR_SET_PDEATHSIG) failed: {os.strerror(errno)}"
-        raise OSError(errno, msg)
-    if os.getppid() != int(value):
-        os.kill(os.getpid(), signal.SIGTERM)
-
-
-def _umask() -> int:
-    """The process's umask, read without changing it where Linux shows it (``os.umask`` sets
-    it to 0 for an instant, which other threads creating files would see)."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as status:
-            for line in status:
-                if line.startswith("Umask:"):
-                    return int(line.split()[1], 8)
-    except (OSError, ValueError, IndexError):
-        pass
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def write_json_atomic(path: Path, data: Any) -> None:
-    """Write ``data`` as JSON to ``path`` via a temporary file in the same directory.
-
-    The file gets the permissions an ordinary ``open`` would give it (0666 minus the umask),
-    not the 0600 of a temporary file, like every other file of a run folder.
-    """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            json.dump(data, handle, indent=2, sort_keys=True, allow_nan=False)
-            handle.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Write ``data`` as JSON to ``path`` atomically (:func:`interfaces.fileio.write_atomic`)."""
+    text = json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n"
+    write_atomic(path, text)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -40,8 +40,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from interfaces.fileio import write_atomic
 from twin.errors import CdwTwinError
-from twin.fileio import write_atomic
 from twin.scenario import Scenario
 
 

@@ -136,8 +136,8 @@ def episode_clock(stamps_ns: list[int], recording: Path) -> EpisodeClock:
 
 
 def decode_events(recording: Path, hz: float) -> list[Any]:
-    """The ``/events`` of ``recording`` as :class:`twin.events.Event`, in recorded order."""
-    from twin.events import Event, EventType
+    """The ``/events`` of ``recording`` as :class:`interfaces.events.Event`, in recorded order."""
+    from interfaces.events import Event, EventType
 
     events = []
     for index, (_, msg) in enumerate(read_topic(recording, "/events")):

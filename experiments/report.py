@@ -42,8 +42,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from experiments import stats
+from interfaces.fileio import write_atomic
 from twin.errors import CdwTwinError
-from twin.fileio import write_atomic
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

@@ -91,9 +91,9 @@ from types import FrameType
 from typing import IO, TYPE_CHECKING, Any, Literal
 
 from experiments.stats import mean_of
-from twin.cmd_node import PARENT_PID_VARIABLE
+from interfaces.fileio import write_atomic
+from interfaces.lifecycle import PARENT_PID_VARIABLE
 from twin.errors import CdwTwinError
-from twin.fileio import write_atomic
 
 if TYPE_CHECKING:
     from twin.scenario import Scenario

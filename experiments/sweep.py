@@ -58,9 +58,9 @@ from typing import TYPE_CHECKING, Any, Literal
 import yaml
 
 from experiments.stats import wilson_interval
-from twin.dataclass_io import from_data
+from interfaces.dataclass_io import from_data
+from interfaces.fileio import write_atomic
 from twin.errors import ConfigError
-from twin.fileio import write_atomic
 
 if TYPE_CHECKING:
     from twin.scenario import Scenario

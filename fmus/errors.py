@@ -1,8 +1,12 @@
-"""Errors raised while building the FMUs."""
+"""Errors about FMUs: building ours, loading or stepping any."""
 
 from __future__ import annotations
 
-from twin.errors import FmuError
+from interfaces.errors import CdwTwinError
+
+
+class FmuError(CdwTwinError):
+    """An FMU is missing, malformed, or rejected a call."""
 
 
 class FmuBuildError(FmuError):

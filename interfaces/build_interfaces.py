@@ -57,7 +57,7 @@ import time
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
-from twin.errors import CdwTwinError
+from interfaces.errors import CdwTwinError
 
 PACKAGE = "cdw_interfaces"
 HERE = Path(__file__).resolve().parent

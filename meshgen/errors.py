@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from twin.errors import CdwTwinError, ConfigError
+from interfaces.errors import CdwTwinError, ConfigError
 
 
 class MeshgenError(CdwTwinError):

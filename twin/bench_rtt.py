@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from cdw_interfaces.msg import Ping
     from rosgraph_msgs.msg import Clock
 
-    from twin.cmd_node import PARENT_PID_VARIABLE
+    from interfaces.lifecycle import PARENT_PID_VARIABLE
     from twin.ros_isolation import clean_stale_fastdds_shm, ros_domain
     from twin.ros_node import CLOCK_QOS, STREAM_QOS, make_executor
 

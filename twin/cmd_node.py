@@ -21,51 +21,21 @@ the stand-alone recorder for a cell the twin does not run).
 from __future__ import annotations
 
 import argparse
-import ctypes
 import dataclasses
-import os
 import signal
-import sys
 import time
 from contextlib import ExitStack
 from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
+from interfaces.lifecycle import STOP_SIGNALS, die_with_parent
+
 if TYPE_CHECKING:
     from experiments.record import McapRecording
     from twin.episode_log import EventLog
     from twin.scenario import Scenario
     from twin.sim import Twin
-
-PARENT_PID_VARIABLE = "CDW_TWIN_PARENT_PID"
-"""Environment variable naming the process this node must not outlive (set by ``cdw-twin run``)."""
-
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-"""Signals that end the episode early (its folder written, exit status 130)."""
-
-_PR_SET_PDEATHSIG = 1
-
-
-def die_with_parent(variable: str = PARENT_PID_VARIABLE) -> None:
-    """Get SIGTERM when the process named by ``variable`` (our parent) dies (Linux only).
-
-    ``prctl(PR_SET_PDEATHSIG)`` asks the kernel to send the signal when the parent thread that
-    started us exits, however it exits (``kill -9`` included). The parent may have died before
-    the call: then our parent id is no longer the one named, and we send ourselves the
-    signal. The variable is removed so that processes we start do not inherit it. Does nothing
-    when the variable is not set (a node started by hand).
-    """
-    value = os.environ.pop(variable, None)
-    if value is None or not sys.platform.startswith("linux"):
-        return
-    libc = ctypes.CDLL(None, use_errno=True)
-    if libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
-        errno = ctypes.get_errno()
-        msg = f"prctl(PR_SET_PDEATHSIG) failed: {os.strerror(errno)}"
-        raise OSError(errno, msg)
-    if os.getppid() != int(value):
-        os.kill(os.getpid(), signal.SIGTERM)
 
 
 class EpisodeStopped(Exception):  # noqa: N818 (a request, not an error)
@@ -234,8 +204,8 @@ def _serve(args: argparse.Namespace, twin: Twin, stop: list[int], log: EventLog 
     from rclpy.signals import SignalHandlerOptions
     from rclpy.utilities import try_shutdown
 
+    from interfaces.fileio import write_atomic
     from twin.episode_log import tracking_summary, write_status, write_summary
-    from twin.fileio import write_atomic
     from twin.ros_node import TwinNode, make_executor, run_loop
 
     scenario = twin.scenario

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from interfaces.fileio import write_atomic
 from twin.errors import SceneError
-from twin.fileio import write_atomic
 from twin.objects import read_lines
 
 

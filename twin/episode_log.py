@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from twin.events import Event
-from twin.fileio import write_atomic
+from interfaces.events import Event
+from interfaces.fileio import write_atomic
 from twin.target_metric import TrackingResult
 
 DEFAULT_FLUSH_INTERVAL_S = 0.5

@@ -1,24 +1,18 @@
-"""Project-wide error base.
+"""Errors raised by the twin package.
 
-Every package of cdw-twin derives its errors from :class:`CdwTwinError`, so a caller can catch
-everything the project raises on purpose with one ``except`` while real bugs still surface.
-Messages always name the file, line, field or value that was wrong.
+The base error and :class:`ConfigError` live in :mod:`interfaces.errors` (every package may
+import it), the FMU errors in :mod:`fmus.errors`; they are re-exported here for the twin's
+modules.
 """
 
 from __future__ import annotations
 
-
-class CdwTwinError(Exception):
-    """Base class of every error cdw-twin raises on purpose."""
-
-
-class ConfigError(CdwTwinError):
-    """A configuration value (scenario, robot, CLI option) is missing or out of range."""
+from fmus.errors import FmuError
+from interfaces.errors import CdwTwinError, ConfigError
 
 
 class SceneError(CdwTwinError):
     """A scene input (scene CSV, mesh, URDF) is missing or malformed."""
 
 
-class FmuError(CdwTwinError):
-    """An FMU is missing, malformed, or rejected a call."""
+__all__ = ["CdwTwinError", "ConfigError", "FmuError", "SceneError"]

@@ -37,8 +37,8 @@ from functools import partial
 
 import pybullet as pb
 
+from interfaces.events import Event, EventType
 from twin.config import CellConfig
-from twin.events import Event, EventType
 from twin.objects import read_obj_triangles
 from twin.robot import Robot
 from twin.stream import Placement

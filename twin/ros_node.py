@@ -53,6 +53,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from trajectory_msgs.msg import JointTrajectory
 
+from interfaces.events import Event
 from twin.commands import (
     JointTarget,
     Rejected,
@@ -61,7 +62,6 @@ from twin.commands import (
     validate_priorities,
     validate_setpoint,
 )
-from twin.events import Event
 from twin.perception import DetectionFrame
 from twin.sim import ArmCommand, Twin
 from twin.telemetry import TelemetryRecorder

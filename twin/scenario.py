@@ -32,9 +32,10 @@ from typing import Literal, NamedTuple
 import numpy as np
 import yaml
 
-from twin.dataclass_io import from_data, load_yaml_strict, to_data
+from interfaces.dataclass_io import from_data, to_data
+from interfaces.fileio import write_atomic
+from interfaces.yamlio import load_yaml_strict
 from twin.errors import ConfigError
-from twin.fileio import write_atomic
 from twin.perception import PerceptionConfig
 
 CLASS_NAMES: tuple[str, ...] = ("concrete", "brick", "wood", "rubber")

@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from twin.events import Event, EventType
+from interfaces.events import Event, EventType
 
 
 @dataclass(frozen=True)

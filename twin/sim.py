@@ -40,11 +40,11 @@ from types import TracebackType
 import numpy as np
 import pybullet as pb
 
+from interfaces.events import Event, EventType
 from twin.belt_drive import BeltDrive, BeltState
 from twin.builtin import cache_root
 from twin.config import ROBOTS, CellConfig
 from twin.errors import ConfigError
-from twin.events import Event, EventType
 from twin.monitor import GroundTruth, Monitor
 from twin.objects import ImageLayout, load_dataset
 from twin.perception import DetectionFrame, Perception, PerceptionConfig

@@ -18,8 +18,8 @@ import numpy as np
 import pybullet as pb
 import pytest
 
+from interfaces.events import EventType
 from twin.config import BeltConfig, CellConfig, GraspConfig, RobotConfig, WorkspaceConfig
-from twin.events import EventType
 from twin.perception import PerceptionConfig
 from twin.robot import HOLD_S, Robot
 

@@ -10,7 +10,7 @@ import pybullet as pb
 import pytest
 from twin_helpers import box_px
 
-from twin.events import EventType
+from interfaces.events import EventType
 from twin.scenario import Scenario, SystemLevel
 from twin.sim import ArmCommand, Twin
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from twin.events import Event, EventType
+from interfaces.events import Event, EventType
 from twin.scores import compute_scores
 
 

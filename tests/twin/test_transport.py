@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from twin_helpers import box_px
 
-from twin.events import EventType
+from interfaces.events import EventType
 from twin.scenario import Scenario, SystemLevel
 from twin.sim import Twin
 

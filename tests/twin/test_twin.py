@@ -13,9 +13,9 @@ import pytest
 import trimesh
 from twin_helpers import box_px
 
+from interfaces.events import EventType
 from twin.config import ROBOTS, CellConfig, RobotConfig
 from twin.errors import ConfigError, SceneError
-from twin.events import EventType
 from twin.scenario import ObjectLevel, Scenario, SystemLevel
 from twin.sim import ArmCommand, Twin
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from twin.dataclass_io import load_yaml_strict
+from interfaces.yamlio import load_yaml_strict
 from twin.errors import ConfigError
 
 

@@ -3,8 +3,7 @@
 ``from_data(cls, data, where)`` builds a dataclass from nested dicts and lists, checking every key
 against the dataclass fields (an unknown key is an error, a missing one takes the default) and every
 value against the field's annotation. ``to_data(obj)`` is the inverse, so a config written and read
-back compares equal. ``load_yaml_strict(text, where)`` reads the YAML text such configs come from,
-refusing a key given twice in one mapping (plain YAML keeps the last one silently).
+back compares equal.
 """
 
 from __future__ import annotations
@@ -15,61 +14,9 @@ import types
 import typing
 from typing import Any, TypeVar, Union, get_args, get_origin, get_type_hints
 
-import yaml
-
-from twin.errors import ConfigError
+from interfaces.errors import ConfigError
 
 T = TypeVar("T")
-
-_MERGE_TAG = "tag:yaml.org,2002:merge"
-
-
-class StrictLoader(yaml.SafeLoader):
-    """A YAML SafeLoader whose mappings refuse a key given twice (:class:`ConfigError`).
-
-    Keys brought in by a ``<<`` merge may be overridden, as YAML intends; only keys written
-    out in the same mapping count. ``name`` (set per load) prefixes the error message.
-    """
-
-    name: str = "<yaml>"
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
-        """The mapping of ``node``; :class:`ConfigError` naming the key and both lines if a
-        key is repeated."""
-        first: dict[Any, yaml.Node] = {}
-        for key_node, _ in node.value:
-            if key_node.tag == _MERGE_TAG:
-                continue
-            key = self.construct_object(key_node, deep=True)
-            try:
-                earlier = first.setdefault(key, key_node)
-            except TypeError:
-                continue  # an unhashable key: SafeLoader reports it below
-            if earlier is not key_node:
-                line, first_line = key_node.start_mark.line + 1, earlier.start_mark.line + 1
-                msg = f"{self.name}:{line}: duplicate key {key!r} (first on line {first_line})"
-                raise ConfigError(msg)
-        return super().construct_mapping(node, deep=deep)
-
-
-def load_yaml_strict(text: str, where: str) -> Any:
-    """Parse YAML ``text`` (safe types only); a one-line :class:`ConfigError` naming ``where``
-    and the line for invalid YAML and for a key given twice in one mapping."""
-    loader = StrictLoader(text)
-    loader.name = where
-    try:
-        return loader.get_single_data()
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark
-        at = f"{where}:{mark.line + 1}:{mark.column + 1}" if mark is not None else where
-        what = ", ".join(part for part in (exc.context, exc.problem) if part)
-        msg = f"{at}: not valid YAML: {what}"
-        raise ConfigError(msg) from None
-    except yaml.YAMLError as exc:
-        msg = f"{where}: not valid YAML: {exc}"
-        raise ConfigError(msg) from None
-    finally:
-        loader.dispose()
 
 
 def to_data(obj: object) -> Any:
