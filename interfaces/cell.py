@@ -1,0 +1,487 @@
+"""The cell description: belt, belt drive, physics and stations, as data both sides read.
+
+One YAML file describes a sorting cell. The twin builds its scene from it; each controller
+process reads the same file and takes its own station (``--station NAME``); ``cdw-twin run``
+copies the resolved description into the run folder. The built-in reference cell is
+``interfaces/cells/default.yaml``: one Franka Emika Panda with its hand beside a 0.6 m belt and
+one bin per class.
+
+World frame (REP 103): metres, z up, origin at the first station's robot base in the reference
+cell. The belt travels along +x; its centreline is at ``y = belt.centre_y_m`` and its top
+surface at ``z = belt.surface_z_m``. Objects enter at ``belt.infeed_x_m`` and leave over the end
+at ``belt.end_x_m``.
+
+A station is one robot with one tool, its pick window (an x interval over the belt's width) and
+its bins; its per-robot topics live under its ROS ``namespace`` (``""`` keeps the bare names of
+a one-station cell). ``robot`` and ``tool`` are either a name from the catalogue
+(``interfaces/catalog.yaml``: robots ``panda``, ``xarm6``; tools ``panda_hand``,
+``xarm_gripper``) or a full mapping. A bin sorts one class; the classes a cell sorts are those
+of its bins.
+
+The belt drive is a co-simulation FMU: ``builtin`` is ours (``fmus/belt_drive``, FMI 3), any
+other value a path (relative to the cell file) to a third-party FMU whose variables
+``mapping`` names; ``parameters`` are set before initialisation. Every error names the file and
+the dotted key.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import yaml
+
+from interfaces.dataclass_io import from_data, to_data
+from interfaces.errors import ConfigError
+from interfaces.fileio import write_atomic
+from interfaces.robots import RobotSpec, robot_from_data
+from interfaces.tools import ToolSpec, tool_from_data
+from interfaces.yamlio import load_yaml_strict
+
+CELLS_DIR = Path(__file__).resolve().parent / "cells"
+"""Folder of the cell files shipped with the project (``default``, ``two_pandas``, ...)."""
+
+DEFAULT_CELL = CELLS_DIR / "default.yaml"
+"""The reference cell."""
+
+
+class CellError(ConfigError):
+    """A cell description is malformed or inconsistent (the message names file and key)."""
+
+
+def _require(condition: bool, key: str, value: object, what: str) -> None:
+    if not condition:
+        msg = f"{key} = {value!r}: {what}"
+        raise CellError(msg)
+
+
+def _finite(values: tuple[float, ...]) -> bool:
+    return all(math.isfinite(v) for v in values)
+
+
+# -- belt, drive, physics -------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class BeltSpec:
+    """Geometry of the conveyor belt, in the world frame."""
+
+    width_m: float = 0.6
+    start_x_m: float = -2.2
+    end_x_m: float = 1.2
+    infeed_x_m: float = -1.9
+    centre_y_m: float = 0.5
+    surface_z_m: float = 0.0
+    thickness_m: float = 0.04
+    lateral_friction: float = 0.8
+
+    def __post_init__(self) -> None:
+        _require(self.width_m > 0, "belt.width_m", self.width_m, "must be positive")
+        _require(
+            self.end_x_m > self.start_x_m, "belt.end_x_m", self.end_x_m, "must exceed start_x_m"
+        )
+        _require(
+            self.start_x_m <= self.infeed_x_m < self.end_x_m,
+            "belt.infeed_x_m",
+            self.infeed_x_m,
+            "must lie on the belt",
+        )
+        _require(self.thickness_m > 0, "belt.thickness_m", self.thickness_m, "must be positive")
+        _require(self.lateral_friction >= 0, "belt.lateral_friction", self.lateral_friction, ">= 0")
+
+    @property
+    def length_m(self) -> float:
+        """Belt length along x."""
+        return self.end_x_m - self.start_x_m
+
+    def on_belt_xy(self, x_m: float, y_m: float) -> bool:
+        """Whether a point's projection lies on the belt surface."""
+        half = 0.5 * self.width_m
+        return self.start_x_m <= x_m <= self.end_x_m and abs(y_m - self.centre_y_m) <= half
+
+
+@dataclass(frozen=True, kw_only=True)
+class DriveMapping:
+    """Names of the FMU variables that play each role; the defaults are our BeltDrive FMU's.
+
+    ``load_mass``, ``motor_torque`` and ``motor_current`` may be None for drives without them.
+    """
+
+    speed_setpoint: str = "speed_setpoint_mps"
+    load_mass: str | None = "load_mass_kg"
+    belt_speed: str = "belt_speed_mps"
+    belt_position: str = "belt_position_m"
+    motor_torque: str | None = "motor_torque_Nm"
+    motor_current: str | None = "motor_current_A"
+
+
+@dataclass(frozen=True, kw_only=True)
+class PerturbationMapping:
+    """The FMU parameters a scenario's stochastic belt perturbation sets (ours has all three)."""
+
+    force_std: str = "perturbation_std_N"
+    correlation_time: str = "perturbation_correlation_time_s"
+    seed: str = "perturbation_seed"
+
+
+@dataclass(frozen=True, kw_only=True)
+class DriveSpec:
+    """The belt drive: an FMI 2 or 3 co-simulation FMU and how the twin talks to it.
+
+    ``fmu`` is ``builtin`` (ours) or a path; a relative path is resolved against the cell file
+    when the cell is loaded. ``step_s`` is the communication step (None: every physics step).
+    ``perturbation`` names the parameters a scenario's perturbation sets (None: the drive has
+    none, and a scenario that enables one is refused).
+    """
+
+    fmu: str = "builtin"
+    mapping: DriveMapping = field(default_factory=DriveMapping)
+    parameters: dict[str, float] = field(default_factory=dict)
+    perturbation: PerturbationMapping | None = field(default_factory=PerturbationMapping)
+    step_s: float | None = None
+
+    def __post_init__(self) -> None:
+        _require(bool(self.fmu), "drive.fmu", self.fmu, "must not be empty")
+        if self.step_s is not None:
+            _require(
+                0 < self.step_s <= MAX_DRIVE_STEP_S,
+                "drive.step_s",
+                self.step_s,
+                f"must be in (0, {MAX_DRIVE_STEP_S}] s",
+            )
+
+    @property
+    def builtin(self) -> bool:
+        """Whether the drive is our own BeltDrive FMU."""
+        return self.fmu == "builtin"
+
+
+MAX_DRIVE_STEP_S = 1.0
+"""Longest belt-drive communication step (``twin.belt_drive.MAX_STEP_S`` refuses longer)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class PhysicsSpec:
+    """Solver settings. The step is fixed.
+
+    ``hull_merge_tolerance`` and ``max_convex_pieces`` bound the collision-shape complexity of
+    concave objects (see :mod:`twin.collision`).
+    """
+
+    physics_hz: float = 240.0
+    solver_iterations: int = 10
+    hull_merge_tolerance: float = 0.1
+    max_convex_pieces: int = 6
+    floor_z_m: float = -0.8
+    gravity_mps2: float = 9.81
+
+    def __post_init__(self) -> None:
+        _require(self.physics_hz > 0, "physics.physics_hz", self.physics_hz, "must be positive")
+        _require(
+            self.solver_iterations >= 1, "physics.solver_iterations", self.solver_iterations, ">= 1"
+        )
+        _require(
+            self.hull_merge_tolerance >= 0,
+            "physics.hull_merge_tolerance",
+            self.hull_merge_tolerance,
+            "must be >= 0",
+        )
+        _require(
+            self.max_convex_pieces >= 1, "physics.max_convex_pieces", self.max_convex_pieces, ">= 1"
+        )
+
+    @property
+    def dt_s(self) -> float:
+        """The physics step."""
+        return 1.0 / self.physics_hz
+
+
+@dataclass(frozen=True, kw_only=True)
+class CameraSpec:
+    """The camera over the belt: it sees objects on the belt with x in ``[fov_min_x_m,
+    fov_max_x_m]`` (a line's camera must see upstream of its first pick window)."""
+
+    fov_min_x_m: float = -1.4
+    fov_max_x_m: float = 0.45
+
+    def __post_init__(self) -> None:
+        _require(
+            self.fov_max_x_m > self.fov_min_x_m,
+            "camera.fov_max_x_m",
+            self.fov_max_x_m,
+            "must exceed fov_min_x_m",
+        )
+
+
+# -- stations and bins ----------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class BinSpec:
+    """An open-top bin on the floor; objects dropped into it are sorted as ``class_name``.
+
+    ``drop_z_m`` is the TCP height a controller releases at above the bin's centre.
+    """
+
+    class_name: str
+    centre_x_m: float
+    centre_y_m: float
+    size_m: float = 0.24
+    top_z_m: float = -0.10
+    floor_z_m: float = -0.40
+    wall_m: float = 0.01
+    drop_z_m: float = 0.15
+
+    def __post_init__(self) -> None:
+        key = f"bins[{self.class_name}]"
+        _require(bool(self.class_name), "bins.class_name", self.class_name, "must not be empty")
+        _require(
+            self.size_m > 2 * self.wall_m,
+            f"{key}.size_m",
+            self.size_m,
+            "must exceed twice the wall thickness",
+        )
+        _require(
+            self.top_z_m > self.floor_z_m, f"{key}.top_z_m", self.top_z_m, "must be above floor"
+        )
+
+    @property
+    def inner_half_m(self) -> float:
+        """Half the side of the bin's inner area (inside the walls)."""
+        return 0.5 * self.size_m - self.wall_m
+
+    def contains_xy(self, x_m: float, y_m: float) -> bool:
+        """Whether a point lies over the bin's inner area."""
+        half = self.inner_half_m
+        return abs(x_m - self.centre_x_m) <= half and abs(y_m - self.centre_y_m) <= half
+
+    @property
+    def drop_point_m(self) -> tuple[float, float, float]:
+        """Where a controller releases an object over this bin (world frame)."""
+        return (self.centre_x_m, self.centre_y_m, self.drop_z_m)
+
+
+@dataclass(frozen=True, kw_only=True)
+class StationSpec:
+    """One robot with its tool, pick window and bins; its topics under ``namespace``."""
+
+    name: str
+    namespace: str = ""
+    robot: RobotSpec
+    tool: ToolSpec
+    base_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    base_yaw_rad: float = 0.0
+    pick_window_x_m: tuple[float, float] = (-0.35, 0.35)
+    bins: tuple[BinSpec, ...] = ()
+
+    def __post_init__(self) -> None:
+        _require(
+            bool(self.name) and self.name.replace("_", "").isalnum(),
+            "station.name",
+            self.name,
+            "letters, digits and underscores only",
+        )
+        _require(
+            self.namespace == "" or self.namespace.replace("_", "").isalnum(),
+            "station.namespace",
+            self.namespace,
+            "empty, or letters, digits and underscores (a ROS namespace without slashes)",
+        )
+        lo, hi = self.pick_window_x_m
+        _require(lo < hi, "station.pick_window_x_m", self.pick_window_x_m, "needs min < max")
+        _require(
+            _finite(self.base_position_m),
+            "station.base_position_m",
+            self.base_position_m,
+            "must be finite",
+        )
+        classes = [b.class_name for b in self.bins]
+        _require(
+            len(set(classes)) == len(classes),
+            "station.bins",
+            classes,
+            "one bin per class at a station",
+        )
+
+    def bin_for(self, class_name: str) -> BinSpec | None:
+        """The station's bin that sorts ``class_name``, if any."""
+        return next((b for b in self.bins if b.class_name == class_name), None)
+
+    def in_window(self, x_m: float) -> bool:
+        """Whether ``x_m`` lies in the station's pick window."""
+        lo, hi = self.pick_window_x_m
+        return lo <= x_m <= hi
+
+    def ready_tcp_position_world_m(self) -> tuple[float, float, float]:
+        """The robot's ready TCP position in the world frame."""
+        return self.to_world(self.robot.ready_tcp_position_m)
+
+    def to_world(self, p: tuple[float, float, float]) -> tuple[float, float, float]:
+        """A point of the robot's base frame in the world frame."""
+        c, s = math.cos(self.base_yaw_rad), math.sin(self.base_yaw_rad)
+        bx, by, bz = self.base_position_m
+        x, y, z = p
+        if self.base_yaw_rad == 0.0:
+            return (bx + x, by + y, bz + z)
+        return (bx + c * x - s * y, by + s * x + c * y, bz + z)
+
+
+# -- the cell -------------------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class Cell:
+    """Everything physical about the cell; ``source`` is the file it was read from."""
+
+    name: str = "cell"
+    belt: BeltSpec = field(default_factory=BeltSpec)
+    camera: CameraSpec = field(default_factory=CameraSpec)
+    drive: DriveSpec = field(default_factory=DriveSpec)
+    physics: PhysicsSpec = field(default_factory=PhysicsSpec)
+    stations: tuple[StationSpec, ...] = ()
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        _require(len(self.stations) > 0, "stations", self.stations, "list at least one station")
+        names = [s.name for s in self.stations]
+        _require(len(set(names)) == len(names), "stations", names, "station names must differ")
+        spaces = [s.namespace for s in self.stations]
+        _require(
+            len(set(spaces)) == len(spaces),
+            "stations",
+            spaces,
+            "station namespaces must differ (two stations cannot share their topics)",
+        )
+        for i, station in enumerate(self.stations):
+            for b in station.bins:
+                _require(
+                    not self.belt.on_belt_xy(b.centre_x_m, b.centre_y_m),
+                    f"stations[{i}].bins[{b.class_name}]",
+                    (b.centre_x_m, b.centre_y_m),
+                    "stands on the belt",
+                )
+
+    @property
+    def classes(self) -> tuple[str, ...]:
+        """Every class some station has a bin for, in the order the bins are listed."""
+        seen: dict[str, None] = {}
+        for station in self.stations:
+            for b in station.bins:
+                seen.setdefault(b.class_name)
+        return tuple(seen)
+
+    @property
+    def bins(self) -> tuple[BinSpec, ...]:
+        """Every bin of every station."""
+        return tuple(b for s in self.stations for b in s.bins)
+
+    def bin_at(self, x_m: float, y_m: float) -> BinSpec | None:
+        """The first bin whose inner area holds the point ``(x_m, y_m)``, if any."""
+        for station in self.stations:
+            for bin_spec in station.bins:
+                if bin_spec.contains_xy(x_m, y_m):
+                    return bin_spec
+        return None
+
+    def station(self, name: str) -> StationSpec:
+        """The station called ``name`` (:class:`CellError` naming the known ones otherwise)."""
+        for station in self.stations:
+            if station.name == name:
+                return station
+        known = ", ".join(s.name for s in self.stations)
+        msg = f"{self.source or 'cell'}: no station named {name!r} (the cell has: {known})"
+        raise CellError(msg)
+
+    @property
+    def last_window_max_x_m(self) -> float:
+        """The downstream end of the most downstream pick window (past it, an object is lost
+        to the line)."""
+        return max(s.pick_window_x_m[1] for s in self.stations)
+
+    def to_yaml(self) -> str:
+        """The resolved cell as YAML (every robot and tool written out in full)."""
+        data = to_data(self)
+        data.pop("source", None)
+        return yaml.safe_dump(data, sort_keys=False)
+
+    def save(self, path: Path) -> None:
+        """Write the resolved cell atomically (e.g. into a run folder)."""
+        write_atomic(path, self.to_yaml())
+
+
+# -- loading --------------------------------------------------------------------------------
+def _station_from_data(raw: object, where: str) -> StationSpec:
+    if not isinstance(raw, dict):
+        msg = f"{where} = {raw!r}: expected a mapping"
+        raise CellError(msg)
+    data = dict(raw)
+    for key in ("robot", "tool"):
+        if key not in data:
+            msg = f"{where}: missing {key!r}"
+            raise CellError(msg)
+    robot = robot_from_data(data.pop("robot"), f"{where}.robot")
+    tool = tool_from_data(data.pop("tool"), f"{where}.tool")
+    return from_data(StationSpec, {**data, "robot": robot, "tool": tool}, where)
+
+
+def cell_from_data(data: object, where: str, *, base_dir: Path | None = None) -> Cell:
+    """Build a cell from plain data (a parsed YAML file); errors name ``where`` and the key.
+
+    A relative ``drive.fmu`` path is resolved against ``base_dir``.
+    """
+    if not isinstance(data, dict):
+        msg = f"{where}: the top level must be a mapping"
+        raise CellError(msg)
+    raw = dict(data)
+    raw_stations = raw.pop("stations", None)
+    if not isinstance(raw_stations, list) or not raw_stations:
+        msg = f"{where}: stations = {raw_stations!r}: list at least one station"
+        raise CellError(msg)
+    stations = tuple(_station_from_data(s, f"stations[{i}]") for i, s in enumerate(raw_stations))
+    try:
+        cell = from_data(Cell, {**raw, "stations": stations, "source": where}, "")
+    except ConfigError as exc:
+        msg = f"{where}: {exc}"
+        raise CellError(msg) from None
+    fmu = cell.drive.fmu
+    if not cell.drive.builtin and base_dir is not None and not Path(fmu).is_absolute():
+        cell = replace(cell, drive=replace(cell.drive, fmu=str((base_dir / fmu).resolve())))
+    return cell
+
+
+def load_cell(path: Path | str | None = None) -> Cell:
+    """Read a cell file: a path, a name of a shipped cell (``default``), or None (default)."""
+    resolved = resolve_cell_path(path)
+    try:
+        text = resolved.read_text(encoding="utf-8")
+    except OSError as exc:
+        msg = f"{resolved}: cannot read cell file: {exc.strerror}"
+        raise CellError(msg) from None
+    data = load_yaml_strict(text, str(resolved))
+    try:
+        return cell_from_data(data, str(resolved), base_dir=resolved.parent)
+    except CellError:
+        raise
+    except ConfigError as exc:
+        msg = f"{resolved}: {exc}"
+        raise CellError(msg) from None
+
+
+def resolve_cell_path(path: Path | str | None, base_dir: Path | None = None) -> Path:
+    """The cell file ``path`` names: None or ``default`` is the reference cell; a bare name
+    without ``/`` or ``.yaml`` is a shipped cell; anything else a path (relative to
+    ``base_dir`` when given)."""
+    if path is None:
+        return DEFAULT_CELL
+    text = str(path)
+    if "/" not in text and not text.endswith((".yaml", ".yml")):
+        shipped = CELLS_DIR / f"{text}.yaml"
+        if not shipped.is_file():
+            known = ", ".join(sorted(p.stem for p in CELLS_DIR.glob("*.yaml")))
+            msg = f"cell = {text!r}: no shipped cell of that name (shipped: {known})"
+            raise CellError(msg)
+        return shipped
+    resolved = Path(text).expanduser()
+    if not resolved.is_absolute() and base_dir is not None:
+        resolved = base_dir / resolved
+    return resolved.resolve()
+
+
+def default_cell() -> Cell:
+    """The reference cell (``interfaces/cells/default.yaml``)."""
+    return load_cell(DEFAULT_CELL)

@@ -1,0 +1,83 @@
+"""Robot arms: what the twin loads and a controller plans with, and where their URDFs are."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from interfaces.catalog import entry
+from interfaces.dataclass_io import from_data
+from interfaces.errors import ConfigError
+
+
+def _require(condition: bool, key: str, value: object, what: str) -> None:
+    if not condition:
+        msg = f"{key} = {value!r}: {what}"
+        raise ConfigError(msg)
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotSpec:
+    """A robot arm from a URDF: what the twin loads and the controller plans with.
+
+    ``urdf`` is a path, or a path under ``pybullet_data`` when it does not exist as given
+    (:func:`resolve_urdf`). ``home_joint_positions`` is where the twin starts the arm.
+    The ready pose is in the robot's base frame: the TCP at ``ready_tcp_position_m`` pointing
+    down with ``ready_yaw_rad``; ``ready_joint_positions_rad`` seeds the controller's IK towards
+    it. ``joint_max_acceleration_rps2`` and ``joint_max_jerk_rps3`` are the datasheet limits
+    (one per arm joint). ``position_gain`` and ``velocity_gain`` are the twin's joint motor
+    gains. ``inertia_from_file`` takes the links' inertia tensors from the URDF; otherwise
+    PyBullet computes them from the collision shapes and the URDF masses (pybullet_data's Panda
+    carries placeholder inertias of 0.1 kg m^2 on every link, 10-100 times the identified ones).
+    """
+
+    name: str
+    urdf: str
+    arm_joints: tuple[str, ...]
+    home_joint_positions: tuple[float, ...]
+    ready_tcp_position_m: tuple[float, float, float]
+    ready_yaw_rad: float
+    ready_joint_positions_rad: tuple[float, ...]
+    joint_max_acceleration_rps2: tuple[float, ...]
+    joint_max_jerk_rps3: tuple[float, ...]
+    position_gain: float = 0.1
+    velocity_gain: float = 1.0
+    inertia_from_file: bool = False
+
+    def __post_init__(self) -> None:
+        n = len(self.arm_joints)
+        _require(n > 0, "robot.arm_joints", self.arm_joints, "must not be empty")
+        _require(
+            len(set(self.arm_joints)) == n, "robot.arm_joints", self.arm_joints, "must be unique"
+        )
+        for key in (
+            "home_joint_positions",
+            "ready_joint_positions_rad",
+            "joint_max_acceleration_rps2",
+            "joint_max_jerk_rps3",
+        ):
+            values: tuple[float, ...] = getattr(self, key)
+            _require(len(values) == n, f"robot.{key}", values, f"needs {n} values, one per joint")
+        for key in ("joint_max_acceleration_rps2", "joint_max_jerk_rps3"):
+            values = getattr(self, key)
+            _require(all(v > 0 for v in values), f"robot.{key}", values, "must be positive")
+
+
+def robot_from_data(value: object, where: str) -> RobotSpec:
+    """A robot from a catalogue name or a mapping."""
+    return from_data(RobotSpec, entry(value, "robots", where), where)
+
+
+def resolve_urdf(urdf: str) -> Path:
+    """The URDF file ``urdf`` names: as given if it exists, else under ``pybullet_data``."""
+    path = Path(urdf).expanduser()
+    if path.is_file():
+        return path.resolve()
+    if not path.is_absolute():
+        import pybullet_data
+
+        candidate = Path(pybullet_data.getDataPath()) / urdf
+        if candidate.is_file():
+            return candidate
+    msg = f"robot.urdf = {urdf!r}: neither a file nor a file under pybullet_data"
+    raise ConfigError(msg)
