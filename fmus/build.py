@@ -87,14 +87,12 @@ def _inputs() -> list[Path]:
     ]
 
 
-def fmi2_model_description(fmi3_xml: str, source_files: list[str]) -> str:
-    """Translate our FMI 3.0 model description into the equivalent FMI 2.0 one.
+_FMI2_TYPES = {"Float64": "Real", "Int32": "Integer"}
+"""FMI 3.0 variable elements and their FMI 2.0 type elements (the subset the belt drive uses)."""
 
-    Handles the subset the belt drive uses: Float64 and Int32 variables, units, a
-    CoSimulation element and outputs/initial unknowns. ``source_files`` are listed in the
-    FMI 2.0 ``SourceFiles`` element.
-    """
-    root3 = ET.fromstring(fmi3_xml)
+
+def _fmi2_root(root3: ET.Element, source_files: list[str]) -> ET.Element:
+    """The FMI 2.0 root element with its attributes, CoSimulation, units and experiment."""
     root2 = ET.Element("fmiModelDescription")
     root2.set("fmiVersion", "2.0")
     for key in ("modelName", "description", "generationTool", "variableNamingConvention"):
@@ -113,29 +111,40 @@ def fmi2_model_description(fmi3_xml: str, source_files: list[str]) -> str:
     files = ET.SubElement(cs2, "SourceFiles")
     for name in source_files:
         ET.SubElement(files, "File").set("name", name)
-    units = root3.find("UnitDefinitions")
-    if units is not None:
-        root2.append(units)
-    experiment = root3.find("DefaultExperiment")
-    if experiment is not None:
-        root2.append(experiment)
+    for tag in ("UnitDefinitions", "DefaultExperiment"):
+        element = root3.find(tag)
+        if element is not None:
+            root2.append(element)
+    return root2
+
+
+def _fmi2_variables(root3: ET.Element, root2: ET.Element) -> dict[str, int]:
+    """Add the ``ModelVariables`` of ``root3`` to ``root2`` as FMI 2.0 ``ScalarVariable`` s.
+
+    Returns each value reference's 1-based variable index (FMI 2.0's ``ModelStructure`` refers
+    to variables by index, FMI 3.0's by value reference).
+    """
     variables2 = ET.SubElement(root2, "ModelVariables")
     index_of: dict[str, int] = {}
-    type_names = {"Float64": "Real", "Int32": "Integer"}
     variables3 = root3.find("ModelVariables")
     for index, var3 in enumerate(variables3 if variables3 is not None else [], start=1):
-        if var3.tag not in type_names:
+        if var3.tag not in _FMI2_TYPES:
             msg = f"FMI3.xml: variable type {var3.tag} has no FMI 2.0 equivalent here"
             raise FmuBuildError(msg)
         scalar = ET.SubElement(variables2, "ScalarVariable")
         for key in ("name", "valueReference", "description", "causality", "variability", "initial"):
             if key in var3.attrib:
                 scalar.set(key, var3.attrib[key])
-        typed = ET.SubElement(scalar, type_names[var3.tag])
+        typed = ET.SubElement(scalar, _FMI2_TYPES[var3.tag])
         for key in ("start", "unit", "min", "max"):
             if key in var3.attrib:
                 typed.set(key, var3.attrib[key])
         index_of[var3.attrib["valueReference"]] = index
+    return index_of
+
+
+def _fmi2_structure(root3: ET.Element, root2: ET.Element, index_of: dict[str, int]) -> None:
+    """Add the ``ModelStructure`` (outputs, initial unknowns) of ``root3`` to ``root2``."""
     structure3 = root3.find("ModelStructure")
     structure2 = ET.SubElement(root2, "ModelStructure")
     for tag3, tag2 in (("Output", "Outputs"), ("InitialUnknown", "InitialUnknowns")):
@@ -144,6 +153,19 @@ def fmi2_model_description(fmi3_xml: str, source_files: list[str]) -> str:
             group = ET.SubElement(structure2, tag2)
             for index in sorted(index_of[entry.attrib["valueReference"]] for entry in entries):
                 ET.SubElement(group, "Unknown").set("index", str(index))
+
+
+def fmi2_model_description(fmi3_xml: str, source_files: list[str]) -> str:
+    """Translate our FMI 3.0 model description into the equivalent FMI 2.0 one.
+
+    Handles the subset the belt drive uses: Float64 and Int32 variables, units, a
+    CoSimulation element and outputs/initial unknowns. ``source_files`` are listed in the
+    FMI 2.0 ``SourceFiles`` element.
+    """
+    root3 = ET.fromstring(fmi3_xml)
+    root2 = _fmi2_root(root3, source_files)
+    index_of = _fmi2_variables(root3, root2)
+    _fmi2_structure(root3, root2, index_of)
     ET.indent(root2, space="  ")
     return (
         '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root2, encoding="unicode") + "\n"

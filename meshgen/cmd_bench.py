@@ -11,13 +11,13 @@ Where the outputs go: with ``--tmp-dir`` there, and nowhere else. Without it, th
 figures are measured in a RAM file system (``/dev/shm`` when it is a writable tmpfs) and the
 same measurement is repeated in the default temporary folder (``tempfile.gettempdir()``, the
 disk users write to) and printed under ``disk``. The reason is that creating a file is kernel
-work whose cost is set by the file system, not by this code: on the 2-core ext4 VM this project
-is measured on, creating one empty file took anywhere from 75 to 700 µs within ten minutes on an
-idle machine (tmpfs: 8-12 µs), which for 617 files is 0.2-1.6 ms per object of the 269 in the
-real sample, more than the whole pipeline's computation. ``file_create_us`` calibrates each file
-system (microseconds to create and write one small file, before and after the runs) and
-``files_written`` counts the files each variant creates, so ``files_written * file_create_us``
-is the part of a figure that is file creation alone; ``file_system`` names the type.
+work whose cost is set by the file system, not by this code: on a disk it varies by an order of
+magnitude from minute to minute and can exceed the whole pipeline's computation (figures in
+``docs/benchmarks.md``, meshgen.cmd_bench), so only the RAM figures compare code.
+``file_create_us`` calibrates each file system (microseconds to create and write one small file,
+before and after the runs) and ``files_written`` counts the files each variant creates, so
+``files_written * file_create_us`` is the part of a figure that is file creation alone;
+``file_system`` names the type.
 
 Example::
 

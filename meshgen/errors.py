@@ -19,3 +19,7 @@ class DatasetError(MeshgenError):
 
 class OutputError(MeshgenError):
     """The output folder cannot be written or would overwrite something that is not ours."""
+
+
+class ObjFileError(MeshgenError):
+    """An OBJ mesh file cannot be read or has a malformed ``v`` or ``f`` line."""

@@ -265,35 +265,40 @@ def _signed_areas(pts: FloatArray, sizes: IntArray) -> FloatArray:
     return result
 
 
-def _repair_all(
+def _without_duplicates(
     rings: list[FloatArray], exact: bool
-) -> list[tuple[FloatArray, list[str]] | FootprintRejected]:
-    """Valid CCW rings and their repairs (or the rejection), validity tested in one GEOS call.
+) -> tuple[FloatArray, IntArray, IntArray, IntArray]:
+    """Rings without consecutive duplicate points, concatenated: ``(pts, sizes, dups, cols)``.
 
-    ``exact`` also drops collinear points of valid rings; otherwise only invalid rings (spikes,
-    out-and-back traces) are cleaned of collinear points before ``make_valid`` is considered.
-    Duplicate removal and orientation are vectorised over all rings.
+    ``exact`` cleans each ring with :func:`clean_ring` (collinear points too); otherwise the
+    duplicates of all rings are dropped in one vectorised pass and no collinear point is
+    counted. ``dups`` and ``cols`` are the numbers of points removed per ring.
     """
     count = len(rings)
-    collinear = np.zeros(count, dtype=np.int64)
     if exact:
         cleaned = [clean_ring(r) for r in rings]
         rings = [c[0] for c in cleaned]
         duplicates = np.array([c[1] for c in cleaned], dtype=np.int64)
         collinear = np.array([c[2] for c in cleaned], dtype=np.int64)
         sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=count)
-        live = sizes > 0
-        pts = np.concatenate(rings) if live.any() else np.empty((0, 2))
-    else:
-        raw_sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=count)
-        raw = np.concatenate(rings)
-        _, _, _, prv = _segments(raw_sizes)
-        x, y = raw[:, 0], raw[:, 1]
-        keep = (x != x[prv]) | (y != y[prv])
-        pts = np.compress(keep, raw, axis=0)
-        sizes = np.add.reduceat(keep.astype(np.int64), raw_sizes.cumsum() - raw_sizes)
-        duplicates = raw_sizes - sizes
-        live = sizes > 0
+        pts = np.concatenate(rings) if (sizes > 0).any() else np.empty((0, 2))
+        return pts, sizes, duplicates, collinear
+    raw_sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=count)
+    raw = np.concatenate(rings)
+    _, _, _, prv = _segments(raw_sizes)
+    x, y = raw[:, 0], raw[:, 1]
+    keep = (x != x[prv]) | (y != y[prv])
+    pts = np.compress(keep, raw, axis=0)
+    sizes = np.add.reduceat(keep.astype(np.int64), raw_sizes.cumsum() - raw_sizes)
+    return pts, sizes, raw_sizes - sizes, np.zeros(count, dtype=np.int64)
+
+
+def _counter_clockwise(
+    pts: FloatArray, sizes: IntArray
+) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+    """Concatenated rings each turned counter-clockwise, and which of them were reversed."""
+    count = len(sizes)
+    live = sizes > 0
     live_sizes = sizes[live]
     signed = np.zeros(count)
     if len(live_sizes):
@@ -305,38 +310,66 @@ def _repair_all(
         idx = np.arange(len(pts))
         mirrored = 2 * starts[owner] + sizes[owner] - 1 - idx
         pts = np.take(pts, np.where(flip[owner], mirrored, idx), axis=0)
+    return pts, flip
+
+
+def _finish_ring(
+    ring: FloatArray, counts: tuple[int, int], *, valid: bool, flipped: bool, exact: bool
+) -> tuple[FloatArray, list[str]] | FootprintRejected:
+    """One ring's last repairs (see :func:`_repair_all`) and the list of every repair made.
+
+    ``counts`` are the duplicate and collinear points already removed; ``valid`` is GEOS's
+    verdict on ``ring``, ``flipped`` whether it was reversed.
+    """
+    dup, col = counts
+    if len(ring) >= 3 and not exact and not valid:
+        ring, more_dup, col = clean_ring(ring)
+        dup += more_dup
+        valid = len(ring) >= 3 and bool(shapely.is_valid(shapely.Polygon(ring)))
+    repairs: list[str] = []
+    if dup:
+        repairs.append(f"removed_duplicates:{dup}")
+    if col:
+        repairs.append(f"removed_collinear:{col}")
+    if len(ring) < 3:
+        return FootprintRejected("degenerate", f"{len(ring)} distinct non-collinear point(s) left")
+    if flipped:
+        repairs.append("reoriented")
+    if not valid:
+        try:
+            ring = _make_valid(ring, repairs)
+        except FootprintRejected as exc:
+            return exc
+    return ring, repairs
+
+
+def _repair_all(
+    rings: list[FloatArray], exact: bool
+) -> list[tuple[FloatArray, list[str]] | FootprintRejected]:
+    """Valid CCW rings and their repairs (or the rejection), validity tested in one GEOS call.
+
+    ``exact`` also drops collinear points of valid rings; otherwise only invalid rings (spikes,
+    out-and-back traces) are cleaned of collinear points before ``make_valid`` is considered.
+    Duplicate removal and orientation are vectorised over all rings.
+    """
+    pts, sizes, duplicates, collinear = _without_duplicates(rings, exact)
+    pts, flip = _counter_clockwise(pts, sizes)
     split = split_rows(pts, sizes)
     usable = np.flatnonzero(sizes >= 3)
-    valid = np.zeros(count, dtype=bool)
+    valid = np.zeros(len(rings), dtype=bool)
     if len(usable):
         valid[usable] = shapely.is_valid(_ragged_polygons([split[i] for i in usable]))
-    out: list[tuple[FloatArray, list[str]] | FootprintRejected] = []
-    for i in range(count):
-        ring = split[i]
-        dup, col, is_valid = int(duplicates[i]), int(collinear[i]), bool(valid[i])
-        if len(ring) >= 3 and not exact and not is_valid:
-            ring, more_dup, col = clean_ring(ring)
-            dup += more_dup
-            is_valid = len(ring) >= 3 and bool(shapely.is_valid(shapely.Polygon(ring)))
-        repairs: list[str] = []
-        if dup:
-            repairs.append(f"removed_duplicates:{dup}")
-        if col:
-            repairs.append(f"removed_collinear:{col}")
-        if len(ring) < 3:
-            msg = f"{len(ring)} distinct non-collinear point(s) left"
-            out.append(FootprintRejected("degenerate", msg))
-            continue
-        if flip[i]:
-            repairs.append("reoriented")
-        if not is_valid:
-            try:
-                ring = _make_valid(ring, repairs)
-            except FootprintRejected as exc:
-                out.append(exc)
-                continue
-        out.append((ring, repairs))
-    return out
+    return [
+        _finish_ring(ring, (dup, col), valid=ok, flipped=flipped, exact=exact)
+        for ring, dup, col, ok, flipped in zip(
+            split,
+            duplicates.tolist(),
+            collinear.tolist(),
+            valid.tolist(),
+            flip.tolist(),
+            strict=True,
+        )
+    ]
 
 
 def _simplify_all(

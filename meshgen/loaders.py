@@ -31,7 +31,7 @@ import math
 from dataclasses import dataclass
 from itertools import chain
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -318,19 +318,87 @@ def _check_range(points: np.ndarray, width: int, height: int) -> str | None:
     return None
 
 
-def parse_yolo(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None, list[Skip]]:
-    """Parse one YOLO-seg label file; bad lines become skips, good lines polygons."""
-    name = _rel(source.path, root)
+class _Bad(NamedTuple):
+    """Why one polygon (a label line, a shape, an annotation) is skipped."""
+
+    reason: str
+    detail: str
+
+
+def _yolo_text(source: ImageSource, name: str) -> tuple[str, tuple[int, int]] | Skip:
+    """The text and image size of a YOLO label file, or the skip of the whole file."""
     try:
         text = source.path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
-        return None, [Skip(file=name, where="", reason="unreadable_file", detail=str(exc))]
+        return Skip(file=name, where="", reason="unreadable_file", detail=str(exc))
     if not text.strip():
-        return None, [Skip(file=name, where="", reason="empty_file", detail="no label lines")]
+        return Skip(file=name, where="", reason="empty_file", detail="no label lines")
     if source.size_px is None:
         detail = "no image file, no labelme JSON with the same stem and no --image-size"
-        return None, [Skip(file=name, where="", reason="missing_image_size", detail=detail)]
-    width, height = source.size_px
+        return Skip(file=name, where="", reason="missing_image_size", detail=detail)
+    return text, source.size_px
+
+
+def _yolo_class(token: str, names: dict[int, str]) -> str | _Bad:
+    """The class name of a label line's class field, or why it names none."""
+    try:
+        class_id = int(token)
+    except ValueError:
+        return _Bad("bad_class_id", f"class field {token!r} is not an integer")
+    if class_id < 0:
+        return _Bad("bad_class_id", f"class id {class_id} is negative")
+    if class_id not in names:
+        return _Bad("unknown_class_id", f"class id {class_id} not in data.yaml names")
+    return names[class_id]
+
+
+def _yolo_points(coords: list[str], width: int, height: int) -> np.ndarray | _Bad:
+    """The ``(n, 2)`` pixel points of a label line's normalised coordinates, or why not."""
+    if len(coords) % 2:
+        return _Bad("odd_coordinates", f"{len(coords)} coordinates (must be x y pairs)")
+    try:
+        values = np.array(coords, dtype=np.float64)
+    except ValueError:
+        bad_tok = next(t for t in coords if not _is_float(t))
+        return _Bad("not_a_number", f"value {bad_tok!r} is not a number")
+    if len(values) < 6:
+        return _Bad("too_few_points", f"{len(values) // 2} point(s), need at least 3")
+    problem: str | None
+    if not np.abs(values).max() <= NORMALISED_LIMIT:  # also true for nan
+        problem = "out_of_range" if np.isfinite(values).all() else "not_a_number"
+    else:
+        points = values.reshape(-1, 2) * np.array([width, height], dtype=np.float64)
+        problem = _check_range(points, width, height)
+    if problem is None:
+        return points
+    detail = (
+        "non-finite value"
+        if problem == "not_a_number"
+        else f"normalised coordinates span [{values.min():.4g}, {values.max():.4g}]"
+    )
+    return _Bad(problem, detail)
+
+
+def _yolo_polygon(
+    tokens: list[str], names: dict[int, str], width: int, height: int
+) -> tuple[str, np.ndarray] | _Bad:
+    """The class name and ``(n, 2)`` pixel points of one label line's tokens, or why not."""
+    class_name = _yolo_class(tokens[0], names)
+    if isinstance(class_name, _Bad):
+        return class_name
+    points = _yolo_points(tokens[1:], width, height)
+    if isinstance(points, _Bad):
+        return points
+    return class_name, points
+
+
+def parse_yolo(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None, list[Skip]]:
+    """Parse one YOLO-seg label file; bad lines become skips, good lines polygons."""
+    name = _rel(source.path, root)
+    loaded = _yolo_text(source, name)
+    if isinstance(loaded, Skip):
+        return None, [loaded]
+    text, (width, height) = loaded
     names = dict(source.class_names)
     polygons: list[RawPolygon] = []
     skips: list[Skip] = []
@@ -341,50 +409,13 @@ def parse_yolo(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None,
             continue
         index += 1
         where = f"line {lineno}"
-
-        def bad(reason: str, detail: str, where: str = where) -> None:
-            skips.append(Skip(file=name, where=where, reason=reason, detail=detail))
-
-        try:
-            class_id = int(tokens[0])
-        except ValueError:
-            bad("bad_class_id", f"class field {tokens[0]!r} is not an integer")
+        found = _yolo_polygon(tokens, names, width, height)
+        if isinstance(found, _Bad):
+            skips.append(Skip(file=name, where=where, reason=found.reason, detail=found.detail))
             continue
-        if class_id < 0:
-            bad("bad_class_id", f"class id {class_id} is negative")
-            continue
-        if class_id not in names:
-            bad("unknown_class_id", f"class id {class_id} not in data.yaml names")
-            continue
-        coords = tokens[1:]
-        if len(coords) % 2:
-            bad("odd_coordinates", f"{len(coords)} coordinates (must be x y pairs)")
-            continue
-        try:
-            values = np.array(coords, dtype=np.float64)
-        except ValueError:
-            bad_tok = next(t for t in coords if not _is_float(t))
-            bad("not_a_number", f"value {bad_tok!r} is not a number")
-            continue
-        if len(values) < 6:
-            bad("too_few_points", f"{len(values) // 2} point(s), need at least 3")
-            continue
-        problem: str | None
-        if not np.abs(values).max() <= NORMALISED_LIMIT:  # also true for nan
-            problem = "out_of_range" if np.isfinite(values).all() else "not_a_number"
-        else:
-            points = values.reshape(-1, 2) * np.array([width, height], dtype=np.float64)
-            problem = _check_range(points, width, height)
-        if problem is not None:
-            detail = (
-                "non-finite value"
-                if problem == "not_a_number"
-                else f"normalised coordinates span [{values.min():.4g}, {values.max():.4g}]"
-            )
-            bad(problem, detail)
-            continue
+        class_name, points = found
         polygons.append(
-            RawPolygon(index=index, where=where, class_name=names[class_id], points_px=points)
+            RawPolygon(index=index, where=where, class_name=class_name, points_px=points)
         )
     annotation = ImageAnnotation(
         stem=source.stem,
@@ -563,6 +594,70 @@ def _read_labelme(path: Path, name: str) -> tuple[Any, bool] | Skip:
     return data, "true" not in text and "false" not in text
 
 
+def _labelme_image_size(data: dict[str, Any], source: ImageSource) -> tuple[int, int] | None:
+    """The image size of a labelme document: its image file, its size fields, ``--image-size``.
+
+    The header of the image file named by ``imagePath`` wins over ``imageWidth`` and
+    ``imageHeight``; ``source.size_px`` (``--image-size``) is the last resort.
+    """
+    size: tuple[int, int] | None = None
+    image_path = data.get("imagePath")
+    if isinstance(image_path, str) and image_path:
+        candidate = source.path.parent / image_path
+        if candidate.is_file():
+            size = read_image_size(candidate)
+    if size is None:
+        width, height = data.get("imageWidth"), data.get("imageHeight")
+        if isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0:
+            size = (width, height)
+    return size or source.size_px
+
+
+def _labelme_label(shape: Any) -> str | _Bad:
+    """The class label of one entry of ``shapes``, or why it is no polygon of a class."""
+    if not isinstance(shape, dict):
+        return _Bad("bad_file", "not an object")
+    shape_type = shape.get("shape_type", "polygon")
+    if shape_type != "polygon":
+        return _Bad("not_a_polygon", f"shape_type {shape_type!r}")
+    label = shape.get("label")
+    if not isinstance(label, str) or not label:
+        return _Bad("unknown_class", f"label {label!r} is not a class name")
+    return label
+
+
+def _labelme_polygons(
+    shapes: list[Any], name: str, fast: bool, size: tuple[int, int]
+) -> tuple[list[RawPolygon], list[Skip]]:
+    """The polygons of a labelme ``shapes`` list and the skips of the rest, in shape order.
+
+    Shapes are sorted out one by one (:func:`_labelme_label`); the point lists of the ones with
+    a class label are then converted and checked together (:func:`_checked_points`).
+    """
+    labels = [_labelme_label(shape) for shape in shapes]
+    pending = [
+        shape.get("points")
+        for shape, label in zip(shapes, labels, strict=True)
+        if not isinstance(label, _Bad)
+    ]
+    checked = iter(_checked_points(pending, fast, size[0], size[1]))
+    polygons: list[RawPolygon] = []
+    skips: list[Skip] = []
+    for index, label in enumerate(labels):
+        where = f"shape {index}"
+        if isinstance(label, _Bad):
+            skips.append(Skip(file=name, where=where, reason=label.reason, detail=label.detail))
+            continue
+        points, reason, detail = next(checked)
+        if points is None:
+            skips.append(Skip(file=name, where=where, reason=reason, detail=detail))
+        else:
+            polygons.append(
+                RawPolygon(index=index, where=where, class_name=label, points_px=points)
+            )
+    return polygons, skips
+
+
 def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None, list[Skip]]:
     """Parse one labelme JSON file; bad shapes become skips, good shapes polygons."""
     name = _rel(source.path, root)
@@ -575,65 +670,130 @@ def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | No
         return None, [Skip(file=name, where="", reason="bad_file", detail=detail)]
     if not data["shapes"]:
         return None, [Skip(file=name, where="", reason="empty_file", detail='"shapes" is empty')]
-    size: tuple[int, int] | None = None
-    image_path = data.get("imagePath")
-    if isinstance(image_path, str) and image_path:
-        candidate = source.path.parent / image_path
-        if candidate.is_file():
-            size = read_image_size(candidate)
-    if size is None:
-        width, height = data.get("imageWidth"), data.get("imageHeight")
-        if isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0:
-            size = (width, height)
-    size = size or source.size_px
+    size = _labelme_image_size(data, source)
     if size is None:
         detail = "no image file, no imageWidth/imageHeight and no --image-size"
         return None, [Skip(file=name, where="", reason="missing_image_size", detail=detail)]
-    width, height = size
-    polygons: list[RawPolygon] = []
-    skips: list[Skip] = []
-    pending: list[tuple[int, str, str]] = []  # (index, where, label) of shapes with points
-    pending_points: list[Any] = []
-    outcome: list[Skip | None] = []  # per shape: its skip, or None when it has points to check
-    for index, shape in enumerate(data["shapes"]):
-        where = f"shape {index}"
-        if not isinstance(shape, dict):
-            outcome.append(Skip(file=name, where=where, reason="bad_file", detail="not an object"))
-            continue
-        shape_type = shape.get("shape_type", "polygon")
-        if shape_type != "polygon":
-            detail = f"shape_type {shape_type!r}"
-            outcome.append(Skip(file=name, where=where, reason="not_a_polygon", detail=detail))
-            continue
-        label = shape.get("label")
-        if not isinstance(label, str) or not label:
-            detail = f"label {label!r} is not a class name"
-            outcome.append(Skip(file=name, where=where, reason="unknown_class", detail=detail))
-            continue
-        outcome.append(None)
-        pending.append((index, where, label))
-        pending_points.append(shape.get("points"))
-    checked = iter(zip(pending, _checked_points(pending_points, fast, width, height), strict=True))
-    for skip in outcome:
-        if skip is not None:
-            skips.append(skip)
-            continue
-        (index, where, label), (points, reason, detail) = next(checked)
-        if points is None:
-            skips.append(Skip(file=name, where=where, reason=reason, detail=detail))
-        else:
-            polygons.append(
-                RawPolygon(index=index, where=where, class_name=label, points_px=points)
-            )
+    polygons, skips = _labelme_polygons(data["shapes"], name, fast, size)
     annotation = ImageAnnotation(
         stem=source.stem,
         source=name,
-        width_px=width,
-        height_px=height,
+        width_px=size[0],
+        height_px=size[1],
         polygons=tuple(polygons),
         skips=tuple(skips),
     )
     return annotation, []
+
+
+def _coco_image_ids(images: list[Any], name: str) -> dict[int, int] | Skip:
+    """Image id -> position in ``images``, or the skip of the file when an id is given twice."""
+    known: dict[int, int] = {}
+    for j, image in enumerate(images):
+        if isinstance(image, dict) and isinstance(image.get("id"), int):
+            first = known.setdefault(image["id"], j)
+            if first != j:
+                detail = f"image id {image['id']} is also the id of images[{first}]"
+                return Skip(
+                    file=name, where=f"images[{j}]", reason="duplicate_image_id", detail=detail
+                )
+    return known
+
+
+def _coco_by_image(
+    annotations: list[Any], known: dict[int, int], name: str, skips: list[Skip]
+) -> dict[int, list[tuple[int, dict[str, Any]]]]:
+    """The annotations of each known image id as ``(position, annotation)``, in file order.
+
+    An annotation without an integer ``image_id``, or with one that no image has, is added to
+    ``skips``.
+    """
+    per_image: dict[int, list[tuple[int, dict[str, Any]]]] = {}
+    for i, ann in enumerate(annotations):
+        where = f"annotations[{i}]"
+        if not isinstance(ann, dict) or not isinstance(ann.get("image_id"), int):
+            detail = "annotation without an integer image_id"
+            skips.append(Skip(file=name, where=where, reason="bad_file", detail=detail))
+            continue
+        if ann["image_id"] not in known:
+            detail = f"image_id {ann['image_id']} is not the id of any entry of images"
+            skips.append(Skip(file=name, where=where, reason="unknown_image_id", detail=detail))
+            continue
+        per_image.setdefault(ann["image_id"], []).append((i, ann))
+    return per_image
+
+
+def _coco_image_size(
+    image: dict[str, Any], stem: str, images: dict[str, Path], image_size: tuple[int, int] | None
+) -> tuple[int, int] | None:
+    """The size of a COCO image: its image file's header, its ``width``/``height``, the option."""
+    size = read_image_size(images[stem]) if stem in images else None
+    if size is None:
+        width, height = image.get("width"), image.get("height")
+        if isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0:
+            size = (width, height)
+    return size or image_size
+
+
+def _coco_segmentation(seg: Any) -> np.ndarray | _Bad:
+    """The largest polygon (at least 3 points) of a ``segmentation`` as ``(n, 2) float``.
+
+    Every part must be a list of an even number of finite numbers; RLE masks are refused.
+    """
+    if not isinstance(seg, list) or not seg:
+        return _Bad("not_a_polygon", "segmentation is not a polygon list (RLE is not supported)")
+    parts = seg if isinstance(seg[0], list) else [seg]
+    best: np.ndarray | None = None
+    for part in parts:
+        if not isinstance(part, list) or len(part) % 2:
+            return _Bad("odd_coordinates", "segmentation polygon is malformed")
+        if not all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for v in part
+        ):
+            return _Bad("not_a_number", "segmentation polygon is malformed")
+        pts = np.array(part, dtype=np.float64).reshape(-1, 2)
+        if len(pts) >= 3 and (best is None or len(pts) > len(best)):
+            best = pts
+    if best is None:
+        return _Bad("too_few_points", "no segmentation polygon with at least 3 points")
+    return best
+
+
+def _coco_polygon(
+    ann: dict[str, Any], categories: dict[int, str], size: tuple[int, int]
+) -> tuple[str, np.ndarray] | _Bad:
+    """The class name and ``(n, 2)`` pixel points of one COCO annotation, or why not."""
+    category = ann.get("category_id")
+    if category not in categories:
+        return _Bad("unknown_class_id", f"category_id {category!r} not in categories")
+    points = _coco_segmentation(ann.get("segmentation"))
+    if isinstance(points, _Bad):
+        return points
+    range_problem = _check_range(points, size[0], size[1])
+    if range_problem is not None:
+        return _Bad(range_problem, f"pixel coordinates outside the {size[0]}x{size[1]} image")
+    return categories[category], points
+
+
+def _coco_polygons(
+    anns: list[tuple[int, dict[str, Any]]],
+    categories: dict[int, str],
+    size: tuple[int, int],
+    name: str,
+    skips: list[Skip],
+) -> list[RawPolygon]:
+    """The polygons of one image's ``(position, annotation)`` list; the rest go to ``skips``."""
+    polygons: list[RawPolygon] = []
+    for k, (i, ann) in enumerate(anns):
+        where = f"annotations[{i}]"
+        found = _coco_polygon(ann, categories, size)
+        if isinstance(found, _Bad):
+            skips.append(Skip(file=name, where=where, reason=found.reason, detail=found.detail))
+            continue
+        class_name, points = found
+        polygons.append(RawPolygon(index=k, where=where, class_name=class_name, points_px=points))
+    return polygons
 
 
 def parse_coco(
@@ -652,36 +812,16 @@ def parse_coco(
     problem = coco_layout_problem(data)
     if problem:
         return [], [Skip(file=name, where="", reason="bad_file", detail=problem)]
-    known: dict[int, int] = {}  # image id -> position in images
-    for j, image in enumerate(data["images"]):
-        if isinstance(image, dict) and isinstance(image.get("id"), int):
-            first = known.setdefault(image["id"], j)
-            if first != j:
-                detail = f"image id {image['id']} is also the id of images[{first}]"
-                skip = Skip(
-                    file=name, where=f"images[{j}]", reason="duplicate_image_id", detail=detail
-                )
-                return [], [skip]
-    categories: dict[int, str] = {}
-    for cat in data["categories"]:
-        if isinstance(cat, dict) and isinstance(cat.get("id"), int):
-            categories[cat["id"]] = str(cat.get("name"))
+    known = _coco_image_ids(data["images"], name)
+    if isinstance(known, Skip):
+        return [], [known]
+    categories = {
+        cat["id"]: str(cat.get("name"))
+        for cat in data["categories"]
+        if isinstance(cat, dict) and isinstance(cat.get("id"), int)
+    }
     skips: list[Skip] = []
-    per_image: dict[int, list[tuple[int, dict[str, Any]]]] = {}
-    for i, ann in enumerate(data["annotations"]):
-        if not isinstance(ann, dict) or not isinstance(ann.get("image_id"), int):
-            detail = "annotation without an integer image_id"
-            skips.append(
-                Skip(file=name, where=f"annotations[{i}]", reason="bad_file", detail=detail)
-            )
-            continue
-        if ann["image_id"] not in known:
-            detail = f"image_id {ann['image_id']} is not the id of any entry of images"
-            skips.append(
-                Skip(file=name, where=f"annotations[{i}]", reason="unknown_image_id", detail=detail)
-            )
-            continue
-        per_image.setdefault(ann["image_id"], []).append((i, ann))
+    per_image = _coco_by_image(data["annotations"], known, name, skips)
     out: list[ImageAnnotation] = []
     for j, image in enumerate(data["images"]):
         if not isinstance(image, dict) or not isinstance(image.get("id"), int):
@@ -689,62 +829,14 @@ def parse_coco(
             skips.append(Skip(file=name, where=f"images[{j}]", reason="bad_file", detail=detail))
             continue
         stem = Path(str(image.get("file_name", image["id"]))).stem
-        size = read_image_size(images[stem]) if stem in images else None
-        if size is None:
-            width, height = image.get("width"), image.get("height")
-            if isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0:
-                size = (width, height)
-        size = size or image_size
+        size = _coco_image_size(image, stem, images, image_size)
         if size is None:
             detail = f"image {stem!r}: no image file, no width/height and no --image-size"
             skips.append(
                 Skip(file=name, where=f"images[{j}]", reason="missing_image_size", detail=detail)
             )
             continue
-        polygons: list[RawPolygon] = []
-        for k, (i, ann) in enumerate(per_image.get(image["id"], [])):
-            where = f"annotations[{i}]"
-
-            def bad(reason: str, detail: str, where: str = where) -> None:
-                skips.append(Skip(file=name, where=where, reason=reason, detail=detail))
-
-            category = ann.get("category_id")
-            if category not in categories:
-                bad("unknown_class_id", f"category_id {category!r} not in categories")
-                continue
-            seg = ann.get("segmentation")
-            if not isinstance(seg, list) or not seg:
-                bad("not_a_polygon", "segmentation is not a polygon list (RLE is not supported)")
-                continue
-            parts = seg if isinstance(seg[0], list) else [seg]
-            best: np.ndarray | None = None
-            problem = ""
-            for part in parts:
-                if not isinstance(part, list) or len(part) % 2:
-                    problem = "odd_coordinates"
-                    break
-                if not all(
-                    isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                    for v in part
-                ):
-                    problem = "not_a_number"
-                    break
-                pts = np.array(part, dtype=np.float64).reshape(-1, 2)
-                if len(pts) >= 3 and (best is None or len(pts) > len(best)):
-                    best = pts
-            if problem:
-                bad(problem, "segmentation polygon is malformed")
-                continue
-            if best is None:
-                bad("too_few_points", "no segmentation polygon with at least 3 points")
-                continue
-            range_problem = _check_range(best, size[0], size[1])
-            if range_problem is not None:
-                bad(range_problem, f"pixel coordinates outside the {size[0]}x{size[1]} image")
-                continue
-            polygons.append(
-                RawPolygon(index=k, where=where, class_name=categories[category], points_px=best)
-            )
+        polygons = _coco_polygons(per_image.get(image["id"], []), categories, size, name, skips)
         out.append(
             ImageAnnotation(
                 stem=stem,

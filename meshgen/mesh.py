@@ -184,24 +184,28 @@ class ConvexPieces:
     per_ring: IntArray
 
 
-def hertel_mehlhorn(rings: list[FloatArray], tris_list: list[IntArray]) -> ConvexPieces:
-    """Exact convex decomposition (Hertel–Mehlhorn) of many CCW rings from their triangulations.
+@dataclass(frozen=True, slots=True)
+class _HalfEdges:
+    """The half-edges of many triangulations in one numbering, ready for diagonal removal.
 
-    Per ring: removes every diagonal whose removal keeps both of its end points convex (a left
-    turn, or within ``CONVEX_REL_TOL`` of the ring's squared extent of one); the result has at
-    most four times the minimum number of pieces. The triangles of all rings are held as
-    half-edges in one numbering (``e`` runs from ``org[e]`` to ``org[nxt[e]]``), so removing a
-    diagonal is four pointer updates and its test two cross products. Diagonals are visited in
-    half-edge order (:func:`interior_diagonals`), pieces listed from their lowest half-edge.
-    Everything that does not depend on earlier removals (diagonals and twins, each half-edge's
-    corner coordinates, each ring's tolerance) is computed for all rings at once in numpy; only
-    the removals and the walk around the pieces run in Python, over all rings in one loop each.
+    Half-edge ``e`` starts at ring-local vertex ``org[e]`` of its ring, at ``(xs[e], ys[e])``;
+    ``edge_ends`` are the cumulative half-edge counts of the rings. ``first``/``second`` are the
+    interior diagonals as half-edge pairs (:func:`interior_diagonals`) and ``tols`` the
+    convexity tolerance of each one's ring.
     """
-    sizes = [len(r) for r in rings]
-    if not rings:
-        empty = np.zeros(0, dtype=np.int64)
-        return ConvexPieces(empty, empty, empty)
-    first, second = interior_diagonals(tris_list, sizes)
+
+    org: list[int]
+    xs: list[float]
+    ys: list[float]
+    edge_ends: IntArray
+    first: list[int]
+    second: list[int]
+    tols: list[float]
+
+
+def _half_edges(rings: list[FloatArray], tris_list: list[IntArray]) -> _HalfEdges:
+    """Everything :func:`hertel_mehlhorn` needs that does not depend on earlier removals."""
+    first, second = interior_diagonals(tris_list, [len(r) for r in rings])
     edge_counts = np.fromiter((t.size for t in tris_list), dtype=np.int64, count=len(rings))
     edge_ends = np.cumsum(edge_counts)
     points, ring_sizes = join_rows(rings)
@@ -213,14 +217,29 @@ def hertel_mehlhorn(rings: list[FloatArray], tris_list: list[IntArray]) -> Conve
     ring_tol = -CONVEX_REL_TOL * span * span
     local = np.concatenate([t.ravel() for t in tris_list])
     corners = np.take(points, local + np.repeat(starts, edge_counts), axis=0)
-    xs: list[float] = corners[:, 0].tolist()
-    ys: list[float] = corners[:, 1].tolist()
     diagonal_ring = np.searchsorted(edge_ends, first, side="right")
-    tols: list[float] = ring_tol[diagonal_ring].tolist()
-    count = len(local)
+    return _HalfEdges(
+        org=local.tolist(),
+        xs=corners[:, 0].tolist(),
+        ys=corners[:, 1].tolist(),
+        edge_ends=edge_ends,
+        first=first.tolist(),
+        second=second.tolist(),
+        tols=ring_tol[diagonal_ring].tolist(),
+    )
+
+
+def _remove_diagonals(edges: _HalfEdges) -> tuple[list[int], list[bool]]:
+    """Remove every diagonal whose removal keeps both end points convex, in half-edge order.
+
+    Returns the ``next`` links of the half-edges after the removals and which half-edges are
+    still alive (the removed diagonals' two halves are not).
+    """
+    xs, ys = edges.xs, edges.ys
+    count = len(xs)
     nxt, prv = _triangle_links(count)
     alive = [True] * count
-    for e, f, tol in zip(first.tolist(), second.tolist(), tols, strict=True):
+    for e, f, tol in zip(edges.first, edges.second, edges.tols, strict=True):
         # a = org[e] joins x = org[prv[e]] and w = org[nxt[nxt[f]]]
         pe = prv[e]
         w = nxt[nxt[f]]
@@ -242,12 +261,34 @@ def hertel_mehlhorn(rings: list[FloatArray], tris_list: list[IntArray]) -> Conve
         nxt[pf] = ne
         prv[ne] = pf
         alive[e] = alive[f] = False
-    org: list[int] = local.tolist()
+    return nxt, alive
+
+
+def hertel_mehlhorn(rings: list[FloatArray], tris_list: list[IntArray]) -> ConvexPieces:
+    """Exact convex decomposition (Hertel–Mehlhorn) of many CCW rings from their triangulations.
+
+    Per ring: removes every diagonal whose removal keeps both of its end points convex (a left
+    turn, or within ``CONVEX_REL_TOL`` of the ring's squared extent of one); the result has at
+    most four times the minimum number of pieces. The triangles of all rings are held as
+    half-edges in one numbering (``e`` runs from ``org[e]`` to ``org[nxt[e]]``), so removing a
+    diagonal is four pointer updates and its test two cross products. Diagonals are visited in
+    half-edge order (:func:`interior_diagonals`), pieces listed from their lowest half-edge.
+    Everything that does not depend on earlier removals (diagonals and twins, each half-edge's
+    corner coordinates, each ring's tolerance) is computed for all rings at once in numpy
+    (:func:`_half_edges`); only the removals and the walk around the pieces run in Python, over
+    all rings in one loop each.
+    """
+    if not rings:
+        empty = np.zeros(0, dtype=np.int64)
+        return ConvexPieces(empty, empty, empty)
+    edges = _half_edges(rings, tris_list)
+    nxt, alive = _remove_diagonals(edges)
+    org = edges.org
     vertices: list[int] = []
     piece_sizes: list[int] = []
     piece_starts: list[int] = []
     # compress reads ``alive`` as it goes, so edges already walked are passed over
-    for start in compress(range(count), alive):
+    for start in compress(range(len(org)), alive):
         before = len(vertices)
         e = start
         while alive[e]:
@@ -256,7 +297,7 @@ def hertel_mehlhorn(rings: list[FloatArray], tris_list: list[IntArray]) -> Conve
             e = nxt[e]
         piece_sizes.append(len(vertices) - before)
         piece_starts.append(start)
-    owner = np.searchsorted(edge_ends, np.array(piece_starts, dtype=np.int64), side="right")
+    owner = np.searchsorted(edges.edge_ends, np.array(piece_starts, dtype=np.int64), side="right")
     return ConvexPieces(
         np.array(vertices, dtype=np.int64),
         np.array(piece_sizes, dtype=np.int64),

@@ -1,7 +1,7 @@
 """Rows of numbers to text for many rows at once, with exactly the bytes of Python's ``%``.
 
-Formatting a float with ``%`` costs 100-200 ns in Python, which adds up over the tens of
-thousands of coordinates a run writes. :func:`render` lays out rows such as
+Formatting floats one at a time with ``%`` is a Python-level call per number, which adds up over
+the tens of thousands of coordinates a run writes. :func:`render` lays out rows such as
 ``"v %.6f %.6f %.6f\\n"`` for all rows together in a byte buffer:
 
 - every row is first the same template (the literal text, a ``-`` where a column may be

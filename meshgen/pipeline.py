@@ -31,7 +31,7 @@ import time
 import zlib
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -143,9 +143,9 @@ def _pcg64_first_double(seed_key: list[int]) -> float:
     """First ``random()`` double of ``numpy.random.default_rng(seed_key)``, computed directly.
 
     numpy's own ``SeedSequence`` gives the four state words; the PCG64 step is
-    :func:`meshgen.seeding.pcg64_first_double` (constructing a ``Generator`` costs about four
-    times as much). The pipeline uses the batched :func:`object_heights_m`; this one-key form
-    serves :func:`object_height_m` (and so the baseline).
+    :func:`meshgen.seeding.pcg64_first_double`, which saves constructing a ``Generator``. The
+    pipeline uses the batched :func:`object_heights_m`; this one-key form serves
+    :func:`object_height_m` (and so the baseline).
     """
     words: list[int] = np.random.SeedSequence(seed_key).generate_state(4, np.uint64).tolist()
     return pcg64_first_double((words[0], words[1], words[2], words[3]))
@@ -407,9 +407,9 @@ CHUNK_IMAGES = 32
 """Images meshed together (one batch of vectorised footprint work) per job.
 
 Each batch pays a fixed cost (a few hundred numpy and GEOS calls), so larger batches are
-cheaper per object; the batches after the first are parsed while the writer thread is still
-creating the files of the earlier ones (which matters on a slow file system). On the 60-image
-real sample 32 (two batches) measured about as fast as one batch and clearly faster than 16.
+cheaper per object; on the other hand the batches after the first are parsed while the writer
+thread is still creating the files of the earlier ones (which matters on a slow file system),
+which favours several batches. 32 balances the two (figures in ``docs/benchmarks.md``, meshgen).
 """
 
 
@@ -436,21 +436,33 @@ class RunInterrupted(KeyboardInterrupt):
         self.summary = summary
 
 
-def _summarise(
-    listing: DatasetListing,
-    results: list[tuple[ImageResult | None, list[Skip]]],
-    *,
-    out: Path,
-    config: MeshgenConfig,
-    workers: int,
-    start: float,
-    complete: bool,
-) -> tuple[DatasetSummary, list[tuple[object, ...]]]:
-    """The summary of ``results`` and the ``index.csv`` rows of the images meshed."""
-    skips: list[Skip] = list(listing.skips)
+@dataclass(slots=True, kw_only=True)
+class _Run:
+    """One :func:`mesh_dataset` run as it goes: what its summary and its clean-up need.
+
+    ``sink`` writes the files of a one-process run (a background writer thread); ``pool`` is
+    the worker pool of a multi-process run; ``swapped`` is set once ``out`` holds the result.
+    """
+
+    dataset: Path
+    out: Path
+    staging: Path
+    config: MeshgenConfig
+    workers: int
+    start: float
+    listing: DatasetListing
+    results: list[tuple[ImageResult | None, list[Skip]]] = field(default_factory=list)
+    sink: FileSink = field(default_factory=FileSink)
+    pool: Any = None
+    swapped: bool = False
+
+
+def _summarise(run: _Run, complete: bool) -> tuple[DatasetSummary, list[tuple[object, ...]]]:
+    """The summary of the images meshed so far and their ``index.csv`` rows."""
+    skips: list[Skip] = list(run.listing.skips)
     rows: list[tuple[object, ...]] = []
     objects = 0
-    for result, file_skips in results:
+    for result, file_skips in run.results:
         skips.extend(file_skips)
         if result is None:
             continue
@@ -468,17 +480,58 @@ def _summarise(
             )
         )
     summary = DatasetSummary(
-        out=out,
-        fmt=listing.fmt,
+        out=run.out,
+        fmt=run.listing.fmt,
         images=len(rows),
         objects=objects,
         skips=tuple(skips),
-        elapsed_s=time.perf_counter() - start,
-        workers=workers,
-        config=config,
+        elapsed_s=time.perf_counter() - run.start,
+        workers=run.workers,
+        config=run.config,
         complete=complete,
     )
     return summary, rows
+
+
+def _mesh_sources(run: _Run, progress: Callable[[int, int], None] | None) -> None:
+    """Mesh the listed images in batches into the staging folder, collecting ``run.results``.
+
+    With several workers the batches go to a process pool (each worker writes its own files);
+    otherwise they are meshed here while a writer thread creates the files.
+    """
+    sources = run.listing.sources
+    total = len(sources)
+    workers = run.workers
+    size = CHUNK_IMAGES if workers <= 1 else max(1, min(CHUNK_IMAGES, total // (4 * workers)))
+    jobs = [
+        (sources[i : i + size], run.dataset, run.config, run.staging) for i in range(0, total, size)
+    ]
+    if workers > 1 and len(jobs) > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        run.pool = ProcessPoolExecutor(max_workers=workers, initializer=ignore_interrupts)
+        for chunk in run.pool.map(_process, jobs):
+            run.results.extend(chunk)
+            if progress is not None:
+                progress(len(run.results), total)
+        run.pool.shutdown()
+    else:
+        run.sink = ThreadedFileSink()
+        for job in jobs:
+            run.results.extend(_process(job, run.sink))
+            if progress is not None:
+                progress(len(run.results), total)
+        run.sink.close()
+
+
+def _abandon(run: _Run) -> None:
+    """Stop the files and workers under way and remove the staging folder (unless swapped)."""
+    with deferred_interrupts(redeliver=False):
+        run.sink.cancel()
+        if run.pool is not None:
+            run.pool.shutdown(wait=True, cancel_futures=True)
+        if not run.swapped:
+            shutil.rmtree(run.staging, ignore_errors=True)
 
 
 def mesh_dataset(
@@ -500,66 +553,33 @@ def mesh_dataset(
     out = Path(out).resolve()
     check_location(Path(dataset), out)
     check_replaceable(out)
-    listing = DatasetListing(fmt=config.fmt, sources=(), skips=())
-    staging = staging_path(out)
-    results: list[tuple[ImageResult | None, list[Skip]]] = []
-    sink: FileSink = FileSink()
-    pool: Any = None
-    swapped = False
+    run = _Run(
+        dataset=Path(dataset),
+        out=out,
+        staging=staging_path(out),
+        config=config,
+        workers=workers,
+        start=start,
+        listing=DatasetListing(fmt=config.fmt, sources=(), skips=()),
+    )
     try:
-        listing = discover(Path(dataset), config.fmt, config.image_size_px)
+        run.listing = discover(run.dataset, config.fmt, config.image_size_px)
         staging_dir(out)
-        write_text(staging / "materials.mtl", mtl_text(config.classes))
-        sources = listing.sources
-        total = len(sources)
-        size = CHUNK_IMAGES if workers <= 1 else max(1, min(CHUNK_IMAGES, total // (4 * workers)))
-        jobs = [
-            (sources[i : i + size], Path(dataset), config, staging) for i in range(0, total, size)
-        ]
-        if workers > 1 and len(jobs) > 1:
-            from concurrent.futures import ProcessPoolExecutor
-
-            pool = ProcessPoolExecutor(max_workers=workers, initializer=ignore_interrupts)
-            for chunk in pool.map(_process, jobs):
-                results.extend(chunk)
-                if progress is not None:
-                    progress(len(results), total)
-            pool.shutdown()
-        else:
-            sink = ThreadedFileSink()
-            for job in jobs:
-                results.extend(_process(job, sink))
-                if progress is not None:
-                    progress(len(results), total)
-            sink.close()
-        summary, rows = _summarise(
-            listing, results, out=out, config=config, workers=workers, start=start, complete=True
-        )
-        write_text(staging / "index.csv", csv_text(INDEX_COLUMNS, rows))
-        write_json(staging / "summary.json", summary.to_json())
+        write_text(run.staging / "materials.mtl", mtl_text(config.classes))
+        _mesh_sources(run, progress)
+        summary, rows = _summarise(run, complete=True)
+        write_text(run.staging / "index.csv", csv_text(INDEX_COLUMNS, rows))
+        write_json(run.staging / "summary.json", summary.to_json())
         with deferred_interrupts():
-            swap_in(staging, out)
-            swapped = True
+            swap_in(run.staging, out)
+            run.swapped = True
     except BaseException as exc:
-        with deferred_interrupts(redeliver=False):
-            sink.cancel()
-            if pool is not None:
-                pool.shutdown(wait=True, cancel_futures=True)
-            if not swapped:
-                shutil.rmtree(staging, ignore_errors=True)
+        _abandon(run)
         if isinstance(exc, KeyboardInterrupt):
-            if not swapped:
-                summary, _ = _summarise(
-                    listing,
-                    results,
-                    out=out,
-                    config=config,
-                    workers=workers,
-                    start=start,
-                    complete=False,
-                )
+            if not run.swapped:
+                summary, _ = _summarise(run, complete=False)
             raise RunInterrupted(summary) from exc
-        if isinstance(exc, OSError) and str(exc.filename or "").startswith(str(staging)):
+        if isinstance(exc, OSError) and str(exc.filename or "").startswith(str(run.staging)):
             raise output_error(out, exc, "write the output") from exc
         raise
     return summary

@@ -148,35 +148,36 @@ def _head_values(
     )
 
 
-def object_json_text(
-    record: ObjectRecord,
-    *,
-    source_where: str,
-    density_kg_m3: float,
-    seed: int,
-    rng_key: tuple[int, int, int],
-    footprint_json: str,
-    polygon_json: str,
-) -> str:
+class EntryExtras(NamedTuple):
+    """What an object's scene.json entry holds beyond its record (see :func:`object_json_text`)."""
+
+    source_where: str
+    density_kg_m3: float
+    rng_key: tuple[int, int, int]
+    footprint_json: str
+    polygon_json: str
+
+
+def object_json_text(record: ObjectRecord, extra: EntryExtras, seed: int) -> str:
     """The scene.json entry of one object: its record plus where it came from and its points.
 
     The fields of :func:`_object_fields` as ``json.dumps(..., sort_keys=True,
-    separators=(",", ":"))`` writes them, then ``footprint_json`` and ``polygon_json``: the
-    JSON text of ``footprint_m`` (``(n, 2)`` metres, ``%.9f``) and ``polygon_px`` (``(m, 2)``
-    pixels, ``%.3f``), which the pipeline formats for many objects at once
-    (:func:`meshgen.objtext.points_json_blocks`). The general route, for any value types;
+    separators=(",", ":"))`` writes them, then ``extra.footprint_json`` and
+    ``extra.polygon_json``: the JSON text of ``footprint_m`` (``(n, 2)`` metres, ``%.9f``) and
+    ``polygon_px`` (``(m, 2)`` pixels, ``%.3f``), which the pipeline formats for many objects at
+    once (:func:`meshgen.objtext.points_json_blocks`). The general route, for any value types;
     :func:`objects_json_text` formats whole images of plain values with one template and falls
     back to this.
     """
     fields = _object_fields(
         record,
-        source_where=source_where,
-        density_kg_m3=density_kg_m3,
+        source_where=extra.source_where,
+        density_kg_m3=extra.density_kg_m3,
         seed=seed,
-        rng_key=rng_key,
+        rng_key=extra.rng_key,
     )
     head = json.dumps(fields, sort_keys=True, separators=(",", ":"))[:-1] + ","
-    return f'{head}"footprint_m":{footprint_json},"polygon_px":{polygon_json}}}'
+    return f'{head}"footprint_m":{extra.footprint_json},"polygon_px":{extra.polygon_json}}}'
 
 
 _ENTRY_FORMAT = _OBJECT_FORMAT + '"footprint_m":%s,"polygon_px":%s}'
@@ -186,16 +187,6 @@ _ENTRY_FLOATS = (0, 1, 2, 3, 7, 8, 9, 10, 21, 22, 23)
 """Where in an entry's values the floats stand (written with ``%r``)."""
 _ENTRY_INTS = (4, 12, 15, 16, 17, 18)
 """Where in an entry's values the integers stand (written with ``%d``)."""
-
-
-class EntryExtras(NamedTuple):
-    """What an object's scene.json entry holds beyond its record (see :func:`object_json_text`)."""
-
-    source_where: str
-    density_kg_m3: float
-    rng_key: tuple[int, int, int]
-    footprint_json: str
-    polygon_json: str
 
 
 def objects_json_text(
@@ -228,14 +219,5 @@ def objects_json_text(
     ):
         return ",".join([_ENTRY_FORMAT] * len(records)) % tuple(values)
     return ",".join(
-        object_json_text(
-            record,
-            source_where=extra.source_where,
-            density_kg_m3=extra.density_kg_m3,
-            seed=seed,
-            rng_key=extra.rng_key,
-            footprint_json=extra.footprint_json,
-            polygon_json=extra.polygon_json,
-        )
-        for record, extra in zip(records, extras, strict=True)
+        object_json_text(record, extra, seed) for record, extra in zip(records, extras, strict=True)
     )

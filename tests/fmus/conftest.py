@@ -1,4 +1,4 @@
-"""Session fixtures: build both belt-drive FMUs once into a temporary folder."""
+"""Session fixtures: both belt-drive FMUs built once, and the pythonfmu-built LagBelt FMU."""
 
 from __future__ import annotations
 
@@ -7,6 +7,9 @@ from pathlib import Path
 import pytest
 
 from fmus.build import build_fmus
+from tests.fmus.pythonfmu_belt import lag_belt_fmu
+
+__all__ = ["fmus", "lag_belt_fmu"]
 
 
 @pytest.fixture(scope="session")

@@ -23,6 +23,7 @@ import trimesh
 
 from meshgen.export import SCENE_COLUMNS
 from meshgen.mesh import ConvexPieces
+from meshgen.objfile import parse_obj
 from meshgen.records import ObjectRecord
 
 FloatArray = npt.NDArray[np.float64]
@@ -139,23 +140,21 @@ def object_json(
 
 
 def obj_meshes(text: str) -> list[trimesh.Trimesh]:
-    """One mesh per ``o`` block of OBJ text (a single mesh when there is no ``o`` line)."""
-    verts: list[list[float]] = []
-    blocks: list[list[list[int]]] = [[]]
-    for line in text.splitlines():
-        if line.startswith("o "):
-            blocks.append([])
-        elif line.startswith("v "):
-            verts.append([float(v) for v in line.split()[1:]])
-        elif line.startswith("f "):
-            blocks[-1].append([int(i) - 1 for i in line.split()[1:]])
+    """One mesh per ``o`` block of OBJ text (a single mesh when there is no ``o`` line).
+
+    Read with :func:`meshgen.objfile.parse_obj`; each block's mesh holds the vertices its faces
+    use.
+    """
+    mesh = parse_obj(text)
     out = []
-    for faces in (b for b in blocks if b):
-        f = np.array(faces)
-        used = np.unique(f)
-        remap = np.full(len(verts), -1)
+    for group in mesh.groups:
+        faces = mesh.faces[group.faces]
+        if not len(faces):
+            continue
+        used = np.unique(faces)
+        remap = np.full(len(mesh.vertices), -1)
         remap[used] = np.arange(len(used))
-        out.append(trimesh.Trimesh(np.array(verts)[used], remap[f], process=False))
+        out.append(trimesh.Trimesh(mesh.vertices[used], remap[faces], process=False))
     return out
 
 

@@ -44,15 +44,10 @@ PIXELS = np.array([[10.0, 20.0], [30.0, 20.0], [30.0, 41.0]])
 def _texts(record: ObjectRecord, density: float) -> tuple[str, str]:
     """``object_json_text`` of ``record`` and the ``json.dumps`` reference of it."""
     where, seed, key = "shape 7", 5, (5, 123, 7)
-    text = object_json_text(
-        record,
-        source_where=where,
-        density_kg_m3=density,
-        seed=seed,
-        rng_key=key,
-        footprint_json=points_json(FOOTPRINT, "%.9f"),
-        polygon_json=points_json(PIXELS, "%.3f"),
+    extra = EntryExtras(
+        where, density, key, points_json(FOOTPRINT, "%.9f"), points_json(PIXELS, "%.3f")
     )
+    text = object_json_text(record, extra, seed)
     reference = object_json(
         record,
         source_where=where,
