@@ -31,9 +31,9 @@ def _time_ik(calls: int) -> dict[str, float]:
     from control.ik import Kinematics, tool_pose
 
     cfg = ControllerConfig()
-    kin = Kinematics(cfg.robot, cfg.ik)
+    kin = Kinematics.of_station(cfg.station, cfg.ik)
     q = kin.solve(
-        tool_pose(cfg.robot.ready_tcp_position_m, cfg.robot.ready_yaw_rad),
+        tool_pose(cfg.ready_tcp_position_m, cfg.ready_yaw_rad),
         np.asarray(cfg.robot.ready_joint_positions_rad),
     ).q
     iterations = 0

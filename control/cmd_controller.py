@@ -3,7 +3,12 @@
 Examples::
 
     cdw-twin controller --lockstep --stats-out out/controller_stats.json
-    python -m control --params-file my_cell.yaml --duration 60
+    python -m control --cell two_pandas --station downstream --params-file my_tuning.yaml
+
+The controller drives one station of a cell: ``--cell`` names the cell file (a path, or a
+shipped cell such as ``two_pandas``; default: the reference cell) and ``--station`` the station
+(default: the cell's first); the station's robot, tool, pick window and bins, and its topics'
+namespace, come from there. ``--params-file`` is the controller's tuning.
 
 The node uses sim time (``/clock``) in both modes. On shutdown it writes its counters (pick
 statistics, rejected detections, skipped commands, control-loop timing) as JSON to
@@ -32,15 +37,20 @@ DEFAULT_PARAMS = Path(__file__).resolve().parent / "config" / "default.yaml"
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the controller's options to ``parser``."""
     parser.add_argument(
+        "--cell",
+        help="cell file: a path or a shipped cell's name (default: the reference cell)",
+    )
+    parser.add_argument("--station", help="the station to drive (default: the cell's first)")
+    parser.add_argument(
         "--params-file",
         type=Path,
         default=DEFAULT_PARAMS,
-        help="ROS 2 parameter YAML file (default: control/config/default.yaml)",
+        help="controller tuning, ROS 2 parameter YAML (default: control/config/default.yaml)",
     )
     parser.add_argument(
         "--lockstep",
         action="store_true",
-        help="answer the twin's /lockstep/tick with /lockstep/ack (deterministic closed loop)",
+        help="answer the twin's /lockstep/tick with lockstep/ack (deterministic closed loop)",
     )
     parser.add_argument("--stats-out", type=Path, help="write the counters as JSON on shutdown")
     parser.add_argument(
@@ -62,15 +72,19 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.utilities import try_shutdown
 
     from control.config import load_config
-    from control.errors import ControlError
     from control.node import ControllerNode
+    from interfaces.cell import load_cell
+    from interfaces.errors import CdwTwinError
 
     if args.duration is not None and not args.duration > 0.0:
         print(f"--duration: {args.duration!r} must be > 0 s", file=sys.stderr)
         return 2
     try:
-        config = load_config(args.params_file)
-    except ControlError as exc:
+        cell = load_cell(args.cell)
+        if args.station:
+            cell.station(args.station)  # an unknown name: the cell file's error
+        config = load_config(args.params_file, cell=cell, station=args.station or "")
+    except CdwTwinError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     stop: list[int] = []
@@ -86,14 +100,15 @@ def run(args: argparse.Namespace) -> int:
         die_with_parent()
         try:
             node = ControllerNode(config, lockstep=args.lockstep)
-        except ControlError as exc:
+        except CdwTwinError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
         executor = EventsExecutor()
         executor.add_node(node)
         node.get_logger().info(
             f"controller up ({'lockstep' if args.lockstep else 'realtime'}, "
-            f"{1.0 / config.motion.control_period_s:.0f} Hz, params {args.params_file})"
+            f"{1.0 / config.motion.control_period_s:.0f} Hz, station {config.station.name} "
+            f"of {config.cell.source}, params {args.params_file})"
         )
         while not stop:
             executor.spin_once(timeout_sec=0.1)

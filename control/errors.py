@@ -1,18 +1,20 @@
 """Errors raised by the controller package.
 
-The controller is its own process and imports nothing from ``twin``; its errors therefore derive
-from :class:`ControlError`, not from the twin's base error.
+The controller is its own process and imports nothing from ``twin``; its errors derive from the
+project's base error in :mod:`interfaces.errors`, which every package may import.
 """
 
 from __future__ import annotations
 
+from interfaces.errors import CdwTwinError, ConfigError
 
-class ControlError(Exception):
+
+class ControlError(CdwTwinError):
     """Base class of every error the controller raises on purpose."""
 
 
-class ControlConfigError(ControlError):
-    """The controller configuration (YAML file or dataclass field) is invalid."""
+class ControlConfigError(ControlError, ConfigError):
+    """The controller configuration (parameter file, cell, dataclass field) is invalid."""
 
 
 class RobotModelError(ControlError):

@@ -2,7 +2,7 @@
 
 The model is built from the same URDF the twin loads; every joint that is not an arm joint
 (fingers, ...) is locked at its neutral position, so configurations ``q`` are ``(n_arm,) float``
-in the order of ``RobotConfig.arm_joint_names``. Poses are Pinocchio ``SE3`` objects named
+in the order of the robot's ``arm_joints``. Poses are Pinocchio ``SE3`` objects named
 ``aMb`` (pose of frame b in frame a); ``o`` is the world frame, ``base`` the robot base.
 """
 
@@ -10,13 +10,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from control.config import IkConfig, RobotConfig, resolve_urdf_path
+from control.config import IkConfig
 from control.errors import RobotModelError
+from interfaces.cell import StationSpec
+from interfaces.errors import ConfigError
+from interfaces.robots import RobotSpec, resolve_urdf
 
 FloatArray = NDArray[np.float64]
 
@@ -68,59 +72,53 @@ class IkResult:
 class Kinematics:
     """FK and damped-least-squares IK of the tool centre point for one arm."""
 
-    def __init__(self, robot: RobotConfig, ik: IkConfig | None = None) -> None:
+    def __init__(
+        self,
+        robot: RobotSpec,
+        *,
+        tcp_link: str,
+        tcp_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        base_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        base_yaw_rad: float = 0.0,
+        ik: IkConfig | None = None,
+    ) -> None:
         """Build the reduced Pinocchio model of ``robot`` (arm joints only) and its TCP frame.
 
-        Raises ``RobotModelError`` when the URDF cannot be parsed or a joint/link is missing.
+        The TCP is ``tcp_link`` plus ``tcp_offset_m`` in that link's frame; the base stands at
+        ``base_position_m`` turned by ``base_yaw_rad`` about the world z axis. Raises
+        ``RobotModelError`` when the URDF cannot be found or parsed or a joint/link is missing.
         """
         self._ik = ik if ik is not None else IkConfig()
-        path = resolve_urdf_path(robot.urdf_path)
+        try:
+            path = resolve_urdf(robot.urdf)
+        except ConfigError as exc:
+            raise RobotModelError(str(exc)) from None
         try:
             full = pin.buildModelFromUrdf(str(path))
         except (RuntimeError, ValueError) as exc:
             msg = f"{path}: cannot build a Pinocchio model: {exc}"
             raise RobotModelError(msg) from exc
-        lock: list[int] = []
-        for joint_id in range(1, full.njoints):
-            name = full.names[joint_id]
-            if name not in robot.arm_joint_names:
-                lock.append(joint_id)
-        for name in robot.arm_joint_names:
-            if not full.existJointName(name):
-                msg = f"{path}: robot.arm_joint_names: no joint {name!r} in the URDF"
-                raise RobotModelError(msg)
-            joint = full.joints[full.getJointId(name)]
-            if joint.nq != 1:
-                msg = f"{path}: arm joint {name!r} has {joint.nq} position variables, expected 1"
-                raise RobotModelError(msg)
-        for name in robot.finger_joint_names:
-            if not full.existJointName(name):
-                msg = f"{path}: robot.finger_joint_names: no joint {name!r} in the URDF"
-                raise RobotModelError(msg)
-        model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
-        order = [model.getJointId(name) for name in robot.arm_joint_names]
-        if order != sorted(order):
-            msg = f"{path}: robot.arm_joint_names {robot.arm_joint_names} are not in chain order"
+        model = self._reduced(full, robot.arm_joints, path)
+        if not model.existFrame(tcp_link):
+            msg = f"{path}: tool.tcp_link: no link or frame {tcp_link!r} in the URDF"
             raise RobotModelError(msg)
-        if not model.existFrame(robot.tcp_link):
-            msg = f"{path}: robot.tcp_link: no link or frame {robot.tcp_link!r} in the URDF"
-            raise RobotModelError(msg)
-        link = model.frames[model.getFrameId(robot.tcp_link)]
-        offset = pin.SE3(np.eye(3), np.asarray(robot.tcp_offset_m, dtype=np.float64))
+        link = model.frames[model.getFrameId(tcp_link)]
+        offset = pin.SE3(np.eye(3), np.asarray(tcp_offset_m, dtype=np.float64))
         self._tcp_id = model.addFrame(
             pin.Frame(
                 _TCP_FRAME,
                 link.parentJoint,
-                model.getFrameId(robot.tcp_link),
+                model.getFrameId(tcp_link),
                 link.placement * offset,
                 pin.FrameType.OP_FRAME,
             )
         )
         self._model = model
         self._data = model.createData()
+        self._urdf_joints = frozenset(full.names)
         self.urdf_path = path
         """Resolved URDF file the model was built from."""
-        self.joint_names: tuple[str, ...] = tuple(robot.arm_joint_names)
+        self.joint_names: tuple[str, ...] = tuple(robot.arm_joints)
         """Arm joint names, the order of every ``q``."""
         self.lower_rad: FloatArray = _frozen(model.lowerPositionLimit)
         """Lower joint limits ``(n_arm,) float``."""
@@ -128,11 +126,54 @@ class Kinematics:
         """Upper joint limits ``(n_arm,) float``."""
         self.velocity_limit_rps: FloatArray = _frozen(model.velocityLimit)
         """Joint velocity limits ``(n_arm,) float`` from the URDF."""
-        quat = robot.base_orientation_xyzw
-        base_rotation = pin.Quaternion(quat[3], quat[0], quat[1], quat[2]).toRotationMatrix()
-        self.oMbase = pin.SE3(base_rotation, np.asarray(robot.base_position_m, dtype=np.float64))
+        self.acceleration_limit_rps2: FloatArray = _frozen(
+            np.asarray(robot.joint_max_acceleration_rps2, dtype=np.float64)
+        )
+        """Joint acceleration limits ``(n_arm,) float`` (the robot's datasheet)."""
+        self.jerk_limit_rps3: FloatArray = _frozen(
+            np.asarray(robot.joint_max_jerk_rps3, dtype=np.float64)
+        )
+        """Joint jerk limits ``(n_arm,) float`` (the robot's datasheet)."""
+        half = 0.5 * base_yaw_rad
+        base_rotation = pin.Quaternion(math.cos(half), 0.0, 0.0, math.sin(half)).toRotationMatrix()
+        self.oMbase = pin.SE3(base_rotation, np.asarray(base_position_m, dtype=np.float64))
         """World pose of the robot base."""
         self._baseMo = self.oMbase.inverse()
+
+    @classmethod
+    def of_station(cls, station: StationSpec, ik: IkConfig | None = None) -> Kinematics:
+        """The kinematics of a station's robot with its tool's TCP, at the station's base."""
+        return cls(
+            station.robot,
+            tcp_link=station.tool.tcp_link,
+            tcp_offset_m=station.tool.tcp_offset_m,
+            base_position_m=station.base_position_m,
+            base_yaw_rad=station.base_yaw_rad,
+            ik=ik,
+        )
+
+    @staticmethod
+    def _reduced(full: pin.Model, arm_joints: tuple[str, ...], path: Path) -> pin.Model:
+        """``full`` with every joint but the arm's locked at its neutral position."""
+        for name in arm_joints:
+            if not full.existJointName(name):
+                msg = f"{path}: robot.arm_joints: no joint {name!r} in the URDF"
+                raise RobotModelError(msg)
+            joint = full.joints[full.getJointId(name)]
+            if joint.nq != 1:
+                msg = f"{path}: arm joint {name!r} has {joint.nq} position variables, expected 1"
+                raise RobotModelError(msg)
+        lock = [j for j in range(1, full.njoints) if full.names[j] not in arm_joints]
+        model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
+        order = [model.getJointId(name) for name in arm_joints]
+        if order != sorted(order):
+            msg = f"{path}: robot.arm_joints {arm_joints} are not in chain order"
+            raise RobotModelError(msg)
+        return model
+
+    def has_joint(self, name: str) -> bool:
+        """Whether the URDF has a joint called ``name`` (arm or not)."""
+        return name in self._urdf_joints
 
     @property
     def nq(self) -> int:

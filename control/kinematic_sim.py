@@ -7,7 +7,8 @@ at a finite speed and stop on the object's sides when they close around it (or c
 when it is not ``grippable``), and the controller gets the measured opening; without one the
 opening is not measured. The episode measures the tracking time to 4 mm (from the start of tracking
 the target until the TCP-to-grasp-point distance stays below 4 mm until the gripper has closed)
-by ground truth. Used by the tests and by ``python -m control.bench``.
+by ground truth, with the rule the twin uses (:class:`interfaces.metrics.SettleTimer`). Used by
+the tests and by ``python -m control.bench``.
 """
 
 from __future__ import annotations
@@ -19,10 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from control.config import ControllerConfig
-from control.ik import yaw_of
+from control.ik import Kinematics, yaw_of
 from control.pick import Command, Phase, PickController, PickStats, TcpMeasurement
 from control.scheduler import grasp_z_m
 from control.tracking import Detection, Tracker
+from interfaces.metrics import SettleTimer
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -76,6 +78,63 @@ class EpisodeResult:
     openings_m: tuple[float, ...] = ()
 
 
+class _SimCamera:
+    """Noisy detections of the object at ``camera.rate_hz``, delivered ``latency_s`` late."""
+
+    def __init__(self, camera: CameraSpec, obj: ObjectSpec, speed_mps: float, seed: int) -> None:
+        self._camera, self._obj, self._speed_mps = camera, obj, speed_mps
+        self._rng = np.random.default_rng(seed)
+        self._pending: deque[tuple[float, Detection]] = deque()
+        self._frame = 0
+
+    def deliver(self, t_s: float, tracker: Tracker) -> None:
+        """Take the frames captured up to ``t_s`` and feed the tracker those that arrived."""
+        camera, obj, rng = self._camera, self._obj, self._rng
+        while self._frame / camera.rate_hz <= t_s + 1e-12:
+            stamp = self._frame / camera.rate_hz
+            detection = Detection(
+                stamp_s=stamp,
+                class_name=obj.class_name,
+                confidence=0.9,
+                x_m=obj.x0_m + self._speed_mps * stamp + rng.normal(0.0, camera.position_std_m),
+                y_m=obj.y_m + rng.normal(0.0, camera.position_std_m),
+                yaw_rad=obj.yaw_rad + rng.normal(0.0, camera.yaw_std_rad),
+                length_m=obj.length_m,
+                width_m=obj.width_m,
+                height_m=obj.height_m,
+            )
+            self._pending.append((stamp + camera.latency_s, detection))
+            self._frame += 1
+        while self._pending and self._pending[0][0] <= t_s:
+            _, detection = self._pending.popleft()
+            tracker.update(detection.stamp_s, [detection], (self._speed_mps, 0.0))
+
+
+class _SimGripper:
+    """Fingers moving at ``gripper.speed_mps`` towards the command, stopped by the object's
+    sides once they closed around it at the grasp point (unless it is not ``grippable``)."""
+
+    def __init__(self, gripper: GripperSpec, object_width_m: float, open_m: float) -> None:
+        self._gripper, self._width_m = gripper, object_width_m
+        self.opening_m = open_m
+        self.commanded_m = open_m
+        self._holding = False
+
+    def step(self, distance_m: float, dt_s: float) -> float:
+        """Move for ``dt_s`` with the TCP ``distance_m`` from the grasp point; the opening."""
+        self._holding = self._gripper.grippable and (self._holding or distance_m < 0.01)
+        goal = max(self.commanded_m, self._width_m) if self._holding else self.commanded_m
+        step = self._gripper.speed_mps * dt_s
+        self.opening_m += min(max(goal - self.opening_m, -step), step)
+        self._holding = self._holding and self.opening_m <= self._width_m + 1e-9
+        return self.opening_m
+
+
+def _violation_rad(kin: Kinematics, q: np.ndarray) -> float:
+    """How far ``q`` lies outside the joint limits (0 inside)."""
+    return float(np.max(np.maximum(kin.lower_rad - q, 0.0) + np.maximum(q - kin.upper_rad, 0.0)))
+
+
 def run_episode(
     speed_mps: float,
     *,
@@ -89,75 +148,40 @@ def run_episode(
     """Run one closed-loop episode at belt speed ``speed_mps`` and measure it."""
     cfg = config if config is not None else ControllerConfig()
     obj = obj if obj is not None else ObjectSpec()
-    camera = camera if camera is not None else CameraSpec()
-    rng = np.random.default_rng(seed)
+    sim_camera = _SimCamera(camera or CameraSpec(), obj, speed_mps, seed)
     controller = PickController(cfg)
     kin = controller.kinematics
-    tracker = Tracker(cfg.tracking)
+    tracker = Tracker(cfg.tracking, classes=cfg.classes)
     dt_s = cfg.motion.control_period_s
     delay_ticks = max(round(cfg.motion.command_latency_s / dt_s), 1)
     in_flight: deque[np.ndarray] = deque([controller.q_ready.copy()] * delay_ticks)
-    pending: deque[tuple[float, Detection]] = deque()
-    frame = 0
     grasp_z = grasp_z_m(obj.height_m, cfg)
     history: list[tuple[float, Phase, float]] = []
     phases: list[tuple[float, Phase]] = []
     worst_violation = 0.0
     release_tcp_m: tuple[float, float, float] | None = None
-    opening_m = cfg.robot.gripper_max_opening_m
-    commanded_width_m = opening_m
-    holding = False
+    fingers = (
+        None if gripper is None else _SimGripper(gripper, obj.width_m, cfg.tool.open_command_m)
+    )
     openings: list[float] = []
     for tick in range(round(duration_s / dt_s)):
         t_s = tick * dt_s
-        while frame / camera.rate_hz <= t_s + 1e-12:
-            stamp = frame / camera.rate_hz
-            detection = Detection(
-                stamp_s=stamp,
-                class_name=obj.class_name,
-                confidence=0.9,
-                x_m=obj.x0_m + speed_mps * stamp + rng.normal(0.0, camera.position_std_m),
-                y_m=obj.y_m + rng.normal(0.0, camera.position_std_m),
-                yaw_rad=obj.yaw_rad + rng.normal(0.0, camera.yaw_std_rad),
-                length_m=obj.length_m,
-                width_m=obj.width_m,
-                height_m=obj.height_m,
-            )
-            pending.append((stamp + camera.latency_s, detection))
-            frame += 1
-        while pending and pending[0][0] <= t_s:
-            _, detection = pending.popleft()
-            tracker.update(detection.stamp_s, [detection], (speed_mps, 0.0))
-        q = in_flight.popleft()
-        oMtool = kin.fk(q)  # noqa: N806
-        truth = (obj.x0_m + speed_mps * t_s, obj.y_m, grasp_z)
-        distance = math.dist(tuple(float(v) for v in oMtool.translation), truth)
-        if gripper is not None:
-            # the fingers stop on the object's sides once they closed around it at the grasp point
-            holding = gripper.grippable and (holding or distance < 0.01)
-            goal = max(commanded_width_m, obj.width_m) if holding else commanded_width_m
-            step = gripper.speed_mps * dt_s
-            opening_m += min(max(goal - opening_m, -step), step)
-            holding = holding and opening_m <= obj.width_m + 1e-9
-        openings.append(opening_m if gripper is not None else math.nan)
+        sim_camera.deliver(t_s, tracker)
+        oMtool = kin.fk(in_flight.popleft())  # noqa: N806
+        p = oMtool.translation
+        tcp_m = (float(p[0]), float(p[1]), float(p[2]))
+        distance = math.dist(tcp_m, (obj.x0_m + speed_mps * t_s, obj.y_m, grasp_z))
+        openings.append(math.nan if fingers is None else fingers.step(distance, dt_s))
         measured = TcpMeasurement(
-            position_m=(
-                float(oMtool.translation[0]),
-                float(oMtool.translation[1]),
-                float(oMtool.translation[2]),
-            ),
-            yaw_rad=yaw_of(oMtool),
-            opening_m=openings[-1],
+            position_m=tcp_m, yaw_rad=yaw_of(oMtool), tool_measured_m=openings[-1]
         )
         command: Command = controller.update(
             t_s, measured, tracker.predict_to(t_s), (speed_mps, 0.0)
         )
-        commanded_width_m = command.gripper_width_m
+        if fingers is not None:
+            fingers.commanded_m = command.tool_command_m
         q_cmd = np.asarray(command.joint_positions_rad)
-        violation = float(
-            np.max(np.maximum(kin.lower_rad - q_cmd, 0.0) + np.maximum(q_cmd - kin.upper_rad, 0.0))
-        )
-        worst_violation = max(worst_violation, violation)
+        worst_violation = max(worst_violation, _violation_rad(kin, q_cmd))
         in_flight.append(q_cmd)
         if not phases or phases[-1][1] != command.phase:
             phases.append((t_s, command.phase))
@@ -165,7 +189,7 @@ def run_episode(
         if command.phase == Phase.RELEASE and release_tcp_m is None:
             release_tcp_m = measured.position_m
     return EpisodeResult(
-        tracking_time_4mm_s=_tracking_time(history, dt_s),
+        tracking_time_4mm_s=_tracking_time(history),
         max_follow_error_m=max(
             (d for _, p, d in history if p in (Phase.DWELL, Phase.CLOSE)), default=math.nan
         ),
@@ -177,13 +201,16 @@ def run_episode(
     )
 
 
-def _tracking_time(history: list[tuple[float, Phase, float]], dt_s: float) -> float:
-    """Time from the first approach until the distance stays < 4 mm to the end of the close."""
+def _tracking_time(history: list[tuple[float, Phase, float]]) -> float:
+    """Time from the first approach until the distance stays < 4 mm to the end of the close
+    (NaN when there was no close, or the distance was not below 4 mm at its end)."""
     start = next((t for t, p, _ in history if p == Phase.APPROACH), None)
     close_end = max((t for t, p, _ in history if p == Phase.CLOSE), default=None)
     if start is None or close_end is None:
         return math.nan
-    last_bad = max(
-        (t for t, _, d in history if start <= t <= close_end and d >= 0.004), default=start - dt_s
-    )
-    return last_bad + dt_s - start
+    timer = SettleTimer(start)
+    for t_s, _, distance_m in history:
+        if start <= t_s <= close_end:
+            timer.update(t_s, distance_m)
+    settled_s = timer.settled_after_s
+    return math.nan if settled_s is None else settled_s

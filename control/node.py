@@ -1,18 +1,22 @@
 """The controller as a ROS 2 node: a thin shell around the pure tracker and pick controller.
 
 It converts messages to the controller's dataclasses and back; the logic lives in
-:mod:`control.tracking`, :mod:`control.scheduler` and :mod:`control.pick`. Topics, types and
-QoS follow ``docs/interfaces.md``.
+:mod:`control.tracking`, :mod:`control.scheduler` and :mod:`control.pick`. Topic names, types
+and QoS come from :mod:`interfaces.contract`. The node drives one station of the cell: it lives
+in the station's namespace, and the station's topics (``joint_states``, the commands,
+``lockstep/ack``) are under it (``/s1/joint_states``; the bare names for the empty namespace);
+the cell's topics (belt, detections, priorities, the lockstep tick) are shared by every station.
 
 When the control update runs:
 
-- realtime: on every ``steps_per_update``-th ``/joint_states`` message (every 2nd at 120 Hz
+- realtime: on every ``steps_per_update``-th ``joint_states`` message (every 2nd at 120 Hz
   control and 240 Hz state), at the sim time of that message. The update runs as soon as a
   fresh state is there, so no timer phase adds latency, and no wall clock is involved.
-- lockstep: on ``/lockstep/tick`` k, once the messages the tick covers have all arrived; every
-  ``steps_per_update``-th tick at the tick's sim time. The tick names, per counted topic, the
-  newest stamp published up to it; messages are attributed to ticks by their stamps, so a
-  restarted controller, or one whose reader dropped messages, finds its place in the stream.
+- lockstep: on ``/lockstep/tick`` k (one per cell), once the messages the tick covers have all
+  arrived; every ``steps_per_update``-th tick at the tick's sim time. The tick names, per
+  counted topic, the newest stamp published up to it; messages are attributed to ticks by
+  their stamps, so a restarted controller, or one whose reader dropped messages, finds its
+  place in the stream.
   Every tick is acknowledged with the number of command messages published for that tick.
   Discovery is checked from both sides before the first tick, because a volatile message
   sent before both its writer and its reader have matched can be lost, and the other side
@@ -42,93 +46,60 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from builtin_interfaces.msg import Time as TimeMsg
-from cdw_interfaces.msg import (
-    BeltState,
-    DetectionArray,
-    LockstepTick,
-    PickTarget,
-    SortingPriorities,
-    StepAck,
-)
 from numpy.typing import NDArray
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from trajectory_msgs.msg import JointTrajectoryPoint
 
 from control.config import ControllerConfig
-from control.errors import ControlError
+from control.errors import ControlError, RobotModelError
 from control.ik import Kinematics, yaw_of
 from control.inbox import StampedInbox
-from control.pick import FOLLOWING_PHASES, Command, Phase, PickController, TcpMeasurement
+from control.pick import PURSUIT_PHASES, Command, PickController, TcpMeasurement
+from control.scheduler import nearest_grasp_yaw
+from control.tools import ControllerTool
 from control.tracking import Detection, Track, Tracker
+from interfaces.contract import (
+    ARM_TRAJECTORY,
+    BELT_STATE,
+    COMMANDS,
+    COUNTED,
+    DETECTIONS,
+    GRIPPER_COMMAND,
+    JOINT_STATES,
+    LOCKSTEP_ACK,
+    LOCKSTEP_TICK,
+    PICK_TARGET,
+    PRIORITIES,
+    Topic,
+)
+from interfaces.ros import message_class, msg_stamp_ns, msg_stamp_s, qos_profile, time_msg
 
 FloatArray = NDArray[np.float64]
-
-PURSUIT_PHASES = frozenset({Phase.APPROACH, *FOLLOWING_PHASES})
-"""Phases whose announced grasp point is predicted by ``command_latency_s`` (and corrected)."""
-
-
-def _qos(depth: int, *, latched: bool = False) -> QoSProfile:
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=depth,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
-    )
-
-
-STATE_QOS = _qos(10)
-# the topics a lockstep tick covers, in the order of LockstepTick's last_*_ns fields
-COUNTED_TOPICS = ("/joint_states", "/conveyor/state", "/objects/detections")
-STREAM_QOS = _qos(100)
-LATCHED_QOS = _qos(1, latched=True)
-
-COMMAND_TOPICS: tuple[str, ...] = (
-    "/arm_controller/joint_trajectory",
-    "/gripper/command",
-    "/controller/target",
-)
-"""Topics whose messages count in ``StepAck.n_commands``."""
-
-
-def stamp_to_s(stamp: TimeMsg) -> float:
-    """Seconds of a ROS time."""
-    return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
-
-
-def to_time(t_s: float) -> TimeMsg:
-    """A ROS time from seconds (``t_s >= 0``)."""
-    sec = math.floor(t_s)
-    return TimeMsg(sec=sec, nanosec=min(round((t_s - sec) * 1e9), 999_999_999))
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class JointSample:
     """Measured arm joints at ``stamp_s``: ``positions_rad`` ``(n_arm,) float``, and the
-    gripper's ``opening_m`` (NaN when not measured)."""
+    tool's measured command value ``tool_measured_m`` (NaN when not measured)."""
 
     stamp_s: float
     positions_rad: FloatArray
-    opening_m: float = math.nan
+    tool_measured_m: float = math.nan
 
 
 def joint_sample(
-    msg: JointState, arm_joint_names: Sequence[str], finger_joint_names: Sequence[str] = ()
+    msg: Any, arm_joint_names: Sequence[str], tool: ControllerTool | None = None
 ) -> JointSample | None:
     """The arm joints of a ``JointState`` in ``arm_joint_names`` order; None if any is missing
     or not finite.
 
-    The gripper opening is twice the mean of the ``finger_joint_names`` positions: each finger
-    joint reports half the opening, as a Panda's two prismatic fingers do (and the twin
-    publishes for any gripper). NaN when a finger joint is missing or not finite, or none is
-    named.
+    The tool's measured value comes from its joints
+    (:meth:`~control.tools.ControllerTool.measured_m`): NaN without a tool, or when its joints
+    are missing.
     """
     index = {name: i for i, name in enumerate(msg.name)}
     if len(msg.position) != len(msg.name) or any(n not in index for n in arm_joint_names):
@@ -136,22 +107,18 @@ def joint_sample(
     q = np.array([msg.position[index[n]] for n in arm_joint_names], dtype=np.float64)
     if not np.all(np.isfinite(q)):
         return None
-    fingers = [float(msg.position[index[n]]) for n in finger_joint_names if n in index]
-    opening = (
-        2.0 * sum(fingers) / len(fingers)
-        if fingers and len(fingers) == len(finger_joint_names)
-        else math.nan
-    )
+    measured = math.nan
+    if tool is not None:
+        names = tool.joint_names
+        measured = tool.measured_m({n: float(msg.position[index[n]]) for n in names if n in index})
     return JointSample(
-        stamp_s=stamp_to_s(msg.header.stamp),
-        positions_rad=q,
-        opening_m=opening if math.isfinite(opening) else math.nan,
+        stamp_s=msg_stamp_s(msg.header.stamp), positions_rad=q, tool_measured_m=measured
     )
 
 
-def detections_of(msg: DetectionArray) -> tuple[float, list[Detection]]:
+def detections_of(msg: Any) -> tuple[float, list[Detection]]:
     """Capture time and detections of one camera frame (validation is the tracker's job)."""
-    stamp_s = stamp_to_s(msg.header.stamp)
+    stamp_s = msg_stamp_s(msg.header.stamp)
     detections = [
         Detection(
             stamp_s=stamp_s,
@@ -198,40 +165,53 @@ def _timing(values_s: Sequence[float]) -> dict[str, float | None]:
 
 
 class ControllerNode(Node):
-    """Tracks detections, picks objects and streams arm, gripper and target commands."""
+    """Tracks detections, picks objects and streams arm, tool and target commands for one
+    station, its topics under the station's namespace."""
 
     def __init__(
         self, config: ControllerConfig, *, lockstep: bool, node_name: str = "controller"
     ) -> None:
         """Create publishers and subscriptions; ``use_sim_time`` is always true.
 
-        Raises ``ControlError`` (``RobotModelError``, ``ControlConfigError``) when the robot
-        model cannot be built.
+        The node lives in the station's namespace. Raises ``ControlError``
+        (``RobotModelError``, ``ControlConfigError``) when the robot model cannot be built.
         """
+        namespace = config.station.namespace
         super().__init__(
             node_name,
+            namespace=f"/{namespace}" if namespace else "",
             parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)],
         )
         self.config = config
         self.lockstep = lockstep
-        self._kin = Kinematics(config.robot, config.ik)
-        self._tracker = Tracker(config.tracking)
+        self._kin = Kinematics.of_station(config.station, config.ik)
+        self._tool = config.tool
+        missing = [n for n in self._tool.joint_names if not self._kin.has_joint(n)]
+        if missing:
+            msg = f"{self._kin.urdf_path}: tool.joints: no joint {missing[0]!r} in the URDF"
+            raise RobotModelError(msg)
+        self._tracker = Tracker(config.tracking, classes=config.classes)
         self._controller: PickController | None = None
-        self._arm_names = tuple(config.robot.arm_joint_names)
-        self._finger_names = tuple(config.robot.finger_joint_names)
+        self._arm_names = tuple(config.robot.arm_joints)
         self._steps_per_update = config.steps_per_update
         self._period_s = config.motion.control_period_s
         self._priorities: dict[str, float] | None = None
         self._belt_velocity_mps: tuple[float, float] = (0.0, 0.0)
         self._joint: JointSample | None = None
+        self.topics: dict[Topic, str] = {
+            t: t.resolve(namespace) for t in (*COUNTED, *COMMANDS, LOCKSTEP_ACK)
+        }
+        """Every counted and command topic with its name on the wire."""
+        self._counted = tuple(self.topics[t] for t in COUNTED)
+        self._commands = tuple(self.topics[t] for t in COMMANDS)
         self._received: Counter[str] = Counter()
-        self._inbox: StampedInbox[Any] = StampedInbox(COUNTED_TOPICS)
-        self._ticks: deque[tuple[LockstepTick, float]] = deque()
+        self._inbox: StampedInbox[Any] = StampedInbox(self._counted)
+        self._ticks: deque[tuple[Any, float]] = deque()
         self._acked_commands = 0
         self._last_control_tick = -1
         self._last_update_s = -math.inf
         self._last_q_cmd: FloatArray | None = None
-        self._last_gripper: float | None = None
+        self._last_tool_command: float | None = None
         self._last_target_key: tuple[int, str] | None = None
         self._updates = 0
         self.published: Counter[str] = Counter()
@@ -241,34 +221,41 @@ class ControllerNode(Node):
         self.tick_to_ack_wall_s: deque[float] = deque(maxlen=200_000)
         self._logged: dict[str, float] = {}
 
-        self.pub_traj = self.create_publisher(
-            JointTrajectory, "/arm_controller/joint_trajectory", STATE_QOS
-        )
-        self.pub_gripper = self.create_publisher(Float64, "/gripper/command", STATE_QOS)
-        self.pub_target = self.create_publisher(PickTarget, "/controller/target", STATE_QOS)
+        self.pub_traj = self._publisher(ARM_TRAJECTORY)
+        self.pub_gripper = self._publisher(GRIPPER_COMMAND)
+        self.pub_target = self._publisher(PICK_TARGET)
         self.pub_ack: Publisher | None = None
         self._counted_subs = [
-            self.create_subscription(JointState, "/joint_states", self._on_joint_state, STATE_QOS),
-            self.create_subscription(BeltState, "/conveyor/state", self._on_belt, STATE_QOS),
-            self.create_subscription(
-                DetectionArray, "/objects/detections", self._on_detections, STATE_QOS
-            ),
+            self._subscribe(JOINT_STATES, self._on_joint_state),
+            self._subscribe(BELT_STATE, self._on_belt),
+            self._subscribe(DETECTIONS, self._on_detections),
         ]
-        self.create_subscription(
-            SortingPriorities, "/sorting/priorities", self._on_priorities, LATCHED_QOS
-        )
+        self._subscribe(PRIORITIES, self._on_priorities)
         self._outputs_matched = False
         if lockstep:
-            self._counted_subs.append(
-                self.create_subscription(LockstepTick, "/lockstep/tick", self._on_tick, STREAM_QOS)
-            )
+            self._counted_subs.append(self._subscribe(LOCKSTEP_TICK, self._on_tick))
             self._match_timer = self.create_timer(
                 0.005, self._on_match_timer, clock=Clock(clock_type=ClockType.STEADY_TIME)
             )
 
+    def _publisher(self, topic: Topic) -> Publisher:
+        return self.create_publisher(
+            message_class(topic),
+            topic.resolve(self.config.station.namespace),
+            qos_profile(topic.qos),
+        )
+
+    def _subscribe(self, topic: Topic, callback: Any) -> Any:
+        return self.create_subscription(
+            message_class(topic),
+            topic.resolve(self.config.station.namespace),
+            callback,
+            qos_profile(topic.qos),
+        )
+
     def _on_match_timer(self) -> None:
         if self.pub_ack is None and all(s.get_publisher_count() > 0 for s in self._counted_subs):
-            self.pub_ack = self.create_publisher(StepAck, "/lockstep/ack", STREAM_QOS)
+            self.pub_ack = self._publisher(LOCKSTEP_ACK)
         if self._ticks:
             self._drain_ticks()
         if self._outputs_matched:
@@ -284,67 +271,70 @@ class ControllerNode(Node):
 
     # -- inputs -----------------------------------------------------------------------------
     def _arrived(self, topic: str, msg: Any) -> None:
-        """Count and queue a message of a counted topic."""
+        """Count and queue a message of a counted topic (by its name on the wire)."""
         self._received[topic] += 1
-        stamp = msg.header.stamp
-        self._inbox.add(topic, int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), msg)
+        self._inbox.add(topic, msg_stamp_ns(msg.header.stamp), msg)
 
-    def _on_joint_state(self, msg: JointState) -> None:
-        self._arrived("/joint_states", msg)
-        count = self._received["/joint_states"]
+    def _on_joint_state(self, msg: Any) -> None:
+        topic = self._counted[0]
+        self._arrived(topic, msg)
         if self.lockstep:
             self._drain_ticks()
-        elif count % self._steps_per_update == 0:
+        elif self._received[topic] % self._steps_per_update == 0:
             self._consume(None)
             if self._joint is not None:
                 self._control(self._joint.stamp_s)
 
-    def _on_belt(self, msg: BeltState) -> None:
-        self._arrived("/conveyor/state", msg)
+    def _on_belt(self, msg: Any) -> None:
+        self._arrived(self._counted[1], msg)
         if self.lockstep:
             self._drain_ticks()
 
-    def _on_detections(self, msg: DetectionArray) -> None:
-        self._arrived("/objects/detections", msg)
+    def _on_detections(self, msg: Any) -> None:
+        self._arrived(self._counted[2], msg)
         if self.lockstep:
             self._drain_ticks()
 
-    def _on_priorities(self, msg: SortingPriorities) -> None:
-        known = self.config.tracking.class_names
-        priorities, unknown = priorities_of(list(msg.classes), known)
+    def _on_priorities(self, msg: Any) -> None:
+        priorities, unknown = priorities_of(list(msg.classes), self.config.classes)
         if unknown:
             self.skipped["unknown_priority_class"] += len(unknown)
-            self._warn("priorities", f"/sorting/priorities: unknown classes {unknown} ignored")
+            self._warn("priorities", f"{PRIORITIES.name}: unknown classes {unknown} ignored")
         self._priorities = priorities
         if self._controller is not None:
             self._controller.set_class_priorities(priorities)
 
-    def _on_tick(self, msg: LockstepTick) -> None:
+    def _on_tick(self, msg: Any) -> None:
         self._ticks.append((msg, time.perf_counter()))
         self._drain_ticks()
 
     def _consume(self, limits_ns: Sequence[int] | None) -> None:
-        """Apply queued messages stamped at or before ``limits_ns`` (per ``COUNTED_TOPICS``;
-        None: all), belt first, then detections, then joint states."""
-        limit = {} if limits_ns is None else dict(zip(COUNTED_TOPICS, limits_ns, strict=True))
-        for belt in self._inbox.take("/conveyor/state", limit.get("/conveyor/state")):
-            if math.isfinite(belt.speed_mps):
-                self._belt_velocity_mps = (float(belt.speed_mps), 0.0)
+        """Apply queued messages stamped at or before ``limits_ns`` (per counted topic; None:
+        all), belt first, then detections, then joint states."""
+        joints, belt, detections = self._counted
+        limit = {} if limits_ns is None else dict(zip(self._counted, limits_ns, strict=True))
+        for state in self._inbox.take(belt, limit.get(belt)):
+            if math.isfinite(state.speed_mps):
+                self._belt_velocity_mps = (float(state.speed_mps), 0.0)
             else:
                 self.skipped["bad_belt_state"] += 1
-        for frame in self._inbox.take("/objects/detections", limit.get("/objects/detections")):
-            stamp_s, detections = detections_of(frame)
-            self._tracker.update(stamp_s, detections, self._belt_velocity_mps)
-        for joints in self._inbox.take("/joint_states", limit.get("/joint_states")):
-            sample = joint_sample(joints, self._arm_names, self._finger_names)
+        for frame in self._inbox.take(detections, limit.get(detections)):
+            stamp_s, found = detections_of(frame)
+            self._tracker.update(stamp_s, found, self._belt_velocity_mps)
+        for message in self._inbox.take(joints, limit.get(joints)):
+            sample = joint_sample(message, self._arm_names, self._tool)
             if sample is None:
                 self.skipped["bad_joint_state"] += 1
-                self._warn("joints", "/joint_states: arm joints missing or not finite, ignored")
+                self._warn("joints", f"{joints}: arm joints missing or not finite, ignored")
             else:
                 self._joint = sample
 
     def _drain_ticks(self) -> None:
-        """Handle every queued tick whose messages have all arrived, in order."""
+        """Handle every queued tick whose messages have all arrived, in order.
+
+        The tick's ``last_joint_state_ns`` is the newest stamp on this station's joint states
+        (every station publishes one per step, with the same stamp).
+        """
         pub_ack = self.pub_ack
         if pub_ack is None or not self.outputs_matched():
             return
@@ -362,10 +352,10 @@ class ControllerNode(Node):
             k = int(tick.tick)
             if k > self._last_control_tick and k % self._steps_per_update == 0:
                 self._last_control_tick = k
-                self._control(stamp_to_s(tick.stamp))
+                self._control(msg_stamp_s(tick.stamp))
             sent = self.n_commands - self._acked_commands
             self._acked_commands = self.n_commands
-            pub_ack.publish(StepAck(tick=k, n_commands=sent))
+            pub_ack.publish(message_class(LOCKSTEP_ACK)(tick=k, n_commands=sent))
             self.ticks_acked += 1
             self.tick_to_ack_wall_s.append(time.perf_counter() - arrived_wall_s)
 
@@ -373,7 +363,7 @@ class ControllerNode(Node):
     @property
     def n_commands(self) -> int:
         """Cumulative command messages published (acks carry the per-tick difference)."""
-        return sum(self.published[topic] for topic in COMMAND_TOPICS)
+        return sum(self.published[topic] for topic in self._commands)
 
     def _ensure_controller(self, q: FloatArray) -> PickController:
         if self._controller is None:
@@ -401,7 +391,7 @@ class ControllerNode(Node):
             measured = TcpMeasurement(
                 position_m=(float(p[0]), float(p[1]), float(p[2])),
                 yaw_rad=yaw_of(oMtool),
-                opening_m=joint.opening_m,
+                tool_measured_m=joint.tool_measured_m,
             )
             tracks = self._tracker.predict_to(t_s)
             command = controller.update(t_s, measured, tracks, self._belt_velocity_mps)
@@ -415,45 +405,44 @@ class ControllerNode(Node):
         self.update_wall_s.append(time.perf_counter() - start)
 
     def _publish(self, command: Command, tracks: Sequence[Track]) -> None:
-        q = np.asarray(command.joint_positions_rad, dtype=np.float64)
-        stamp = to_time(command.t_s)
-        if self._kin.within_limits(q):
-            limit = self._kin.velocity_limit_rps
-            if self._last_q_cmd is None:
-                dq = np.zeros_like(q)
-            else:
-                dq = np.clip((q - self._last_q_cmd) / self._period_s, -limit, limit)
-            self._last_q_cmd = q
-            msg = JointTrajectory()
-            msg.header.stamp = stamp
-            msg.joint_names = list(self._arm_names)
-            msg.points = [
-                JointTrajectoryPoint(
-                    positions=[float(v) for v in q], velocities=[float(v) for v in dq]
-                )
-            ]
-            self.pub_traj.publish(msg)
-            self.published[COMMAND_TOPICS[0]] += 1
-        else:
-            self.skipped["unsafe_command"] += 1
-            self._warn("unsafe", f"joint command {q.tolist()} outside the limits, not sent")
-        width = float(
-            np.clip(command.gripper_width_m, 0.0, self.config.robot.gripper_max_opening_m)
-        )
+        stamp = time_msg(command.t_s)
+        self._publish_joints(command, stamp)
+        value = self._tool.clip_command_m(command.tool_command_m)
         refresh = self._updates % self.config.node.gripper_refresh_every == 0
-        if math.isfinite(width) and (width != self._last_gripper or refresh):
-            self.pub_gripper.publish(Float64(data=width))
-            self.published[COMMAND_TOPICS[1]] += 1
-            self._last_gripper = width
+        if math.isfinite(value) and (value != self._last_tool_command or refresh):
+            self.pub_gripper.publish(message_class(GRIPPER_COMMAND)(data=value))
+            self.published[self._commands[1]] += 1
+            self._last_tool_command = value
         key = (command.target_id or 0, str(command.phase))
         refresh = self._updates % self.config.node.target_refresh_every == 0
         if key != self._last_target_key or refresh:
             self.pub_target.publish(self._target_msg(command, tracks, stamp))
-            self.published[COMMAND_TOPICS[2]] += 1
+            self.published[self._commands[2]] += 1
             self._last_target_key = key
 
-    def _target_msg(self, command: Command, tracks: Sequence[Track], stamp: TimeMsg) -> PickTarget:
-        msg = PickTarget(track_id=command.target_id or 0, phase=str(command.phase))
+    def _publish_joints(self, command: Command, stamp: Any) -> None:
+        q = np.asarray(command.joint_positions_rad, dtype=np.float64)
+        if not self._kin.within_limits(q):
+            self.skipped["unsafe_command"] += 1
+            self._warn("unsafe", f"joint command {q.tolist()} outside the limits, not sent")
+            return
+        limit = self._kin.velocity_limit_rps
+        if self._last_q_cmd is None:
+            dq = np.zeros_like(q)
+        else:
+            dq = np.clip((q - self._last_q_cmd) / self._period_s, -limit, limit)
+        self._last_q_cmd = q
+        msg = message_class(ARM_TRAJECTORY)()
+        msg.header.stamp = stamp
+        msg.joint_names = list(self._arm_names)
+        msg.points = [
+            JointTrajectoryPoint(positions=[float(v) for v in q], velocities=[float(v) for v in dq])
+        ]
+        self.pub_traj.publish(msg)
+        self.published[self._commands[0]] += 1
+
+    def _target_msg(self, command: Command, tracks: Sequence[Track], stamp: Any) -> Any:
+        msg = message_class(PICK_TARGET)(track_id=command.target_id or 0, phase=str(command.phase))
         msg.header.stamp = stamp
         msg.header.frame_id = "world"
         track = next((t for t in tracks if t.track_id == command.target_id), None)
@@ -463,7 +452,7 @@ class ControllerNode(Node):
             msg.velocity.x, msg.velocity.y = float(velocity[0]), float(velocity[1])
         yaw = command.setpoint.position[3]
         if track is not None:
-            yaw = track.yaw_rad + math.pi * round((yaw - track.yaw_rad) / math.pi)
+            yaw = nearest_grasp_yaw(track.yaw_rad, yaw, self._tool.grasp_yaw_period_rad)
         msg.yaw_rad = math.atan2(math.sin(yaw), math.cos(yaw))
         point = command.grasp_point_m
         if point is not None:
@@ -509,11 +498,12 @@ class ControllerNode(Node):
             stats = {k: dict(v) if isinstance(v, Mapping) else v for k, v in stats.items()}
         return {
             "mode": "lockstep" if self.lockstep else "realtime",
+            "station": self.config.station.name,
             "pick": stats,
             "rejected_detections": dict(self._tracker.rejected),
             "skipped": dict(sorted(self.skipped.items())),
             "received": dict(sorted(self._received.items())),
-            "published": {topic: self.published[topic] for topic in COMMAND_TOPICS},
+            "published": {topic: self.published[topic] for topic in self._commands},
             "n_commands": self.n_commands,
             "control_updates": self._updates,
             "ticks_acked": self.ticks_acked,
@@ -523,12 +513,9 @@ class ControllerNode(Node):
 
 
 __all__ = [
-    "COMMAND_TOPICS",
     "ControllerNode",
     "JointSample",
     "detections_of",
     "joint_sample",
     "priorities_of",
-    "stamp_to_s",
-    "to_time",
 ]

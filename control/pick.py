@@ -2,13 +2,20 @@
 
 Sequence per object: ``approach`` (Ruckig to a point above the predicted grasp point, arriving
 with the object's velocity), ``descend`` (to the grasp point, still moving with it), ``dwell``
-(track it for ``dwell_s``), ``close`` (gripper closes while tracking), ``lift``, ``carry`` (to the
+(track it for ``dwell_s``), ``close`` (the tool grasps while tracking), ``lift``, ``carry`` (to the
 drop point above the class bin), ``release``, ``return`` (towards the ready pose; a new target may
 be taken from there). With ``pick.approach_space: joint`` the next target is chosen as soon as
 the release ends, and the approach begins as one joint-space move, planned once, that arrives
 above the object with its velocity; the Cartesian approach then takes over. Errors (lost
 target, Ruckig error, IK failure) abort the pick, are counted, and never produce a joint command
 outside the limits: the last valid joint command is held.
+
+Each tick runs the handler of the current phase, from a table with one handler per
+:class:`Phase`. A handler returns the tick's :class:`Goal`, or a :class:`Transition` when it
+switched the phase: the new phase's handler then runs in the same tick. Before the handler of a
+phase that pursues a target, the target checks run (lost for too long, past the pick window),
+and an abort they cause is a transition as well. The tool (:mod:`control.tools`) says what to
+command to grasp and release and whether the grasp holds anything.
 """
 
 from __future__ import annotations
@@ -16,8 +23,8 @@ from __future__ import annotations
 import contextlib
 import math
 from collections import Counter
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
@@ -34,7 +41,15 @@ from control.planner import (
     JointCommander,
     JointPlanner,
 )
-from control.scheduler import Schedule, grasp_height_m, nearest_half_turn, schedule
+from control.poses import (
+    JointApproach,
+    JointGoal,
+    best_grasp_yaw,
+    drop_point,
+    drop_pose,
+    solve_meeting,
+)
+from control.scheduler import Schedule, grasp_height_m, nearest_grasp_yaw, schedule
 from control.tracking import Track
 
 FloatArray = NDArray[np.float64]
@@ -55,14 +70,11 @@ class Phase(StrEnum):
     RETURN = "return"
 
 
-WRIST_MARGIN_RAD = 0.15
-"""Least room on the tool-turning joint at the intercept for the nearest grasp yaw."""
-
 FOLLOWING_PHASES = frozenset({Phase.DESCEND, Phase.DWELL, Phase.CLOSE})
 """Phases in which the TCP moves with the object and the feedback term is active."""
 
-JOINT_APPROACH_GUESS_S = 0.6
-"""First guess (s) of a joint-space approach's duration (the fixed point starts there)."""
+PURSUIT_PHASES = frozenset({Phase.APPROACH, *FOLLOWING_PHASES})
+"""Phases that pursue a target: its predicted grasp point leads by ``command_latency_s``."""
 
 MAX_APPROACH_LEAD_S = 1.0
 """Cap (s) on the approach's lead: it aims where the object will be that much later.
@@ -76,21 +88,22 @@ object itself. (A lead that could grow diverges when the arm is barely faster th
 @dataclass(frozen=True, kw_only=True)
 class TcpMeasurement:
     """Measured tool: TCP ``position_m`` ``(x, y, z)`` in the world frame, ``yaw_rad``, and the
-    gripper's ``opening_m`` (from the finger joints; NaN when not measured, which turns off the
-    grip check)."""
+    tool's measured command value ``tool_measured_m`` (a gripper's opening, from its joints;
+    NaN when not measured, which turns off the grip check)."""
 
     position_m: Vec3
     yaw_rad: float
-    opening_m: float = math.nan
+    tool_measured_m: float = math.nan
 
 
 @dataclass(frozen=True, kw_only=True)
 class Command:
-    """Everything the arm and gripper are told in one control tick.
+    """Everything the arm and tool are told in one control tick.
 
     ``setpoint`` is the Ruckig state, ``commanded_position_m`` the setpoint plus feedback that
     went into the IK, ``joint_positions_rad`` ``(n_arm,)`` is always within the joint limits,
-    ``grasp_point_m`` is the predicted grasp point of the target (None without a target).
+    ``tool_command_m`` the tool's command (a gripper's opening), ``grasp_point_m`` is the
+    predicted grasp point of the target (None without a target).
     """
 
     t_s: float
@@ -99,7 +112,7 @@ class Command:
     setpoint: CartesianState
     commanded_position_m: Vec3
     joint_positions_rad: tuple[float, ...]
-    gripper_width_m: float
+    tool_command_m: float
     grasp_point_m: Vec3 | None
 
 
@@ -109,7 +122,7 @@ class PickStats:
 
     ``untargeted`` counts objects that were never targeted, by the last reason the scheduler gave;
     ``aborted`` counts aborted picks by reason (``target_lost``, ``too_late``, ``ruckig_error``,
-    ``ik_failure``, ``grip_missed``: the fingers closed on nothing); ``errors`` counts every
+    ``ik_failure``, ``grip_missed``: the tool closed on nothing); ``errors`` counts every
     Ruckig/IK error, also outside a pick;
     ``rate_limited`` counts joint commands slowed to the joint velocity limits;
     ``sync_fallbacks`` counts Ruckig plans (Cartesian steps and joint moves) whose time
@@ -127,25 +140,86 @@ class PickStats:
     sync_fallbacks: int = 0
 
 
-@dataclass(frozen=True, kw_only=True, eq=False)
-class JointGoal:
-    """A joint-space goal ``q`` ``(n_arm,) float`` (carry, release, return, idle, joint approach).
+@dataclass(frozen=True, kw_only=True)
+class TickInput:
+    """What one pass of the phase machine sees: the time, the tracks and the belt velocity."""
 
-    Reached at rest, or (the joint-space approach, which meets a moving object) with joint
-    velocities ``dq`` ``(n_arm,)`` at the planned absolute time ``arrive_s``.
+    t_s: float
+    tracks: Sequence[Track]
+    belt_velocity_mps: tuple[float, float]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Goal:
+    """A handler's result: this tick's Ruckig goal, and the target's grasp point (if any)."""
+
+    target: CartesianTarget | JointGoal
+    aim_m: Vec3 | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Transition:
+    """A handler switched to ``phase``: its handler runs next, in the same tick.
+
+    It sees ``tracks`` (none after an abort: no new target is chosen in the tick of an abort).
+    ``checked``: the target checks already ran in this pass (the approach hands over to the
+    descent), so they do not run again before the new handler.
     """
 
-    q: FloatArray
-    dq: FloatArray | None = None
-    arrive_s: float = -math.inf
+    phase: Phase
+    tracks: Sequence[Track]
+    checked: bool = False
 
 
-@dataclass(frozen=True, kw_only=True, eq=False)
-class JointApproach:
-    """The joint-space approach's goal: above the target at ``arrive_s`` with its velocity."""
+Handler = Callable[[TickInput], Goal | Transition]
 
-    goal: JointGoal
-    yaw_rad: float
+
+@dataclass(kw_only=True)
+class _Pursuit:
+    """The current target and what the pick knows about it."""
+
+    target: Track | None = None
+    seen_s: float = -math.inf
+    grasp_yaw_rad: float
+    intercept_estimate_s: float = math.nan
+    tracking_start_s: float = math.nan
+    carrying: bool = False
+    lift_target: CartesianTarget | None = None
+
+
+@dataclass(kw_only=True, eq=False)
+class _Motion:
+    """State of the motion between ticks: joint-space or Cartesian, and what is left of it."""
+
+    drop_q: FloatArray
+    joint_mode: bool = False
+    joint_remaining_s: float = 0.0
+    yaw_remaining_s: float = 0.0
+    approach_lead_s: float = 0.0
+    approach_waiting: bool = False
+    joint_approach: JointApproach | None = None
+    ticks_since_command: int = 1
+
+
+@dataclass(kw_only=True)
+class _Book:
+    """Counters of targets and errors, and the tracks that must not be chosen again."""
+
+    targeted: int = 0
+    completed: int = 0
+    completed_by_class: Counter[str] = field(default_factory=Counter)
+    aborted: Counter[str] = field(default_factory=Counter)
+    errors: Counter[str] = field(default_factory=Counter)
+    untargeted: dict[int, str] = field(default_factory=dict)
+    targeted_ids: set[int] = field(default_factory=set)
+    excluded: set[int] = field(default_factory=set)
+    grip_misses: Counter[int] = field(default_factory=Counter)
+    last_error: str = ""
+
+    def error(self, kind: str, message: str) -> None:
+        """Count an error of ``kind`` and keep its message."""
+        self.errors[kind] += 1
+        self.last_error = message
 
 
 class PickController:
@@ -163,63 +237,56 @@ class PickController:
         Raises ``ControlError`` when the ready pose has no IK solution.
         """
         self._cfg = config
-        self._kin = kinematics if kinematics is not None else Kinematics(config.robot, config.ik)
-        robot = config.robot
-        ready = self._kin.solve(
-            tool_pose(robot.ready_tcp_position_m, robot.ready_yaw_rad),
-            np.asarray(robot.ready_joint_positions_rad, dtype=np.float64),
+        self._kin = (
+            kinematics
+            if kinematics is not None
+            else Kinematics.of_station(config.station, config.ik)
         )
-        if not ready.success:
-            msg = (
-                f"robot.ready_tcp_position_m {robot.ready_tcp_position_m} with ready_yaw_rad "
-                f"{robot.ready_yaw_rad} has no IK solution near ready_joint_positions_rad"
-            )
-            raise ControlError(msg)
-        self.q_ready: FloatArray = np.array(ready.q)
+        self.q_ready: FloatArray = self._solve_ready()
         """Joint positions ``(n_arm,)`` of the ready pose."""
         q0 = self.q_ready if q_init is None else np.asarray(q_init, dtype=np.float64)
         oMtool = self._kin.fk(q0)  # noqa: N806
         p = oMtool.translation
         start = CartesianState(position=(float(p[0]), float(p[1]), float(p[2]), yaw_of(oMtool)))
-        self._ready_target = CartesianTarget(
-            position=(*robot.ready_tcp_position_m, robot.ready_yaw_rad)
-        )
         self._planner = CartesianPlanner(config.motion, start)
         self._joint_planner = JointPlanner(self._kin, config.motion)
-        self._joint_mode = False
-        self._joint_remaining_s = 0.0
-        self._approach_lead_s = 0.0
-        self._approach_waiting = False
-        self._joint_approach: JointApproach | None = None
-        self._meetings: dict[int, JointApproach | None] = {}
-        self._meetings_t_s = math.nan
-        self._yaw_remaining_s = 0.0
-        self._drop_q = np.array(self.q_ready)
         self._commander = JointCommander(self._kin, config.motion, q0)
         self._feedback = FeedbackTerm(config.motion)
+        self._motion = _Motion(drop_q=np.array(self.q_ready))
+        self._pursuit = _Pursuit(grasp_yaw_rad=config.ready_yaw_rad)
+        self._book = _Book()
+        self._meetings: dict[int, JointApproach | None] = {}
+        self._meetings_t_s = math.nan
         self._phase = Phase.RETURN
         self._phase_start_s = -math.inf
-        self._target: Track | None = None
-        self._target_seen_s = -math.inf
-        self._grasp_yaw_rad = robot.ready_yaw_rad
-        self._intercept_estimate_s = math.nan
-        self._carrying = False
-        self._lift_target: CartesianTarget | None = None
-        self._ticks_since_command = 1
-        self._tracking_start_s = math.nan
-        self._excluded: set[int] = set()
-        self._grip_misses: Counter[int] = Counter()
         self._measured = TcpMeasurement(position_m=(math.nan,) * 3, yaw_rad=math.nan)
-        self._targeted_ids: set[int] = set()
-        self._untargeted: dict[int, str] = {}
-        self._targeted = 0
-        self._completed = 0
-        self._completed_by_class: Counter[str] = Counter()
-        self._aborted: Counter[str] = Counter()
-        self._errors: Counter[str] = Counter()
-        self.last_error = ""
-        """The message of the latest Ruckig/IK error (empty before the first)."""
+        self._handlers: dict[Phase, Handler] = {
+            Phase.IDLE: self._on_idle,
+            Phase.APPROACH: self._on_approach,
+            Phase.DESCEND: self._on_descend,
+            Phase.DWELL: self._on_dwell,
+            Phase.CLOSE: self._on_close,
+            Phase.LIFT: self._on_lift,
+            Phase.CARRY: self._on_carry,
+            Phase.RELEASE: self._on_release,
+            Phase.RETURN: self._on_return,
+        }
 
+    def _solve_ready(self) -> FloatArray:
+        cfg = self._cfg
+        ready = self._kin.solve(
+            tool_pose(cfg.ready_tcp_position_m, cfg.ready_yaw_rad),
+            np.asarray(cfg.robot.ready_joint_positions_rad, dtype=np.float64),
+        )
+        if not ready.success:
+            msg = (
+                f"robot.ready_tcp_position_m {cfg.robot.ready_tcp_position_m} with ready_yaw_rad "
+                f"{cfg.robot.ready_yaw_rad} has no IK solution near ready_joint_positions_rad"
+            )
+            raise ControlError(msg)
+        return np.array(ready.q)
+
+    # -- public view --------------------------------------------------------------------------
     @property
     def phase(self) -> Phase:
         """The current phase."""
@@ -228,17 +295,22 @@ class PickController:
     @property
     def tracking_start_s(self) -> float:
         """Time the current target was chosen (NaN without a target)."""
-        return self._tracking_start_s
+        return self._pursuit.tracking_start_s
 
     @property
     def intercept_estimate_s(self) -> float:
         """The scheduler's estimate of the time to intercept the current target (at choice)."""
-        return self._intercept_estimate_s
+        return self._pursuit.intercept_estimate_s
 
     @property
     def kinematics(self) -> Kinematics:
         """The kinematics the controller commands with."""
         return self._kin
+
+    @property
+    def last_error(self) -> str:
+        """The message of the latest Ruckig/IK error (empty before the first)."""
+        return self._book.last_error
 
     def set_class_priorities(self, priorities: Mapping[str, float]) -> None:
         """Replace the scheduler's class priorities (larger is picked first) from now on."""
@@ -247,37 +319,236 @@ class PickController:
 
     def stats(self) -> PickStats:
         """Counters of targeted, completed, aborted and untargeted objects."""
+        book = self._book
         return PickStats(
-            targeted=self._targeted,
-            completed=self._completed,
-            completed_by_class=dict(self._completed_by_class),
-            aborted=dict(self._aborted),
-            untargeted=dict(Counter(self._untargeted.values())),
-            errors=dict(self._errors),
+            targeted=book.targeted,
+            completed=book.completed,
+            completed_by_class=dict(book.completed_by_class),
+            aborted=dict(book.aborted),
+            untargeted=dict(Counter(book.untargeted.values())),
+            errors=dict(book.errors),
             rate_limited=self._commander.rate_limited,
             sync_fallbacks=self._planner.sync_fallbacks + self._joint_planner.sync_fallbacks,
         )
 
+    # -- the tick -----------------------------------------------------------------------------
+    def update(
+        self,
+        t_s: float,
+        measured_tcp: TcpMeasurement,
+        tracks: Sequence[Track],
+        belt_velocity_mps: tuple[float, float],
+    ) -> Command:
+        """Advance one control tick at ``t_s`` and return the command for the arm and tool.
+
+        ``tracks`` are the tracker's confirmed tracks (any stamp; they are extrapolated to the
+        time the command takes effect), ``belt_velocity_mps`` the measured ``(vx, vy)``.
+        """
+        self._measured = measured_tcp
+        now = TickInput(t_s=t_s, tracks=tracks, belt_velocity_mps=belt_velocity_mps)
+        plan = self._plan(now)
+        if isinstance(plan.target, JointGoal):
+            self._step_joint(plan.target)
+            self._feedback.reset()
+            position = self._planner.state.position_m
+        else:
+            self._motion.joint_mode = False
+            self._step_cartesian(plan.target, now)
+            position = self._command_cartesian(t_s, measured_tcp)
+        target = self._pursuit.target
+        return Command(
+            t_s=t_s,
+            phase=self._phase,
+            target_id=target.track_id if target is not None else None,
+            setpoint=self._planner.state,
+            commanded_position_m=position,
+            joint_positions_rad=tuple(float(v) for v in self._commander.q),
+            tool_command_m=self._tool_command_m(),
+            grasp_point_m=plan.aim_m,
+        )
+
+    def _plan(self, now: TickInput) -> Goal:
+        """Run the phase handlers of this tick until one returns the tick's goal."""
+        checked = False
+        while True:
+            if not checked and self._check_target(now):
+                now = replace(now, tracks=())  # aborted: the new phase runs without tracks
+                continue
+            result = self._handlers[self._phase](now)
+            if isinstance(result, Goal):
+                return result
+            assert result.phase == self._phase
+            now = replace(now, tracks=result.tracks)
+            checked = result.checked
+
+    def _check_target(self, now: TickInput) -> bool:
+        """In a phase that pursues a target: refresh it, and abort the pick when it is lost
+        (approach) or past the pick window (until the gripper closes). True when aborted."""
+        phase = self._phase
+        if phase not in PURSUIT_PHASES:
+            return False
+        if not self._track_target(now.t_s, now.tracks) and phase == Phase.APPROACH:
+            self._abort("target_lost", now.t_s)
+            return True
+        if phase == Phase.CLOSE:
+            return False
+        obj = self._object_state(now.t_s, now.belt_velocity_mps)
+        x_now = obj[0][0] if obj is not None else math.inf
+        if x_now > self._cfg.pick_window_x_m[1]:
+            self._abort("too_late", now.t_s)
+            return True
+        return False
+
+    # -- phase handlers -----------------------------------------------------------------------
+    def _on_idle(self, now: TickInput) -> Goal | Transition:
+        """At the ready pose: choose a target."""
+        self._schedule(now.t_s, now.tracks)
+        if self._phase != Phase.IDLE:
+            return Transition(phase=self._phase, tracks=now.tracks)
+        return Goal(target=JointGoal(q=self.q_ready))
+
+    def _on_return(self, now: TickInput) -> Goal | Transition:
+        """Back to the ready pose; a target may be chosen before it is reached."""
+        pick, motion = self._cfg.pick, self._motion
+        almost_ready = motion.joint_mode and (
+            motion.joint_remaining_s <= pick.schedule_before_ready_s
+            or pick.approach_space == "joint"
+        )
+        if almost_ready:
+            self._schedule(now.t_s, now.tracks)
+            if self._phase != Phase.RETURN:
+                return Transition(phase=self._phase, tracks=now.tracks)
+        goal = JointGoal(q=self.q_ready)
+        if motion.joint_remaining_s <= self._cfg.motion.control_period_s and self._at_joint_goal(
+            goal
+        ):
+            self._set_phase(Phase.IDLE, now.t_s)
+        return Goal(target=goal)
+
+    def _on_approach(self, now: TickInput) -> Goal | Transition:
+        """Above the moving target, turned to its grasp yaw; then the descent."""
+        pick, motion, pursuit = self._cfg.pick, self._motion, self._pursuit
+        period_s = self._cfg.motion.control_period_s
+        if motion.joint_approach is not None:
+            if not (motion.joint_mode and motion.joint_remaining_s <= period_s):
+                obj = self._object_state(now.t_s, now.belt_velocity_mps, now_s=now.t_s)
+                aim = obj[0] if obj is not None else None
+                return Goal(target=motion.joint_approach.goal, aim_m=aim)
+            motion.joint_approach = None  # above the object, moving with it: Cartesian from here
+            motion.approach_lead_s = 0.0
+            pursuit.grasp_yaw_rad = nearest_grasp_yaw(
+                pursuit.grasp_yaw_rad,
+                self._planner.state.position[3],
+                self._cfg.tool.grasp_yaw_period_rad,
+            )
+        target, aim = self._following_target(
+            now.t_s, now.belt_velocity_mps, pick.approach_height_m, lead_s=motion.approach_lead_s
+        )
+        waiting = self._not_upstream(target)
+        motion.approach_waiting = waiting is not target
+        if motion.approach_waiting:  # the meeting point is not in the window yet: wait there
+            return Goal(target=waiting, aim_m=aim)
+        yaw_error = abs(self._planner.state.position[3] - target.position[3])
+        on_object = motion.approach_lead_s <= period_s  # not on a point ahead of it
+        yaw_ready = (
+            yaw_error < pick.yaw_tolerance_rad or motion.yaw_remaining_s <= pick.descend_yaw_lead_s
+        )
+        if on_object and yaw_ready and self._arrived(target):
+            self._set_phase(Phase.DESCEND, now.t_s)
+            return Transition(phase=Phase.DESCEND, tracks=now.tracks, checked=True)
+        return Goal(target=target, aim_m=aim)
+
+    def _on_descend(self, now: TickInput) -> Goal | Transition:
+        """Down to the grasp point, moving with the object."""
+        target, aim = self._following_target(now.t_s, now.belt_velocity_mps, 0.0)
+        if self._arrived(target):
+            self._set_phase(Phase.DWELL, now.t_s)
+        return Goal(target=target, aim_m=aim)
+
+    def _on_dwell(self, now: TickInput) -> Goal | Transition:
+        """At the grasp point for the dwell; the tool closes once the yaw is aligned."""
+        pick = self._cfg.pick
+        target, aim = self._following_target(now.t_s, now.belt_velocity_mps, 0.0)
+        yaw_error = abs(self._planner.state.position[3] - target.position[3])
+        dwelt = now.t_s - self._phase_start_s >= pick.dwell_s - pick.close_overlap_s
+        if dwelt and yaw_error < pick.yaw_tolerance_rad:
+            self._set_phase(Phase.CLOSE, now.t_s)
+        return Goal(target=target, aim_m=aim)
+
+    def _on_close(self, now: TickInput) -> Goal | Transition:
+        """The tool grasps while following; then the grip check and the lift."""
+        if now.t_s - self._phase_start_s >= self._cfg.pick.close_s:
+            if self._holds_nothing():
+                self._abort("grip_missed", now.t_s)
+                return Transition(phase=self._phase, tracks=())
+            self._pursuit.carrying = True
+            self._start_lift(now.t_s)
+            return Transition(phase=Phase.LIFT, tracks=now.tracks)
+        target, aim = self._following_target(now.t_s, now.belt_velocity_mps, 0.0)
+        return Goal(target=target, aim_m=aim)
+
+    def _on_lift(self, now: TickInput) -> Goal | Transition:
+        """Up from the belt; then the carry (holding the object) or the return."""
+        pursuit = self._pursuit
+        if pursuit.carrying and self._holds_nothing():
+            self._abort("grip_missed", now.t_s)  # the tool finished closing on nothing
+            self._set_phase(Phase.LIFT, now.t_s)  # the lift goes on, with the tool open
+        lift = pursuit.lift_target
+        if lift is None or (
+            self._planner.state.position[2] >= lift.position[2] - 0.2 * self._cfg.pick.lift_height_m
+        ):
+            if pursuit.carrying:
+                self._start_carry(now.t_s)
+            else:
+                self._set_phase(Phase.RETURN, now.t_s)
+            return Transition(phase=self._phase, tracks=now.tracks)
+        return Goal(target=lift)
+
+    def _on_carry(self, now: TickInput) -> Goal | Transition:
+        """The joint move to the drop pose; then the release."""
+        goal = JointGoal(q=self._motion.drop_q)
+        if self._motion.joint_remaining_s <= self._cfg.motion.control_period_s and (
+            self._at_joint_goal(goal)
+        ):
+            self._set_phase(Phase.RELEASE, now.t_s)
+        return Goal(target=goal)
+
+    def _on_release(self, now: TickInput) -> Goal | Transition:
+        """The tool opens over the bin; then the pick is complete."""
+        if now.t_s - self._phase_start_s >= self._cfg.pick.release_s:
+            pursuit, book = self._pursuit, self._book
+            book.completed += 1
+            if pursuit.target is not None:
+                book.completed_by_class[pursuit.target.class_name] += 1
+            pursuit.target = None
+            pursuit.carrying = False
+            pursuit.tracking_start_s = math.nan
+            self._set_phase(Phase.RETURN, now.t_s)
+            return Transition(phase=Phase.RETURN, tracks=now.tracks)
+        return Goal(target=JointGoal(q=self._motion.drop_q))
+
+    # -- transitions --------------------------------------------------------------------------
     def _set_phase(self, phase: Phase, t_s: float) -> None:
         self._phase = phase
         self._phase_start_s = t_s
         if phase in (Phase.CARRY, Phase.RETURN):
-            self._joint_remaining_s = math.inf  # until the new joint move's first step
+            self._motion.joint_remaining_s = math.inf  # until the new joint move's first step
 
     def _abort(self, reason: str, t_s: float) -> None:
-        self._aborted[reason] += 1
-        if self._target is not None:
-            track_id = self._target.track_id
+        book, pursuit = self._book, self._pursuit
+        book.aborted[reason] += 1
+        if pursuit.target is not None:
+            track_id = pursuit.target.track_id
             if reason == "grip_missed":
-                self._grip_misses[track_id] += 1
-            if reason != "grip_missed" or self._grip_misses[track_id] > self._cfg.pick.grip_retries:
-                self._excluded.add(track_id)
+                book.grip_misses[track_id] += 1
+            if reason != "grip_missed" or book.grip_misses[track_id] > self._cfg.pick.grip_retries:
+                book.excluded.add(track_id)
             else:
-                self._targeted_ids.discard(track_id)  # may be scheduled again
+                book.targeted_ids.discard(track_id)  # may be scheduled again
         following = self._phase in FOLLOWING_PHASES
-        self._target = None
-        self._tracking_start_s = math.nan
-        self._carrying = False
+        pursuit.target = None
+        pursuit.tracking_start_s = math.nan
+        pursuit.carrying = False
         if following:
             self._start_lift(t_s)
         else:
@@ -288,108 +559,108 @@ class PickController:
         x, y, z, yaw = state.position
         vx, vy = state.velocity[0], state.velocity[1]
         stop_s = 0.1
-        self._lift_target = CartesianTarget(
+        self._pursuit.lift_target = CartesianTarget(
             position=(x + vx * stop_s, y + vy * stop_s, z + self._cfg.pick.lift_height_m, yaw)
         )
         self._set_phase(Phase.LIFT, t_s)
 
     def _start_pick(self, track: Track, decision: Schedule, t_s: float) -> None:
+        pursuit, motion, book = self._pursuit, self._motion, self._book
         intercept_s = decision.intercept_s
-        self._target = track
-        self._target_seen_s = t_s
-        if track.track_id not in self._grip_misses:  # a retry is not a new target
-            self._targeted += 1
-        self._targeted_ids.add(track.track_id)
-        self._untargeted.pop(track.track_id, None)
-        self._tracking_start_s = t_s
-        self._intercept_estimate_s = intercept_s
+        pursuit.target = track
+        pursuit.seen_s = t_s
+        if track.track_id not in book.grip_misses:  # a retry is not a new target
+            book.targeted += 1
+        book.targeted_ids.add(track.track_id)
+        book.untargeted.pop(track.track_id, None)
+        pursuit.tracking_start_s = t_s
+        pursuit.intercept_estimate_s = intercept_s
         self._feedback.reset()
-        self._joint_approach = None
-        if self._cfg.pick.approach_space == "joint" and self._joint_mode:
+        motion.joint_approach = None
+        if self._cfg.pick.approach_space == "joint" and motion.joint_mode:
             # the joint planner continues from the current joint move
-            self._joint_approach = self._plan_joint_approach(track, t_s)
-        self._joint_mode = self._joint_approach is not None
-        self._grasp_yaw_rad = (
-            self._joint_approach.yaw_rad
-            if self._joint_approach is not None
-            else self._best_grasp_yaw(track, intercept_s)
+            motion.joint_approach = self._plan_joint_approach(track, t_s)
+        motion.joint_mode = motion.joint_approach is not None
+        pursuit.grasp_yaw_rad = (
+            motion.joint_approach.yaw_rad
+            if motion.joint_approach is not None
+            else best_grasp_yaw(
+                track,
+                intercept_s,
+                kinematics=self._kin,
+                config=self._cfg,
+                q_now=self._commander.q,
+                tcp_yaw_rad=self._planner.state.position[3],
+            )
         )
-        self._approach_lead_s = min(decision.approach_s, MAX_APPROACH_LEAD_S)
-        self._approach_waiting = False
-        self._yaw_remaining_s = math.inf  # until the first Cartesian step of this pick
+        motion.approach_lead_s = min(decision.approach_s, MAX_APPROACH_LEAD_S)
+        motion.approach_waiting = False
+        motion.yaw_remaining_s = math.inf  # until the first Cartesian step of this pick
         self._set_phase(Phase.APPROACH, t_s)
-        self._joint_remaining_s = math.inf  # until the new joint move's first step
+        motion.joint_remaining_s = math.inf  # until the new joint move's first step
+
+    def _start_carry(self, t_s: float) -> None:
+        """Solve the drop pose once (:func:`~control.poses.drop_pose`) and start the carry."""
+        target = self._pursuit.target
+        class_name, length_m = ("", 0.0) if target is None else (target.class_name, target.length_m)
+        q_now = np.array(self._commander.q)
+        x, y, z, yaw_now = self._planner.state.position
+        drop = drop_point(self._cfg, class_name, (x, y, z), length_m)
+        best = drop_pose(self._kin, self._cfg, drop, q_now, (x, y, yaw_now))
+        if best is not None:
+            self._motion.drop_q = best
+        else:
+            self._book.error(
+                "ik_failure", f"{self._phase}: no IK solution for the drop point {drop}"
+            )
+            self._book.aborted["drop_unreachable"] += 1
+            self._motion.drop_q = self._commander.q
+        self._set_phase(Phase.CARRY, t_s)
+
+    # -- targets ------------------------------------------------------------------------------
+    def _schedule(self, t_s: float, tracks: Sequence[Track]) -> None:
+        estimate = None
+        if self._cfg.pick.approach_space == "joint" and self._motion.joint_mode:
+
+            def estimate(track: Track) -> float:
+                meeting = self._joint_meeting(track, t_s)
+                return math.inf if meeting is None else meeting.goal.arrive_s - t_s
+
+        book = self._book
+        result = schedule(
+            tracks,
+            now_s=t_s,
+            tcp_position_m=self._planner.state.position_m,
+            config=self._cfg,
+            excluded_ids=book.excluded | book.targeted_ids,
+            tcp_yaw_rad=self._planner.state.position[3],
+            approach_estimate=estimate,
+        )
+        for item in result.untargeted:
+            if item.track_id not in book.targeted_ids:
+                book.untargeted[item.track_id] = item.reason
+        if result.target is not None:
+            self._start_pick(result.target, result, t_s)
 
     def _joint_meeting(self, track: Track, t_s: float) -> JointApproach | None:
-        """Where and when a joint-space move from the current joint state meets ``track``.
-
-        The meeting time is a fixed point: the time-optimal duration of the move (Ruckig, from
-        the current joint state) to the pose above where the object will be then (upstream of
-        the pick window when the object is still too far away: the scheduler then waits). The
-        IK is seeded by the ready posture turned at the base towards the meeting point; of the
-        two grasp yaws the one that moves the joints least is kept. None when no pose or move
-        is found. Cached per track for the tick ``t_s`` (the scheduler's estimate and the
-        chosen move are the same computation).
-        """
+        """:func:`~control.poses.solve_meeting` from the current joint state, cached per track
+        for the tick ``t_s`` (the scheduler's estimate and the chosen move are the same
+        computation)."""
         if t_s != self._meetings_t_s:
             self._meetings.clear()
             self._meetings_t_s = t_s
         if track.track_id not in self._meetings:
-            self._meetings[track.track_id] = self._solve_meeting(track, t_s)
+            self._meetings[track.track_id] = solve_meeting(
+                track,
+                t_s,
+                kinematics=self._kin,
+                joint_planner=self._joint_planner,
+                config=self._cfg,
+                q_now=np.array(self._commander.q),
+                q_ready=self.q_ready,
+                tcp_yaw_rad=self._planner.state.position[3],
+            )
         return self._meetings[track.track_id]
-
-    def _solve_meeting(self, track: Track, t_s: float) -> JointApproach | None:
-        kin, cfg = self._kin, self._cfg
-        vx, vy = track.velocity_mps
-        z = grasp_height_m(track, cfg) + cfg.pick.approach_height_m
-        base = cfg.robot.base_position_m
-        ready = cfg.robot.ready_tcp_position_m
-        q_now = np.array(self._commander.q)
-        vmax = np.maximum(kin.velocity_limit_rps, 1e-6)
-        dt_s = JOINT_APPROACH_GUESS_S
-        near = nearest_half_turn(track.yaw_rad, self._planner.state.position[3])
-        yaws: tuple[float, ...] = (near, near + math.pi)
-        q_goal: FloatArray | None = None
-        yaw_goal = near
-        for _ in range(5):
-            x, y = track.position_at(t_s + dt_s)
-            if q_goal is None:
-                turn = math.atan2(y - base[1], x - base[0]) - math.atan2(
-                    ready[1] - base[1], ready[0] - base[0]
-                )
-                seed = np.array(self.q_ready)
-                seed[0] = np.clip(seed[0] + turn, kin.lower_rad[0], kin.upper_rad[0])
-            else:
-                seed = q_goal
-            best: tuple[float, FloatArray, float] | None = None
-            for yaw in yaws:
-                result = kin.solve(tool_pose((x, y, z), yaw), seed)
-                if not result.success:
-                    continue
-                cost = float(np.max(np.abs(np.asarray(result.q) - q_now) / vmax))
-                if best is None or cost < best[0]:
-                    best = (cost, np.array(result.q), yaw)
-            if best is None:
-                return None
-            _, q_goal, yaw_goal = best
-            yaws = (yaw_goal,)
-            dq_goal = kin.joint_velocity(q_goal, np.array([vx, vy, 0.0, 0.0]))
-            try:
-                duration_s = self._joint_planner.duration_s(q_goal, dq_goal)
-            except PlanningError:
-                return None
-            previous_s, dt_s = dt_s, duration_s
-            if abs(dt_s - previous_s) < 0.005:
-                break
-        assert q_goal is not None  # the first iteration returned or set it
-        x, y = track.position_at(t_s + dt_s)
-        result = kin.solve(tool_pose((x, y, z), yaw_goal), q_goal)
-        if not result.success:
-            return None
-        q_goal = np.array(result.q)
-        dq_goal = kin.joint_velocity(q_goal, np.array([vx, vy, 0.0, 0.0]))
-        goal = JointGoal(q=q_goal, dq=dq_goal, arrive_s=t_s + dt_s)
-        return JointApproach(goal=goal, yaw_rad=yaw_goal)
 
     def _plan_joint_approach(self, track: Track, t_s: float) -> JointApproach | None:
         """Start the joint-space move of :meth:`_joint_meeting`; None when there is none."""
@@ -404,56 +675,6 @@ class PickController:
             return None
         return meeting
 
-    def _best_grasp_yaw(self, track: Track, intercept_s: float) -> float:
-        """The grasp yaw, of the two a parallel gripper allows, that the wrist can reach.
-
-        The one nearest the current yaw, unless the last joint (the one that turns the tool,
-        +-2.9 rad on the Panda) would end within ``WRIST_MARGIN_RAD`` of a limit at the
-        predicted intercept point; then the one with more room there.
-        """
-        current = self._planner.state.position[3]
-        near = nearest_half_turn(track.yaw_rad, current)
-        dt_s = intercept_s if math.isfinite(intercept_s) else 0.0
-        x = track.position_m[0] + track.velocity_mps[0] * dt_s
-        y = track.position_m[1] + track.velocity_mps[1] * dt_s
-        z = grasp_height_m(track, self._cfg) + self._cfg.pick.approach_height_m
-        other = near - math.pi if near > current else near + math.pi
-        best, best_room = near, -math.inf
-        for yaw in (near, other):
-            result = self._kin.solve(tool_pose((x, y, z), yaw), self._commander.q)
-            if not result.success:
-                continue
-            q = np.asarray(result.q)
-            room = float(min(q[-1] - self._kin.lower_rad[-1], self._kin.upper_rad[-1] - q[-1]))
-            if room >= WRIST_MARGIN_RAD:
-                return yaw
-            if room > best_room:
-                best, best_room = yaw, room
-        return best
-
-    def _schedule(self, t_s: float, tracks: Sequence[Track]) -> None:
-        estimate = None
-        if self._cfg.pick.approach_space == "joint" and self._joint_mode:
-
-            def estimate(track: Track) -> float:
-                meeting = self._joint_meeting(track, t_s)
-                return math.inf if meeting is None else meeting.goal.arrive_s - t_s
-
-        result = schedule(
-            tracks,
-            now_s=t_s,
-            tcp_position_m=self._planner.state.position_m,
-            config=self._cfg,
-            excluded_ids=self._excluded | self._targeted_ids,
-            tcp_yaw_rad=self._planner.state.position[3],
-            approach_estimate=estimate,
-        )
-        for item in result.untargeted:
-            if item.track_id not in self._targeted_ids:
-                self._untargeted[item.track_id] = item.reason
-        if result.target is not None:
-            self._start_pick(result.target, result, t_s)
-
     def _object_state(
         self, t_s: float, belt_velocity_mps: tuple[float, float], *, now_s: float | None = None
     ) -> tuple[Vec3, Vec3] | None:
@@ -462,11 +683,11 @@ class PickController:
         While the target is not in the current tracks (``now_s`` after the last sighting), it is
         extrapolated with the measured belt velocity.
         """
-        track = self._target
+        track = self._pursuit.target
         if track is None:
             return None
         velocity = track.velocity_mps
-        unseen = (t_s if now_s is None else now_s) > self._target_seen_s
+        unseen = (t_s if now_s is None else now_s) > self._pursuit.seen_s
         if unseen and all(math.isfinite(v) for v in belt_velocity_mps):
             velocity = belt_velocity_mps
         dt_s = t_s - track.stamp_s
@@ -476,15 +697,18 @@ class PickController:
 
     def _track_target(self, t_s: float, tracks: Sequence[Track]) -> bool:
         """Refresh the target snapshot; False when it has been lost for too long."""
-        if self._target is None:
+        pursuit = self._pursuit
+        if pursuit.target is None:
             return False
         for track in tracks:
-            if track.track_id == self._target.track_id:
-                self._target = track
-                self._target_seen_s = t_s
-                self._grasp_yaw_rad = nearest_half_turn(track.yaw_rad, self._grasp_yaw_rad)
+            if track.track_id == pursuit.target.track_id:
+                pursuit.target = track
+                pursuit.seen_s = t_s
+                pursuit.grasp_yaw_rad = nearest_grasp_yaw(
+                    track.yaw_rad, pursuit.grasp_yaw_rad, self._cfg.tool.grasp_yaw_period_rad
+                )
                 return True
-        return t_s - self._target_seen_s <= self._cfg.pick.lost_timeout_s
+        return t_s - pursuit.seen_s <= self._cfg.pick.lost_timeout_s
 
     def _following_target(
         self,
@@ -507,7 +731,7 @@ class PickController:
             raise ControlError(msg)
         (x, y, z), (vx, vy, _) = obj
         target = CartesianTarget(
-            position=(x, y, z + height_m, self._grasp_yaw_rad),
+            position=(x, y, z + height_m, self._pursuit.grasp_yaw_rad),
             velocity=(vx, vy, 0.0, 0.0),
         )
         return target, now[0]
@@ -518,14 +742,13 @@ class PickController:
         Chasing an object upstream takes the arm to the edge of its workspace; it meets the
         object where the window begins instead, and follows it from there.
         """
-        x_min = self._cfg.belt.pick_window_x_m[0]
+        x_min = self._cfg.pick_window_x_m[0]
         if target.position[0] >= x_min:
             return target
         return CartesianTarget(position=(x_min, *target.position[1:]))
 
-    def _arrived(self, target: CartesianTarget, height_m: float) -> bool:
+    def _arrived(self, target: CartesianTarget) -> bool:
         """True when the setpoint is on the moving target (position and velocity)."""
-        del height_m
         state = self._planner.state
         period_s = self._cfg.motion.control_period_s
         previous = [
@@ -537,211 +760,31 @@ class PickController:
             and relative_speed <= self._cfg.pick.arrive_speed_tolerance_mps
         )
 
-    def _plan(
-        self, t_s: float, tracks: Sequence[Track], belt_velocity_mps: tuple[float, float]
-    ) -> tuple[CartesianTarget | JointGoal, Vec3 | None]:
-        """Run the phase transitions and return this tick's Ruckig goal and aim point."""
-        pick = self._cfg.pick
-        period_s = self._cfg.motion.control_period_s
-        phase = self._phase
-        almost_ready = phase == Phase.RETURN and (
-            self._joint_mode
-            and (
-                self._joint_remaining_s <= pick.schedule_before_ready_s
-                or pick.approach_space == "joint"
-            )
+    # -- the tool -----------------------------------------------------------------------------
+    def _grasp_command_m(self) -> float:
+        """The tool's command when it grasps the target."""
+        target = self._pursuit.target
+        width = target.width_m if target is not None else 0.0
+        return self._cfg.tool.grasp_command_m(width, self._cfg.pick.grip_squeeze_m)
+
+    def _tool_command_m(self) -> float:
+        grasping = self._phase == Phase.CLOSE or (
+            self._pursuit.carrying and self._phase in (Phase.LIFT, Phase.CARRY)
         )
-        if phase == Phase.IDLE or almost_ready:
-            self._schedule(t_s, tracks)
-            phase = self._phase
-        if phase in (Phase.APPROACH, *FOLLOWING_PHASES):
-            if not self._track_target(t_s, tracks) and phase == Phase.APPROACH:
-                self._abort("target_lost", t_s)
-                return self._plan(t_s, (), belt_velocity_mps)
-            obj = self._object_state(t_s, belt_velocity_mps)
-            x_now = obj[0][0] if obj is not None else math.inf
-            if phase in (Phase.APPROACH, Phase.DESCEND, Phase.DWELL) and (
-                x_now > self._cfg.belt.pick_window_x_m[1]
-            ):
-                self._abort("too_late", t_s)
-                return self._plan(t_s, (), belt_velocity_mps)
-        if phase == Phase.APPROACH and self._joint_approach is not None:
-            plan = self._joint_approach
-            if not (self._joint_mode and self._joint_remaining_s <= period_s):
-                obj = self._object_state(t_s, belt_velocity_mps, now_s=t_s)
-                return plan.goal, obj[0] if obj is not None else None
-            self._joint_approach = None  # above the object, moving with it: Cartesian from here
-            self._approach_lead_s = 0.0
-            self._grasp_yaw_rad = nearest_half_turn(
-                self._grasp_yaw_rad, self._planner.state.position[3]
-            )
-        if phase == Phase.APPROACH:
-            target, aim = self._following_target(
-                t_s, belt_velocity_mps, pick.approach_height_m, lead_s=self._approach_lead_s
-            )
-            waiting = self._not_upstream(target)
-            self._approach_waiting = waiting is not target
-            if self._approach_waiting:  # the meeting point is not in the window yet: wait there
-                return waiting, aim
-            yaw_error = abs(self._planner.state.position[3] - target.position[3])
-            on_object = self._approach_lead_s <= period_s  # not on a point ahead of it
-            yaw_ready = (
-                yaw_error < pick.yaw_tolerance_rad
-                or self._yaw_remaining_s <= pick.descend_yaw_lead_s
-            )
-            if on_object and yaw_ready and self._arrived(target, pick.approach_height_m):
-                self._set_phase(Phase.DESCEND, t_s)
-                phase = Phase.DESCEND
-            else:
-                return target, aim
-        if phase == Phase.DESCEND:
-            target, aim = self._following_target(t_s, belt_velocity_mps, 0.0)
-            if self._arrived(target, 0.0):
-                self._set_phase(Phase.DWELL, t_s)
-            return target, aim
-        if phase == Phase.DWELL:
-            target, aim = self._following_target(t_s, belt_velocity_mps, 0.0)
-            yaw_error = abs(self._planner.state.position[3] - target.position[3])
-            dwelt = t_s - self._phase_start_s >= pick.dwell_s - pick.close_overlap_s
-            if dwelt and yaw_error < pick.yaw_tolerance_rad:
-                self._set_phase(Phase.CLOSE, t_s)
-            return target, aim
-        if phase == Phase.CLOSE:
-            if t_s - self._phase_start_s >= pick.close_s:
-                if self._closed_on_nothing():
-                    self._abort("grip_missed", t_s)
-                    return self._plan(t_s, (), belt_velocity_mps)
-                self._carrying = True
-                self._start_lift(t_s)
-                return self._plan(t_s, tracks, belt_velocity_mps)
-            return self._following_target(t_s, belt_velocity_mps, 0.0)
-        if phase == Phase.LIFT and self._carrying and self._closed_on_nothing():
-            self._abort("grip_missed", t_s)  # the fingers finished closing on nothing
-            self._set_phase(Phase.LIFT, t_s)  # the lift goes on, with the gripper open
-        if phase == Phase.LIFT:
-            lift = self._lift_target
-            if lift is None or (
-                self._planner.state.position[2] >= lift.position[2] - 0.2 * pick.lift_height_m
-            ):
-                if self._carrying:
-                    self._start_carry(t_s)
-                else:
-                    self._set_phase(Phase.RETURN, t_s)
-                return self._plan(t_s, tracks, belt_velocity_mps)
-            return lift, None
-        if phase == Phase.CARRY:
-            goal = JointGoal(q=self._drop_q)
-            if self._joint_remaining_s <= period_s and self._at_joint_goal(goal):
-                self._set_phase(Phase.RELEASE, t_s)
-            return goal, None
-        if phase == Phase.RELEASE:
-            if t_s - self._phase_start_s >= pick.release_s:
-                self._completed += 1
-                if self._target is not None:
-                    self._completed_by_class[self._target.class_name] += 1
-                self._target = None
-                self._carrying = False
-                self._tracking_start_s = math.nan
-                self._set_phase(Phase.RETURN, t_s)
-                return self._plan(t_s, tracks, belt_velocity_mps)
-            return JointGoal(q=self._drop_q), None
-        goal = JointGoal(q=self.q_ready)
-        if (
-            phase == Phase.RETURN
-            and self._joint_remaining_s <= period_s
-            and self._at_joint_goal(goal)
-        ):
-            self._set_phase(Phase.IDLE, t_s)
-        return goal, None
+        return self._grasp_command_m() if grasping else self._cfg.tool.open_command_m
 
-    def _closed_on_nothing(self) -> bool:
-        """True when the gripper, commanded to close, is measured within
-        ``pick.grip_check_margin_m`` of its commanded opening: nothing stopped the fingers.
+    def _holds_nothing(self) -> bool:
+        """The tool, commanded to grasp, measured within ``pick.grip_check_margin_m`` of its
+        command: nothing held it back (:meth:`~control.tools.ControllerTool.holds_nothing`)."""
+        return self._cfg.tool.holds_nothing(
+            self._measured.tool_measured_m,
+            self._grasp_command_m(),
+            self._cfg.pick.grip_check_margin_m,
+        )
 
-        A gripped object holds them apart: over 41 closes in two realtime throughput runs of the
-        twin, fingers on an object stayed at least 1.4 mm wider than commanded, and fingers that
-        missed closed to within 0.4 mm of it in 0.2 s.
-        """
-        opening = self._measured.opening_m
-        if not math.isfinite(opening):
-            return False
-        return opening - self._closing_width_m() < self._cfg.pick.grip_check_margin_m
-
+    # -- motion -------------------------------------------------------------------------------
     def _at_joint_goal(self, goal: JointGoal) -> bool:
         return bool(np.max(np.abs(self._commander.q - goal.q)) < 1e-4)
-
-    def _start_carry(self, t_s: float) -> None:
-        """Solve the drop pose once: the current posture turned about the base to the bin.
-
-        The drop point is :meth:`_drop_point`. The IK is seeded by the current joints with the
-        base joint turned by the bearing from the TCP to the drop point, and the tool's yaw
-        turns with it (either of the two yaws a parallel gripper allows, whichever leaves the
-        last joint nearer its current angle): the carry is mostly a turn of the base joint and
-        the wrist hardly moves.
-        """
-        robot = self._cfg.robot
-        target = self._target
-        class_name, length_m = ("", 0.0) if target is None else (target.class_name, target.length_m)
-        base = robot.base_position_m
-        q_now = np.array(self._commander.q)
-        x, y, z, yaw_now = self._planner.state.position
-        drop = self._drop_point(class_name, (x, y, z), length_m)
-        turn = math.atan2(drop[1] - base[1], drop[0] - base[0]) - math.atan2(
-            y - base[1], x - base[0]
-        )
-        lower, upper = float(self._kin.lower_rad[0]), float(self._kin.upper_rad[0])
-        turns = [turn + k * 2 * math.pi for k in (-1, 0, 1)]
-        inside = [a for a in turns if lower <= q_now[0] + a <= upper] or [turn]
-        turn = min(inside, key=abs)
-        seed = np.array(q_now)
-        seed[0] = np.clip(seed[0] + turn, lower, upper)
-        best: FloatArray | None = None
-        for yaw in (yaw_now + turn, yaw_now + turn + math.pi):
-            result = self._kin.solve(tool_pose(drop, yaw), seed)
-            if result.success and (
-                best is None or abs(result.q[-1] - q_now[-1]) < abs(best[-1] - q_now[-1])
-            ):
-                best = np.array(result.q)
-        if best is not None:
-            self._drop_q = best
-        else:
-            self._errors["ik_failure"] += 1
-            self._aborted["drop_unreachable"] += 1
-            self.last_error = f"{self._phase}: no IK solution for the drop point {drop}"
-            self._drop_q = self._commander.q
-        self._set_phase(Phase.CARRY, t_s)
-
-    def _drop_point(self, class_name: str, tcp_m: Vec3, length_m: float) -> Vec3:
-        """Where to release an object of ``class_name``, ``length_m`` long, carried from ``tcp_m``.
-
-        Anywhere over the square of half-width ``pick.drop_tolerance_m`` less half the object's
-        length around the class's configured drop point (the bins are axis-aligned squares, so
-        no part of the object ends up over a wall): the point of it nearest the TCP, so the base
-        turns and the arm folds no more than it must. Raised to the TCP's height if that is
-        higher. Without a bin for the class, the ready position.
-        """
-        configured = self._cfg.bins.get(class_name)
-        if configured is None:
-            return self._cfg.robot.ready_tcp_position_m
-        bx, by, bz = configured
-        half = max(0.0, self._cfg.pick.drop_tolerance_m - 0.5 * length_m)
-        return (
-            min(max(tcp_m[0], bx - half), bx + half),
-            min(max(tcp_m[1], by - half), by + half),
-            max(bz, tcp_m[2]),
-        )
-
-    def _closing_width_m(self) -> float:
-        """The opening the gripper is commanded to when it closes on the target."""
-        width = self._target.width_m if self._target is not None else 0.0
-        opening = self._cfg.robot.gripper_max_opening_m
-        return float(np.clip(width - self._cfg.pick.grip_squeeze_m, 0.0, opening))
-
-    def _gripper_width_m(self) -> float:
-        closed = self._phase == Phase.CLOSE or (
-            self._carrying and self._phase in (Phase.LIFT, Phase.CARRY)
-        )
-        return self._closing_width_m() if closed else self._cfg.robot.gripper_max_opening_m
 
     def _sync_cartesian(self, q: FloatArray, dq: FloatArray) -> None:
         oMtool = self._kin.fk(q)  # noqa: N806
@@ -755,11 +798,12 @@ class PickController:
         )
 
     def _step_joint(self, goal: JointGoal) -> None:
-        if not self._joint_mode:
+        motion = self._motion
+        if not motion.joint_mode:
             q = self._commander.q
             velocity = np.asarray(self._planner.state.velocity, dtype=np.float64)
             self._joint_planner.reset(q, self._kin.joint_velocity(q, velocity))
-            self._joint_mode = True
+            motion.joint_mode = True
         try:
             step = (
                 self._joint_planner.step(goal.q)
@@ -767,71 +811,32 @@ class PickController:
                 else self._joint_planner.follow()  # a move planned at its start; cannot fail
             )
         except PlanningError as exc:
-            self._errors["ruckig_error"] += 1
-            self.last_error = f"{self._phase}: {exc}"
+            self._book.error("ruckig_error", f"{self._phase}: {exc}")
             return
-        self._joint_remaining_s = step.remaining_s
+        motion.joint_remaining_s = step.remaining_s
         self._commander.reset(step.q)
         self._sync_cartesian(step.q, step.dq)
 
-    def _step_cartesian(
-        self, target: CartesianTarget, t_s: float, belt: tuple[float, float]
-    ) -> None:
+    def _step_cartesian(self, target: CartesianTarget, now: TickInput) -> None:
+        motion = self._motion
         try:
             step = self._planner.step(target)
-            self._yaw_remaining_s = step.yaw_remaining_s
-            if self._phase == Phase.APPROACH and not self._approach_waiting:
+            motion.yaw_remaining_s = step.yaw_remaining_s
+            if self._phase == Phase.APPROACH and not motion.approach_waiting:
                 period_s = self._cfg.motion.control_period_s
-                self._approach_lead_s = max(
-                    0.0, min(self._approach_lead_s - period_s, step.position_remaining_s)
+                motion.approach_lead_s = max(
+                    0.0, min(motion.approach_lead_s - period_s, step.position_remaining_s)
                 )
         except PlanningError as exc:
-            self._errors["ruckig_error"] += 1
-            self.last_error = f"{self._phase}: {exc}"
-            if self._target is not None and not self._carrying:
-                self._abort("ruckig_error", t_s)
-                goal, _ = self._plan(t_s, (), belt)
+            self._book.error("ruckig_error", f"{self._phase}: {exc}")
+            if self._pursuit.target is not None and not self._pursuit.carrying:
+                self._abort("ruckig_error", now.t_s)
+                goal = self._plan(replace(now, tracks=())).target
                 if isinstance(goal, JointGoal):
                     self._step_joint(goal)
                 else:
                     with contextlib.suppress(PlanningError):
                         self._planner.step(goal)
-
-    def update(
-        self,
-        t_s: float,
-        measured_tcp: TcpMeasurement,
-        tracks: Sequence[Track],
-        belt_velocity_mps: tuple[float, float],
-    ) -> Command:
-        """Advance one control tick at ``t_s`` and return the command for the arm and gripper.
-
-        ``tracks`` are the tracker's confirmed tracks (any stamp; they are extrapolated to the
-        time the command takes effect), ``belt_velocity_mps`` the measured ``(vx, vy)``.
-        """
-        self._measured = measured_tcp
-        goal, aim = self._plan(t_s, tracks, belt_velocity_mps)
-        if isinstance(goal, JointGoal):
-            self._step_joint(goal)
-            self._feedback.reset()
-            position = self._planner.state.position_m
-        else:
-            if self._joint_mode:
-                self._joint_mode = False
-            self._step_cartesian(goal, t_s, belt_velocity_mps)
-            position = self._command_cartesian(t_s, measured_tcp)
-        setpoint = self._planner.state
-        q = self._commander.q
-        return Command(
-            t_s=t_s,
-            phase=self._phase,
-            target_id=self._target.track_id if self._target is not None else None,
-            setpoint=setpoint,
-            commanded_position_m=position,
-            joint_positions_rad=tuple(float(v) for v in q),
-            gripper_width_m=self._gripper_width_m(),
-            grasp_point_m=aim,
-        )
 
     def _command_cartesian(self, t_s: float, measured_tcp: TcpMeasurement) -> Vec3:
         setpoint = self._planner.state
@@ -846,18 +851,20 @@ class PickController:
             )
         else:
             self._feedback.reset()
+        motion = self._motion
         try:
-            self._commander.command(position, setpoint.position[3], ticks=self._ticks_since_command)
-            self._ticks_since_command = 1
+            self._commander.command(
+                position, setpoint.position[3], ticks=motion.ticks_since_command
+            )
+            motion.ticks_since_command = 1
         except IkError as exc:
-            self._errors["ik_failure"] += 1
-            self.last_error = f"{self._phase}: {exc}"
-            self._ticks_since_command += 1
+            self._book.error("ik_failure", f"{self._phase}: {exc}")
+            motion.ticks_since_command += 1
             limit = self._cfg.pick.ik_failures_to_abort
             if (
-                self._target is not None
-                and not self._carrying
-                and self._ticks_since_command > limit
+                self._pursuit.target is not None
+                and not self._pursuit.carrying
+                and motion.ticks_since_command > limit
             ):
                 self._abort("ik_failure", t_s)
         return position

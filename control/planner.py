@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from ruckig import InputParameter, Result, Ruckig, RuckigError, Synchronization, Trajectory
 
 from control.config import MotionConfig
-from control.errors import ControlConfigError, IkError, PlanningError
+from control.errors import IkError, PlanningError
 from control.ik import IkResult, Kinematics, tool_pose
 
 Vec4 = tuple[float, float, float, float]
@@ -35,11 +35,10 @@ def calculate_synchronised(
 ) -> tuple[Result, bool]:
     """Ruckig with time synchronisation, retried once with ``fallback`` if that fails.
 
-    Ruckig's synchronisation step fails numerically for rare states (seen here: a carry whose
-    every retry from the same state failed the same way, "error in step 2 ... for t sync", for
-    10 s), while the same input solves without it. Returns the result and whether the fallback
-    was used; a ``RuckigError`` of the fallback propagates. ``inp.synchronization`` is left at
-    ``Time``.
+    Ruckig's synchronisation step fails numerically for rare states, and fails the same way on
+    every retry from the same state, while the same input solves without it. Returns the result
+    and whether the fallback was used; a ``RuckigError`` of the fallback propagates.
+    ``inp.synchronization`` is left at ``Time``.
     """
     inp.synchronization = Synchronization.Time
     try:
@@ -355,19 +354,6 @@ class JointCommander:
         return result
 
 
-def per_joint(values: tuple[float, ...], n: int, key: str) -> list[float]:
-    """``values`` for ``n`` joints: one value for all, or exactly one per joint.
-
-    Raises ``ControlConfigError`` naming ``key`` otherwise.
-    """
-    if len(values) == 1:
-        return [float(values[0])] * n
-    if len(values) != n:
-        msg = f"{key}: {values!r} has {len(values)} values; the arm has {n} joints (or give one)"
-        raise ControlConfigError(msg)
-    return [float(v) for v in values]
-
-
 @dataclass(frozen=True, kw_only=True, eq=False)
 class JointStep:
     """One control period of a joint-space move: ``q`` and ``dq`` are ``(n_arm,) float``."""
@@ -384,7 +370,8 @@ SNAP_RAD = 2e-3
 class JointPlanner:
     """Ruckig in joint space for transfer moves (carry to a bin, return to ready).
 
-    Joint velocity limits are the URDF's scaled by ``transfer_speed_scale``; positions are kept
+    Joint velocity limits are the URDF's scaled by ``transfer_speed_scale``, acceleration and jerk
+    limits the robot's datasheet values (:class:`~control.ik.Kinematics`); positions are kept
     inside the joint limits by Ruckig and by a final check.
     """
 
@@ -399,12 +386,8 @@ class JointPlanner:
         self._move = Trajectory(n)
         self._move_elapsed_s = 0.0
         self._input.max_velocity = list(kinematics.velocity_limit_rps * motion.transfer_speed_scale)
-        self._input.max_acceleration = per_joint(
-            motion.joint_max_acceleration_rps2, n, "motion.joint_max_acceleration_rps2"
-        )
-        self._input.max_jerk = per_joint(
-            motion.joint_max_jerk_rps3, n, "motion.joint_max_jerk_rps3"
-        )
+        self._input.max_acceleration = [float(v) for v in kinematics.acceleration_limit_rps2]
+        self._input.max_jerk = [float(v) for v in kinematics.jerk_limit_rps3]
         self._q = np.zeros(n)
         self._dq = np.zeros(n)
         self._ddq = np.zeros(n)

@@ -1,14 +1,13 @@
 """Choose the next object to pick, and say why every other object is not picked.
 
-An object is a candidate when its class has a bin, its footprint's narrow side fits the gripper,
-it stands tall enough for the finger pads,
-the arm can intercept it inside the pick window and finish the dwell before it leaves the window,
-its grasp point stays within reach until the gripper has closed, and no other object lies where
-the open fingers come down (the gripper's keep-out rectangle across the narrow side) or reaches
-up to the palm under the hand. The arm can intercept an object when it can be above it inside
-the window: the earliest such meeting is searched, not iterated. Among
-candidates the highest class priority wins, then the least time left in the window, then the
-shortest time to intercept.
+An object is a candidate when its class has a bin at this station, the tool can grasp an object
+of its size (:meth:`~control.tools.ControllerTool.misfit`), the arm can intercept it inside the
+station's pick window and finish the dwell before it leaves the window, its grasp point stays
+within reach until the tool has closed, and no other object lies in the footprints the tool
+comes down on (:meth:`~control.tools.ControllerTool.footprints`). The arm can intercept an
+object when it can be above it inside the window: the earliest such meeting is searched, not
+iterated. Among candidates the highest class priority wins, then the least time left in the
+window, then the shortest time to intercept.
 """
 
 from __future__ import annotations
@@ -113,17 +112,19 @@ _SCAN_STEP_S = 0.1
 _BISECTIONS = 7
 
 
-def nearest_half_turn(yaw_rad: float, reference_rad: float) -> float:
-    """``yaw_rad + k * pi`` closest to ``reference_rad`` (a parallel gripper is symmetric)."""
-    return yaw_rad + math.pi * round((reference_rad - yaw_rad) / math.pi)
+def nearest_grasp_yaw(yaw_rad: float, reference_rad: float, period_rad: float) -> float:
+    """``yaw_rad + k * period_rad`` closest to ``reference_rad``: of the grasp yaws a tool
+    symmetric under turns of ``period_rad`` (pi for a parallel gripper) allows, the nearest."""
+    return yaw_rad + period_rad * round((reference_rad - yaw_rad) / period_rad)
 
 
 def yaw_turn_s(track: Track, tcp_yaw_rad: float, config: ControllerConfig) -> float:
-    """Time the tool needs to turn from ``tcp_yaw_rad`` to the nearer of the track's two grasp
-    yaws (a parallel gripper grasps at ``yaw`` and ``yaw + pi``), less the part of the turn the
-    descent may overlap (``pick.descend_yaw_lead_s``)."""
+    """Time the tool needs to turn from ``tcp_yaw_rad`` to the nearest of the track's grasp
+    yaws (:func:`nearest_grasp_yaw`), less the part of the turn the descent may overlap
+    (``pick.descend_yaw_lead_s``)."""
     motion = config.motion
-    turn_rad = abs(nearest_half_turn(track.yaw_rad, tcp_yaw_rad) - tcp_yaw_rad)
+    period_rad = config.tool.grasp_yaw_period_rad
+    turn_rad = abs(nearest_grasp_yaw(track.yaw_rad, tcp_yaw_rad, period_rad) - tcp_yaw_rad)
     turn_s = move_time_s(
         turn_rad, motion.max_velocity[3], motion.max_acceleration[3], motion.max_jerk[3]
     )
@@ -218,42 +219,24 @@ def _overlap(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> bool
     return True
 
 
-def _keep_out_half_extents(config: ControllerConfig) -> tuple[float, float]:
-    """Half extents (along the long side, across the narrow side) of the keep-out rectangle."""
-    sched = config.scheduler
-    half_across = config.robot.gripper_max_opening_m / 2 + sched.finger_depth_m + sched.clearance_m
-    return sched.finger_width_m / 2 + sched.clearance_m, half_across
-
-
-def keep_out_corners(track: Track, config: ControllerConfig) -> list[tuple[float, float]]:
-    """The ``(4, 2)`` corners of the footprint the open fingers need around ``track``.
-
-    Centred on the track, across its narrow side as wide as the open gripper plus two fingers
-    and the clearance, along its long side as wide as a finger plus the clearance.
-    """
-    half_long, half_across = _keep_out_half_extents(config)
-    return _corners(track.position_m, track.yaw_rad, half_long, half_across)
-
-
-def _hand_half_extents(config: ControllerConfig) -> tuple[float, float]:
-    """Half extents (along the long side, across the narrow side) of the hand's footprint."""
-    sched = config.scheduler
-    return sched.hand_depth_m / 2 + sched.clearance_m, sched.hand_width_m / 2 + sched.clearance_m
-
-
 def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) -> int | None:
-    """The id of a track in the way of the gripper coming down on ``track``, or None.
+    """The id of a track in the way of the tool coming down on ``track``, or None.
 
-    In the way: any footprint in the fingers' keep-out rectangle, or a footprint in the hand's
-    rectangle of an object whose top reaches the palm (``palm_above_tcp_m`` above the grasp
-    point, less the clearance) when the fingers are at the grasp point.
+    In the way: a footprint overlapping one of the tool's footprints about the grasp point
+    (:meth:`~control.tools.ControllerTool.footprints`, grown by ``scheduler.clearance_m`` and
+    turned with the track), if it reaches as high as that footprint cares about.
     """
-    sched = config.scheduler
-    keep_out = keep_out_corners(track, config)
-    hand_half = _hand_half_extents(config)
-    hand = _corners(track.position_m, track.yaw_rad, *hand_half)
-    palm_z = grasp_height_m(track, config) + sched.palm_above_tcp_m - sched.clearance_m
-    radius = max(math.hypot(*_keep_out_half_extents(config)), math.hypot(*hand_half))
+    clearance = config.scheduler.clearance_m
+    footprints = config.tool.footprints(clearance)
+    grasp_z = grasp_height_m(track, config)
+    areas = [
+        (
+            _corners(track.position_m, track.yaw_rad, f.half_along_m, f.half_across_m),
+            None if f.clear_above_tcp_m is None else grasp_z + f.clear_above_tcp_m - clearance,
+        )
+        for f in footprints
+    ]
+    radius = max(math.hypot(f.half_along_m, f.half_across_m) for f in footprints)
     x, y = track.position_m
     for other in others:
         if other.track_id == track.track_id:
@@ -262,12 +245,12 @@ def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) 
         if math.hypot(other.position_m[0] - x, other.position_m[1] - y) > reach:
             continue  # bounding circles apart: the rectangles cannot overlap
         footprint = _corners(other.position_m, other.yaw_rad, other.length_m / 2, other.width_m / 2)
-        if _overlap(keep_out, footprint):
-            return other.track_id
         top_z = config.belt.surface_z_m + base_lift_m(other, config) + other.height_m
-        tall = top_z >= palm_z
-        if tall and _overlap(hand, footprint):
-            return other.track_id
+        for corners, min_top_z in areas:
+            if min_top_z is not None and not top_z >= min_top_z:
+                continue  # too low to reach this part of the tool
+            if _overlap(corners, footprint):
+                return other.track_id
     return None
 
 
@@ -280,12 +263,14 @@ def _static_reason(
         return "low_confidence"
     if track.class_name not in config.bins:
         return "no_bin"
-    if min(track.width_m, track.length_m) > (
-        config.robot.gripper_max_opening_m - sched.grasp_width_margin_m
-    ):
-        return "too_wide"
-    if track.height_m < sched.min_height_m:
-        return "too_flat"
+    misfit = config.tool.misfit(
+        length_m=track.length_m,
+        width_m=track.width_m,
+        height_m=track.height_m,
+        width_margin_m=sched.grasp_width_margin_m,
+    )
+    if misfit is not None:
+        return misfit
     if track.track_id in excluded_ids:
         return "excluded"
     return None
@@ -304,7 +289,7 @@ def _timing_reason(
     if not math.isfinite(approach_s):  # cannot be met within the search horizon
         return "too_late" if track.velocity_mps[0] > 0.0 else "out_of_reach"
     intercept_s = approach_s + descend_after_s(config)
-    x_min, x_max = belt.pick_window_x_m
+    x_min, x_max = config.pick_window_x_m
     x_meet, y_meet = track.position_at(now_s + intercept_s)
     pick = config.pick
     x_done, y_done = track.position_at(
@@ -317,9 +302,9 @@ def _timing_reason(
     if x_above < x_min:
         return "upstream"
     z = grasp_height_m(track, config)
-    base = config.robot.base_position_m
+    base = config.base_position_m
     reach = max(math.dist(base, (x_meet, y_meet, z)), math.dist(base, (x_done, y_done, z)))
-    off_belt = abs(track.position_m[1] - belt.centreline_y_m) > belt.width_m / 2
+    off_belt = abs(track.position_m[1] - belt.centre_y_m) > belt.width_m / 2
     if off_belt or reach > sched.max_reach_m:
         return "out_of_reach"
     if blocked_by(track, others, config) is not None:
@@ -345,7 +330,7 @@ def schedule(
     until the arm can be above the track (``inf`` when it cannot): the joint-space approach
     estimates its own move.
     """
-    x_max = config.belt.pick_window_x_m[1]
+    x_max = config.pick_window_x_m[1]
     ranked: list[tuple[tuple[float, float, float, int], Track, float, float]] = []
     untargeted: list[Untargeted] = []
     after_s = descend_after_s(config)
@@ -366,7 +351,7 @@ def schedule(
             continue
         vx = track.velocity_mps[0]
         time_left_s = (x_max - track.position_m[0]) / vx if vx > 1e-6 else math.inf
-        priority = config.scheduler.class_priorities.get(track.class_name, 0.0)
+        priority = config.class_priorities.get(track.class_name, 0.0)
         key = (-priority, time_left_s, approach_s + after_s, track.track_id)
         ranked.append((key, track, approach_s, time_left_s))
     if not ranked:

@@ -233,10 +233,11 @@ class Tracker:
     reason in :attr:`rejected`.
     """
 
-    def __init__(self, config: TrackingConfig) -> None:
-        """Create an empty tracker."""
+    def __init__(self, config: TrackingConfig, *, classes: Iterable[str]) -> None:
+        """Create an empty tracker of objects of ``classes`` (detections of others are
+        rejected as ``unknown_class``)."""
         self._config = config
-        self._classes = frozenset(config.class_names)
+        self._classes = frozenset(classes)
         self._tracks: dict[int, _TrackState] = {}
         self._next_id = 1
         self._last_stamp_s = -math.inf

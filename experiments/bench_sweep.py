@@ -7,23 +7,19 @@ over the best ``--workers`` wall time, the statistic of ``bench meshgen``: the s
 the one the rest of the machine disturbed least. Every pass's wall and CPU seconds, each
 round's own ratio (``speedup_rounds``) and their median are printed next to it.
 
-Why rounds and a best-of: on the shared 2-vCPU VM this is measured on, the speed of one core
-drifts by a third within minutes (the same pure-Python loop took 4.6 to 6.5 s in five solo
-runs over three minutes), so two long passes timed minutes apart compare two machines as much
-as two worker counts. Interleaving the passes and keeping each one's best compares them at
-the machine's normal speed. ``machine_speedup`` calibrates the machine after each round: the
-speed-up of ``--workers`` copies of a fixed pure-Python CPU loop run as separate processes
-against one copy (median of three; the median over rounds is printed). No sweep can scale
-better than that.
+Why rounds and a best-of: on a shared virtual machine the speed of one core drifts within
+minutes, so two long passes timed minutes apart compare two machines as much as two worker
+counts. Interleaving the passes and keeping each one's best compares them at the machine's
+normal speed. ``machine_speedup`` calibrates the machine after each round: the speed-up of
+``--workers`` copies of a fixed pure-Python CPU loop run as separate processes against one copy
+(median of three; the median over rounds is printed). No sweep can scale better than that.
 
 The ceiling for this workload is below 2 even on an ideal machine: one lockstep episode keeps
-about 1.1 cores busy (twin and controller alternate, but Fast DDS's receive and event threads
-and the first seconds, in which both processes start side by side, run in parallel), and the
-parallel pass has only 2. Episodes last as long as the default scenario's (60 s) unless
-``--duration`` says otherwise; short ones measure start-up more than sweeping. About 10
-minutes with the defaults. Measured here in four runs: ``speedup`` 1.74-1.97; the twelve single
-rounds 1.45-2.20 (median 1.77) while ``machine_speedup`` read 1.19-2.05; the old form (one
-pass each of four episodes) 1.60 the same hour.
+more than one core busy (twin and controller alternate, but Fast DDS's receive and event
+threads and the first seconds, in which the processes start side by side, run in parallel),
+and the parallel pass has only 2. Episodes last as long as the default scenario's (60 s)
+unless ``--duration`` says otherwise; short ones measure start-up more than sweeping. About 10
+minutes with the defaults; measurements are in ``docs/benchmarks.md``.
 
 Lockstep is the benchmarked mode: it runs as fast as the CPU allows (twin and controller are two
 busy processes), so the figure measures throughput. Realtime episodes are paced by the wall clock
@@ -40,8 +36,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from interfaces.errors import CdwTwinError
 from interfaces.fileio import write_atomic
-from twin.errors import CdwTwinError
 from twin.scenario import Scenario
 
 

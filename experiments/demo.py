@@ -117,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
             duration=args.seconds,
             mode="lockstep",
             dataset=meshes,
+            cell=None,
             out=run_dir,
             json=True,
         )

@@ -1,11 +1,13 @@
-"""Metrics recomputed offline from a recording (``cdw-twin record``), with the twin's own code.
+"""Metrics recomputed offline from a recording, with the metric table's own functions.
 
-The twin scores an episode from its events alone (:mod:`twin.scores`); every event goes out on
-``/events``, so the recording is enough to recompute the scores exactly::
+The twin scores an episode from its events alone (:func:`interfaces.metrics.count_events`,
+:func:`interfaces.metrics.event_scores`); every event goes out on ``/events``, so the recording
+is enough to recompute the scores exactly, for the line and for each station::
 
     from experiments.offline import offline_metrics, read_topic
     metrics = offline_metrics(Path("runs/ep0/recording.mcap"))
-    metrics["scores"]             # == summary.json["scores"]
+    metrics["scores"]                       # == summary.json["scores"]
+    metrics["stations"]["upstream"]         # == summary.json["stations"]["upstream"]["scores"]
     for log_time_ns, msg in read_topic(Path("runs/ep0/recording.mcap"), "/conveyor/state"):
         msg.header.stamp.sec, msg.speed_mps
 
@@ -14,7 +16,8 @@ What a recording cannot give:
 - ``step`` of an event: ``SortingEvent`` carries no step; it is rebuilt as
   ``round(time_s * physics_hz)``. Scores do not use it.
 - the episode duration (the twin scores with ``step_count * (1 / physics_hz)``) is rebuilt from
-  the ``/joint_states`` stamps, published after every physics step: ``physics_hz`` is the
+  the joint-state stamps (``/joint_states``, or a station's ``/<ns>/joint_states``: every
+  station publishes one per physics step with the same stamp): ``physics_hz`` is the
   rounded inverse of their median spacing (an integer rate is assumed) and the step count is the
   last stamp times that rate. So the recording must run until the twin's last step.
 - the tracking time to 4 mm: the twin measures it every physics step against the true pose of the
@@ -37,7 +40,8 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-from experiments.record import RecordingError
+from interfaces.contract import EVENTS_TOPIC, JOINT_STATES
+from twin.recording import RecordingError
 
 TRACKING_NOTE = (
     "not recomputable: the twin measures tracking every physics step against the true pose "
@@ -140,7 +144,7 @@ def decode_events(recording: Path, hz: float) -> list[Any]:
     from interfaces.events import Event, EventType
 
     events = []
-    for index, (_, msg) in enumerate(read_topic(recording, "/events")):
+    for index, (_, msg) in enumerate(read_topic(recording, EVENTS_TOPIC.name)):
         try:
             kind = EventType(msg.type)
         except ValueError:
@@ -165,34 +169,53 @@ def decode_events(recording: Path, hz: float) -> list[Any]:
     return events
 
 
-def offline_metrics(recording: Path) -> dict[str, Any]:
+def is_joint_states(topic: str) -> bool:
+    """Whether ``topic`` is a station's joint states (``/joint_states``, ``/s1/joint_states``)."""
+    name = JOINT_STATES.name
+    return topic == f"/{name}" or topic.endswith(f"/{name}")
+
+
+def offline_metrics(recording: Path, cell: Path | str | None = None) -> dict[str, Any]:
     """The twin's scores recomputed from ``recording``, and what the recording holds.
 
+    ``cell`` is the cell the episode ran (a run folder's ``cell.yaml``, a shipped name; None:
+    the default cell): its most downstream station decides which objects the line missed
+    (:func:`interfaces.metrics.count_events`, ``line_exit``).
+
     Keys: ``recording``, ``complete`` (finished cleanly), ``message_counts`` (per topic),
-    ``physics_hz``, ``steps``, ``duration_s``, ``events`` (count per type), ``scores`` (as
-    ``dataclasses.asdict(twin.scores())`` in ``summary.json``), ``tracking`` (None) and
-    ``tracking_note`` (why).
+    ``physics_hz``, ``steps``, ``duration_s``, ``events`` (count per type), ``scores`` (the
+    line's, as ``summary.json`` ``scores``), ``stations`` (per station the events name, as
+    ``summary.json`` ``stations[name]["scores"]``), ``tracking`` (None) and ``tracking_note``
+    (why).
     """
-    from twin.scores import compute_scores
+    from interfaces.cell import load_cell
+    from interfaces.metrics import count_events, event_scores, exit_station, station_names
+
+    line_exit = exit_station(load_cell(cell).stations)
 
     counts: Counter[str] = Counter()
-    joint_stamps: list[int] = []
+    joint_stamps: dict[str, list[int]] = {}
     for _, channel, message in iter_raw(recording):
         counts[channel.topic] += 1
-        if channel.topic == "/joint_states":
-            joint_stamps.append(header_stamp_ns(message.data))
-    clock = episode_clock(joint_stamps, recording)
+        if is_joint_states(channel.topic):
+            joint_stamps.setdefault(channel.topic, []).append(header_stamp_ns(message.data))
+    first = min(joint_stamps, default=None)
+    clock = episode_clock([] if first is None else joint_stamps[first], recording)
     events = decode_events(recording, clock.physics_hz)
-    scores = compute_scores(events, clock.duration_s)
+    duration_s = clock.duration_s
     return {
         "recording": str(recording),
         "complete": is_complete(recording),
         "message_counts": dict(sorted(counts.items())),
         "physics_hz": clock.physics_hz,
         "steps": clock.steps,
-        "duration_s": clock.duration_s,
+        "duration_s": duration_s,
         "events": dict(sorted(Counter(str(e.type) for e in events).items())),
-        "scores": dataclasses.asdict(scores),
+        "scores": event_scores(count_events(events, duration_s, line_exit=line_exit)),
+        "stations": {
+            name: event_scores(count_events(events, duration_s, station=name))
+            for name in station_names(events)
+        },
         "tracking": None,
         "tracking_note": TRACKING_NOTE,
     }
@@ -204,6 +227,7 @@ __all__ = [
     "episode_clock",
     "header_stamp_ns",
     "is_complete",
+    "is_joint_states",
     "iter_raw",
     "offline_metrics",
     "read_topic",

@@ -14,14 +14,19 @@ of every run are pooled and grouped by belt speed. Figures:
 3. round-trip latency over wall time and 4. its histogram (``rtt``; see :mod:`twin.telemetry`);
 5. tracking time to 4 mm per speed, one dot per settled pursuit (``summary.json``,
    ``tracking.tracking_times_s``), settled/pursuits noted above each speed;
-6. success and miss rate per speed with 95 % Wilson score intervals over the pooled counts:
-   success = placed in the correct bin / targeted (targeted from ``controller.json``),
-   miss = missed / processed (the twin's scores);
+6. success and miss rate per speed with 95 % Wilson score intervals over the pooled counts
+   (``success_rate`` = placed_correct / targeted, ``miss_rate`` = missed / processed: the
+   metric table's rates, ``docs/metrics.md``);
 7. mesh-generation timing of the dataset against the reference (24 ms/image, 5.3 ms/object);
    meshgen records whole-run means only, so those are shown;
 8. source polygons (the dataset's annotation files when found next to it, else the pixel polygon
    meshgen recorded in ``scene.json``) over the generated footprints (bottom face of each mesh,
    placed at its ``scene.csv`` centroid) for up to four images.
+
+The tables give per belt speed and per episode the line's numbers and, when a run has several
+stations, per speed and station each station's. Every episode's numbers are
+:func:`experiments.run.episode_metrics` of its folder (the events, the twin's summary and every
+controller's stats), the same as the run's ``episodes.json``.
 
 A figure whose data is missing becomes a "not available: <why>" panel. The dataset is
 ``run.json``'s ``dataset`` when present, else the run's ``scenario.yaml`` dataset, else the
@@ -42,8 +47,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from experiments import stats
+from interfaces.errors import CdwTwinError
 from interfaces.fileio import write_atomic
-from twin.errors import CdwTwinError
+from interfaces.metrics import BY_NAME, rate
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -72,7 +78,8 @@ class Episode:
     seed: int | None
     summary: dict[str, Any] | None
     telemetry: dict[str, Any] | None
-    controller: dict[str, Any] | None
+    metrics: dict[str, Any] | None
+    """:func:`experiments.run.episode_metrics` of the folder (None when it cannot be read)."""
 
     @property
     def name(self) -> str:
@@ -96,6 +103,13 @@ class RunData:
     def at_speed(self, speed: float) -> list[Episode]:
         """Episodes at belt speed ``speed``."""
         return [e for e in self.episodes if e.speed_mps == speed]
+
+    def stations(self) -> list[str]:
+        """Every station some episode has metrics for, in order of first appearance."""
+        seen: dict[str, None] = {}
+        for ep in self.episodes:
+            seen.update(dict.fromkeys((ep.metrics or {}).get("stations") or {}))
+        return list(seen)
 
 
 # -- statistics -------------------------------------------------------------------------------
@@ -174,12 +188,25 @@ def _dataset_of(run_dir: Path, run: dict[str, Any], notes: list[str]) -> Path:
     return builtin_dataset()
 
 
+def _metrics(folder: Path, mode: str, notes: list[str]) -> dict[str, Any] | None:
+    """The episode's metrics as ``cdw-twin run`` computes them; None (with a note) when its
+    events, summary or controller stats cannot be read."""
+    from experiments.run import episode_metrics
+
+    try:
+        return episode_metrics(folder, mode)
+    except (OSError, KeyError, ValueError, TypeError, CdwTwinError) as exc:
+        notes.append(f"{folder}: no metrics ({type(exc).__name__}: {exc})")
+        return None
+
+
 def _episode(run_dir: Path, folder: Path, run: dict[str, Any], notes: list[str]) -> Episode:
     summary = _optional_json(folder / "twin" / "summary.json", notes)
     speed = summary.get("belt_speed_mps") if summary else None
     if speed is None:
         speed = run.get("speed_mps")
     seed = summary.get("seed") if summary else None
+    complete = summary is not None and summary.get("complete") is not False
     return Episode(
         run_dir=run_dir,
         folder=folder,
@@ -187,7 +214,7 @@ def _episode(run_dir: Path, folder: Path, run: dict[str, Any], notes: list[str])
         seed=None if seed is None else int(seed),
         summary=summary,
         telemetry=_optional_json(folder / "twin" / "telemetry.json", notes),
-        controller=_optional_json(folder / "controller.json", notes),
+        metrics=_metrics(folder, str(run.get("mode", "")), notes) if complete else None,
     )
 
 
@@ -216,22 +243,42 @@ def load_runs(paths: Sequence[Path]) -> RunData:
 
 
 # -- per-episode numbers ----------------------------------------------------------------------
-def _counts(ep: Episode) -> dict[str, int] | None:
-    """Pooled-count ingredients of one episode, None without its twin summary."""
-    if ep.summary is None:
+COUNT_KEYS = ("picked", "placed_correct", "targeted", "missed", "processed")
+"""The counts the report pools: the two rates' (``success_rate``, ``miss_rate``) and picks."""
+
+
+def _counts(ep: Episode, station: str | None = None) -> dict[str, int] | None:
+    """Pooled-count ingredients of one episode (the line's, or ``station``'s), None without
+    its metrics."""
+    block = ep.metrics
+    if block is not None and station is not None:
+        block = (block.get("stations") or {}).get(station)
+    if block is None:
         return None
-    scores = ep.summary.get("scores") or {}
-    pick = (ep.controller or {}).get("pick") or {}
-    targeted = int(pick.get("completed", 0)) + sum(
-        int(v) for v in (pick.get("aborted") or {}).values()
-    )
-    return {
-        "picked": int(scores.get("picked", 0)),
-        "placed_correct": int(scores.get("placed_correct", 0)),
-        "targeted": targeted,
-        "missed": int(scores.get("missed", 0)),
-        "processed": int(scores.get("processed", 0)),
-    }
+    return {key: int(block.get(key) or 0) for key in COUNT_KEYS}
+
+
+def _ratio_of(name: str) -> tuple[str, str]:
+    pair = BY_NAME[name].ratio_of
+    if pair is None:
+        msg = f"metric {name!r} is not a rate of two counts"
+        raise KeyError(msg)
+    return pair
+
+
+def _pooled_rate(name: str, total: dict[str, int]) -> float | None:
+    """The table's rate ``name`` of pooled counts; None without trials (nothing to show)."""
+    return rate(name, total) if total.get(_ratio_of(name)[1]) else None
+
+
+def _wilson(name: str, total: dict[str, int]) -> tuple[float, float]:
+    numerator, denominator = _ratio_of(name)
+    return wilson_interval(total.get(numerator, 0), total.get(denominator, 0))
+
+
+def _pooled(counts: Sequence[dict[str, int] | None]) -> dict[str, int]:
+    present = [c for c in counts if c is not None]
+    return {k: sum(c[k] for c in present) for k in COUNT_KEYS} if present else {}
 
 
 def _rtt(ep: Episode) -> list[float]:
@@ -253,7 +300,6 @@ def episode_rows(data: RunData) -> list[dict[str, Any]]:
         counts = _counts(ep) or {}
         latency = (ep.summary or {}).get("latency") or {}
         rtt = _rtt(ep)
-        targeted, processed = counts.get("targeted", 0), counts.get("processed", 0)
         rows.append(
             {
                 "episode": ep.name,
@@ -261,8 +307,8 @@ def episode_rows(data: RunData) -> list[dict[str, Any]]:
                 "seed": ep.seed,
                 "complete": (ep.summary or {}).get("complete"),
                 **counts,
-                "success_rate": counts["placed_correct"] / targeted if targeted else None,
-                "miss_rate": counts["missed"] / processed if processed else None,
+                "success_rate": _pooled_rate("success_rate", counts),
+                "miss_rate": _pooled_rate("miss_rate", counts),
                 "tracking_time_4mm_mean_s": stats.mean_of(_tracking_times(ep)),
                 "rtt_ms_p50": latency.get("rtt_ms_p50", _percentile(rtt, 50)),
                 "rtt_ms_p99": latency.get("rtt_ms_p99", _percentile(rtt, 99)),
@@ -278,31 +324,58 @@ def speed_rows(data: RunData) -> list[dict[str, Any]]:
     rows = []
     for speed in data.speeds():
         eps = data.at_speed(speed)
-        counts = [c for c in map(_counts, eps) if c is not None]
-        total = {k: sum(c[k] for c in counts) for k in counts[0]} if counts else {}
+        total = _pooled([_counts(ep) for ep in eps])
         rtt = [v for ep in eps for v in _rtt(ep)]
         latencies = [_latency(ep) for ep in eps]
         p50s = [float(x["rtt_ms_p50"]) for x in latencies if x.get("rtt_ms_p50") is not None]
         p99s = [float(x["rtt_ms_p99"]) for x in latencies if x.get("rtt_ms_p99") is not None]
         times = [t for ep in eps for t in _tracking_times(ep)]
         rtfs = [float(ep.summary["real_time_factor"]) for ep in eps if ep.summary]
-        targeted, processed = total.get("targeted", 0), total.get("processed", 0)
         rows.append(
             {
                 "speed_mps": speed,
                 "episodes": len(eps),
                 "picks": total.get("picked"),
                 **{f"{k}_total": v for k, v in total.items() if k != "picked"},
-                "success_rate": total["placed_correct"] / targeted if targeted else None,
-                "success_ci95": wilson_interval(total.get("placed_correct", 0), targeted),
-                "miss_rate": total["missed"] / processed if processed else None,
-                "miss_ci95": wilson_interval(total.get("missed", 0), processed),
+                "success_rate": _pooled_rate("success_rate", total),
+                "success_ci95": _wilson("success_rate", total),
+                "miss_rate": _pooled_rate("miss_rate", total),
+                "miss_ci95": _wilson("miss_rate", total),
                 "tracking_time_4mm_mean_s": stats.mean_of(times),
                 "rtt_ms_p50": _percentile(rtt, 50) if rtt else stats.mean_of(p50s),
                 "rtt_ms_p99": _percentile(rtt, 99) if rtt else stats.mean_of(p99s),
                 "real_time_factor": stats.mean_of(rtfs),
             }
         )
+    return rows
+
+
+def station_rows(data: RunData) -> list[dict[str, Any]]:
+    """One row per belt speed and station over the pooled episodes (rates with Wilson 95 %
+    intervals), from each episode's station metrics."""
+    rows = []
+    for speed in data.speeds():
+        eps = data.at_speed(speed)
+        for station in data.stations():
+            total = _pooled([_counts(ep, station) for ep in eps])
+            blocks = [((ep.metrics or {}).get("stations") or {}).get(station) or {} for ep in eps]
+            rows.append(
+                {
+                    "speed_mps": speed,
+                    "station": station,
+                    "episodes": len(eps),
+                    "picks": total.get("picked"),
+                    "placed_correct": total.get("placed_correct"),
+                    "targeted": total.get("targeted"),
+                    "success_rate": _pooled_rate("success_rate", total),
+                    "success_ci95": _wilson("success_rate", total),
+                    "miss_rate": _pooled_rate("miss_rate", total),
+                    "miss_ci95": _wilson("miss_rate", total),
+                    "tracking_time_4mm_mean_s": stats.mean_of(
+                        b.get("tracking_time_4mm_mean_s") for b in blocks
+                    ),
+                }
+            )
     return rows
 
 
@@ -572,15 +645,14 @@ def _source_polygon_px(path: Path, where: str, size: tuple[int, int]) -> list[tu
 
 
 def _bottom_face(mesh: Path, up: str) -> list[tuple[float, float]]:
-    vertices = [
-        tuple(float(v) for v in line.split()[1:4])
-        for line in mesh.read_text(encoding="utf-8").splitlines()
-        if line.startswith("v ")
-    ]
+    """The vertices of a mesh's lowest face in the belt frame (x travel, y across)."""
+    from meshgen.objfile import read_obj
+
+    vertices = read_obj(mesh).vertices
     axis = 2 if up == "z" else 1
-    low = min(v[axis] for v in vertices)
-    bottom = [v for v in vertices if abs(v[axis] - low) < 1e-9]
-    return [(v[0], v[1]) if up == "z" else (v[0], -v[2]) for v in bottom]
+    low = float(vertices[:, axis].min())
+    bottom = vertices[abs(vertices[:, axis] - low) < 1e-9]
+    return [(float(v[0]), float(v[1]) if up == "z" else -float(v[2])) for v in bottom]
 
 
 def _image_outlines(dataset: Path, stem: str) -> tuple[list[_Outline], str]:
@@ -716,6 +788,19 @@ SPEED_COLUMNS = (
     ("rtt_ms_p99", "RTT p99 (ms)"),
     ("real_time_factor", "RTF"),
 )
+STATION_COLUMNS = (
+    ("speed_mps", "speed (m/s)"),
+    ("station", "station"),
+    ("episodes", "episodes"),
+    ("picks", "picks"),
+    ("placed_correct", "placed correct"),
+    ("targeted", "targeted"),
+    ("success_rate", "success"),
+    ("success_ci95", "success 95% CI"),
+    ("miss_rate", "miss"),
+    ("miss_ci95", "miss 95% CI"),
+    ("tracking_time_4mm_mean_s", "tracking to 4 mm, mean (s)"),
+)
 EPISODE_COLUMNS = (
     ("episode", "episode"),
     ("speed_mps", "speed (m/s)"),
@@ -742,6 +827,18 @@ _CSS = (
 )
 
 
+def _station_section(data: RunData) -> str:
+    """The per-station table, for runs of several stations (empty otherwise)."""
+    if len(data.stations()) < 2:
+        return ""
+    return (
+        '<h2 id="per-station">Per belt speed and station</h2>'
+        "<p>Each station's own events (its window, its bins) and its controller's targets; "
+        "rates pool the counts of every episode at a speed.</p>"
+        f"{_table(station_rows(data), STATION_COLUMNS)}"
+    )
+
+
 def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
     """Write ``report.html`` and its PNGs into ``out``; returns the HTML path.
 
@@ -761,7 +858,7 @@ def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
         except Unavailable as exc:
             png.unlink(missing_ok=True)
             body = f'<div class="na" id="na-{stem}">not available: {html.escape(str(exc))}</div>'
-        except (KeyError, IndexError, TypeError, ValueError, OSError, ReportError) as exc:
+        except (KeyError, IndexError, TypeError, ValueError, OSError, CdwTwinError) as exc:
             png.unlink(missing_ok=True)
             reason = f"could not read its data: {type(exc).__name__}: {exc}"
             body = f'<div class="na" id="na-{stem}">not available: {html.escape(reason)}</div>'
@@ -781,6 +878,7 @@ def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
         "<p>Rates pool the counts of every episode at a speed; intervals are Wilson score "
         "intervals (95 %). RTT pools every command's round trip.</p>"
         f"{_table(speed_rows(data), SPEED_COLUMNS)}"
+        f"{_station_section(data)}"
         f"<h2>Per episode</h2>{_table(episode_rows(data), EPISODE_COLUMNS)}"
         + "".join(sections)
         + (f'<div class="notes"><p>Notes:</p><ul>{notes}</ul></div>' if notes else "")
@@ -813,6 +911,7 @@ __all__ = [
     "find_run_dirs",
     "load_runs",
     "speed_rows",
+    "station_rows",
     "wilson_interval",
     "write_report",
 ]

@@ -1,24 +1,31 @@
-"""``cdw-twin run``: closed-loop episodes, the twin node and the controller as two processes.
+"""``cdw-twin run``: closed-loop episodes, the twin node and one controller per station.
 
 Example::
 
     cdw-twin run --speed 0.4 --seed 1 --json
     cdw-twin run experiments/scenarios/default.yaml --episodes 3 --mode realtime --out runs/a
+    cdw-twin run experiments/scenarios/default.yaml --cell two_pandas --duration 20
 
 The scenario (with the command-line overrides applied) is validated before anything starts and
 written to the run folder as ``scenario.yaml``; every process of the run reads that file. The
-controller's parameter file (the scenario's ``controller``) is copied next to it as
-``controller.yaml``, and the written scenario names that copy and the dataset's absolute path
-(unless it is the built-in one): ``cdw-twin run RUN/scenario.yaml`` reruns it as it ran, from
-any folder, whatever the shipped parameter files become. Each
-episode gets its own ROS domain (claimed with a lock, LOCALHOST discovery). The run folder holds
-one folder per episode (the twin's episode log ``twin/``: ``events.jsonl``, ``status.json``,
-``summary.json``, ``telemetry.json``, see :mod:`twin.episode_log`; the recording of every topic
-``recording.mcap``, written by the twin node itself from the bytes it sends and receives
-(``recording.mcap.partial`` while it runs, or after a crash; see :mod:`experiments.record`); the
-controller's stats ``controller.json``; every process's log), ``episodes.json`` and
+scenario's cell (its ``cell`` key, or ``--cell``: a shipped name or a path) is resolved and
+written next to it as ``cell.yaml``, the controller's parameter file (the scenario's
+``controller``) as ``controller.yaml``, and the written scenario names both copies and the
+dataset's absolute path (unless it is the built-in one): ``cdw-twin run RUN/scenario.yaml``
+reruns it as it ran, from any folder, whatever the shipped files become. Each episode gets its
+own ROS domain (claimed with a lock, LOCALHOST discovery) and runs one twin node and one
+controller process per station of the cell (``--station NAME``, each under the station's ROS
+namespace).
+
+The run folder holds one folder per episode (the twin's episode log ``twin/``: ``events.jsonl``,
+``status.json``, ``summary.json``, ``telemetry.json``, see :mod:`twin.episode_log`; the
+recording of every topic ``recording.mcap``, written by the twin node itself from the bytes it
+sends and receives (``recording.mcap.partial`` while it runs, or after a crash; see
+:mod:`twin.recording`); each controller's stats; every process's log), ``episodes.json`` and
 ``episodes.csv`` with the per-episode metrics, and ``run.json`` with their means, the dataset
-and the scenario path.
+and the scenario path. Controller files: with one station ``controller.json`` and
+``controller.log`` (a restarted controller's stats ``controller_1.json``, ...); with several,
+``controller-<station>.json`` / ``controller-<station>_1.json`` and ``controller-<station>.log``.
 
 ``run.json`` says ``"complete": false`` until every episode has finished successfully. A run
 stopped early (Ctrl-C, SIGTERM, a failed episode) keeps the episodes finished so far in
@@ -29,46 +36,41 @@ episode failed) and ``--json`` still prints the result of the finished episodes 
 processes wrote (the twin streams its ``events.jsonl`` and writes its ``summary.json`` with
 ``"complete": false`` when stopped).
 
-An episode fails when its twin or its controller exits before the twin has finished the
-episode (a crash, a ``kill -9``; a controller stopped on purpose for a planned restart does not
-count), or when the twin leaves no complete ``summary.json``. The run stops at the first failed
-episode. A failed episode is a row of ``episodes.json`` (and ``episodes.csv``) with
+An episode fails when its twin or any of its controllers exits before the twin has finished
+the episode (a crash, a ``kill -9``; a controller stopped on purpose for a planned restart does
+not count), or when the twin leaves no complete ``summary.json``. The run stops at the first
+failed episode. A failed episode is a row of ``episodes.json`` (and ``episodes.csv``) with
 ``"failed": true`` and a one-line ``"reason"`` (``controller exited with signal SIGKILL at sim
-12.3 s``, ``twin exited with signal SIGKILL, no summary.json``) and no metrics; it is left out of
-the means. ``run.json`` gives ``"episodes"`` (the successful episodes, those averaged),
-``"failed"`` (their count) and ``"failures"`` (``episode 0 (seed 5) failed: <reason>``).
+12.3 s``; with several stations ``controller 'upstream' exited with ...``; ``twin exited with
+signal SIGKILL, no summary.json``) and no metrics; it is left out of the means. ``run.json``
+gives ``"episodes"`` (the successful episodes, those averaged), ``"failed"`` (their count) and
+``"failures"`` (``episode 0 (seed 5) failed: <reason>``).
 
-No process outlives the runner: the twin and the controller ask the kernel for SIGTERM when
+No process outlives the runner: the twin and the controllers ask the kernel for SIGTERM when
 the runner dies, however it dies (``prctl(PR_SET_PDEATHSIG)``, set by each of them at start
 from the ``CDW_TWIN_PARENT_PID`` the runner passes), and they stay in the runner's process
 group, so a signal to the group (Ctrl-C in a terminal) reaches every process at once. On that
-SIGTERM the twin writes its episode folder (``"complete": false``) and the controller its
+SIGTERM the twin writes its episode folder (``"complete": false``) and each controller its
 counters.
 
 Controller restarts (the scenario's ``faults.controller_restart_at_s``): the runner watches the
 twin's ``/clock`` with a tiny best-effort subscriber of its own, in the episode's domain, and
-when sim time passes a restart time it stops the controller (SIGTERM, so its counters are
-saved as ``controller.json``, ``controller_1.json``, ...) and starts a new one. The lockstep twin
-waits ``--ack-timeout`` (2 s) for the lost controller, logs a ``controller_timeout`` fault, steps
-on without it at the wall-clock pace (so the outage costs about the sim time it lasts) and
-resynchronises when the new controller acknowledges ticks (a ``controller_resumed`` event). The
-restart happens at the first ``/clock`` sample at or after the restart time that the runner sees
-(it polls every 0.1 s wall), so its exact sim time is not reproducible; the twin's events record
-when the controller was lost and when it came back. The watcher also feeds the progress line
-when the output is a terminal.
+when sim time passes a restart time it stops every station's controller (SIGTERM, so their
+counters are saved) and starts new ones. The lockstep twin waits ``--ack-timeout`` (2 s) for a
+lost controller, logs a ``controller_timeout`` fault, steps on without it at the wall-clock pace
+(so the outage costs about the sim time it lasts) and resynchronises when the new controller
+acknowledges ticks (a ``controller_resumed`` event). The restart happens at the first
+``/clock`` sample at or after the restart time that the runner sees (it polls every 0.1 s
+wall), so its exact sim time is not reproducible; the twin's events record when a controller
+was lost and when it came back. The watcher also feeds the progress line when the output is a
+terminal.
 
-Metrics per episode:
-
-- ``picks``: successful picks (``pick_success``), ``placed_correct``: objects in their class bin;
-- ``targeted``: objects the controller committed to and finished with (completed or aborted),
-  except those it released into a bin so late that they were still falling when the episode
-  ended (the twin's ``landing_in_bins``: their fate is undecided);
-- ``success_rate`` = placed_correct / targeted; ``untargeted``: objects never targeted, by reason;
-- ``miss_rate``: the twin's missed / processed (objects that left the window unpicked);
-- ``throughput_per_min`` = placed_correct per simulated minute;
-- ``tracking_time_4mm_mean_s`` / ``_p95_s``: the twin's ground-truth tracking time;
-- ``faults``: fault events other than injected ones (rejected commands, controller timeouts);
-  ``injected_faults``: the scenario's injected-fault window edges.
+Metrics per episode: every metric of the table (:data:`interfaces.metrics.METRICS`,
+``docs/metrics.md``) for the line at the top level of the row (``picks`` is ``picked`` under
+its older name), per station in ``stations`` and per object class in ``classes``; the line's
+``targeted`` counts every controller's, less the objects still falling into a bin at the end
+(:func:`interfaces.metrics.targeted_objects`), a station's its own controller's, less the
+landing objects it released. ``untargeted`` gives the objects never targeted, by reason.
 """
 
 from __future__ import annotations
@@ -78,57 +80,47 @@ import csv
 import io
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import FrameType
 from typing import IO, TYPE_CHECKING, Any, Literal
 
 from experiments.stats import mean_of
+from interfaces.errors import CdwTwinError
 from interfaces.fileio import write_atomic
 from interfaces.lifecycle import PARENT_PID_VARIABLE
-from twin.errors import CdwTwinError
+from interfaces.metrics import in_scope
 
 if TYPE_CHECKING:
+    from interfaces.cell import Cell
+    from interfaces.events import Event
     from twin.scenario import Scenario
 
-METRIC_KEYS = (
-    "speed_mps",
-    "seed",
-    "mode",
-    "picks",
-    "placed_correct",
-    "targeted",
-    "untargeted_total",
-    "processed",
-    "missed",
-    "success_rate",
-    "miss_rate",
-    "throughput_per_min",
-    "tracking_time_4mm_mean_s",
-    "tracking_time_4mm_p95_s",
-    "real_time_factor",
-    "faults",
-    "injected_faults",
-    "controller_restarts",
-)
-"""The metric columns of ``episodes.csv``, in order."""
+METRIC_KEYS = ("speed_mps", "seed", "mode", "picks", *in_scope("line"))
+"""The metric columns of ``episodes.csv``, in order: the episode's settings, ``picks`` (the
+table's ``picked`` under its older name) and every line metric of the table."""
 
 EPISODE_COLUMNS = (*METRIC_KEYS, "failed", "reason")
 """The columns of ``episodes.csv``: the metrics, whether the episode failed and why."""
 
 STOP_GRACE_S = 15.0
 POLL_S = 0.1
+CONTROLLER_COPY = "controller.yaml"
+"""Name of the controller parameter file's copy in a run folder, next to ``scenario.yaml``."""
+CELL_COPY = "cell.yaml"
+"""Name of the resolved cell's copy in a run folder, next to ``scenario.yaml``."""
 
 
 class EpisodeFailedError(CdwTwinError):
-    """An episode failed: its twin or controller exited early, or no complete twin summary.
+    """An episode failed: its twin or a controller exited early, or no complete twin summary.
 
     ``reason`` is the one-line cause (``controller exited with signal SIGKILL at sim 12.3 s``);
     the message names the episode and, for a twin failure, adds the tail of the twin's log.
@@ -156,6 +148,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=None, help="episode seconds")
     parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     parser.add_argument("--dataset", type=Path, default=None, help="meshgen output folder")
+    parser.add_argument(
+        "--cell", default=None, help="cell file: a shipped name or a path (override)"
+    )
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/...)")
     parser.add_argument("--json", action="store_true", help="print the run's metrics as JSON")
 
@@ -165,12 +160,15 @@ class RunOptions:
     """How to run the episodes of one scenario.
 
     ``scenario_path`` is the resolved scenario file (overrides applied, validated); ``dataset``
-    the meshgen output folder; ``restart_at_s`` the controller restart times (sim seconds);
-    ``controller_params`` the controller's parameter file (None: its default).
+    the meshgen output folder; ``cell_path`` the resolved cell file and ``stations`` its station
+    names (one controller process each); ``restart_at_s`` the controller restart times (sim
+    seconds); ``controller_params`` the controller's parameter file (None: its default).
     """
 
     scenario_path: Path
     dataset: Path
+    cell_path: Path | None = None
+    stations: tuple[str, ...] = ()
     controller_params: Path | None = None
     mode: Literal["lockstep", "realtime"] = "lockstep"
     duration_s: float = 60.0
@@ -246,30 +244,58 @@ def controller_params(value: str, scenario_dir: Path | None) -> Path:
     return path.resolve()
 
 
-CONTROLLER_COPY = "controller.yaml"
-"""Name of the controller parameter file's copy in a run folder, next to ``scenario.yaml``."""
+@dataclass(frozen=True, kw_only=True)
+class RunFiles:
+    """What :func:`write_run_scenario` wrote into a run folder."""
+
+    scenario: Path
+    controller: Path
+    cell: Path
 
 
 def write_run_scenario(
-    scenario: Scenario, params: Path, folder: Path, dataset: Path | None
-) -> tuple[Path, Path]:
-    """Write ``scenario`` to ``folder/scenario.yaml`` naming a copy of ``params`` beside it.
+    scenario: Scenario, params: Path, cell: Cell, folder: Path, dataset: Path | None
+) -> RunFiles:
+    """Write ``scenario`` to ``folder/scenario.yaml`` naming copies of ``params`` and ``cell``
+    beside it (``controller.yaml``, ``cell.yaml``).
 
     ``dataset``, when given, replaces the scenario's ``dataset`` by its absolute path (None: the
-    built-in dataset). Returns the paths of the written scenario and of the parameter file's copy.
+    built-in dataset). Returns the paths written.
     """
-    from dataclasses import replace
-
-    copy = folder / CONTROLLER_COPY
-    write_atomic(copy, params.read_text(encoding="utf-8"))
-    scenario = replace(scenario, controller=CONTROLLER_COPY)
+    folder.mkdir(parents=True, exist_ok=True)
+    params_copy = folder / CONTROLLER_COPY
+    write_atomic(params_copy, params.read_text(encoding="utf-8"))
+    cell_copy = folder / CELL_COPY
+    cell.save(cell_copy)
+    scenario = replace(scenario, controller=CONTROLLER_COPY, cell=CELL_COPY)
     if dataset is not None:
         scenario = replace(scenario, dataset=str(dataset.resolve()))
     scenario_path = folder / "scenario.yaml"
     write_atomic(scenario_path, scenario.to_yaml())
-    return scenario_path, copy
+    return RunFiles(scenario=scenario_path, controller=params_copy, cell=cell_copy)
 
 
+def run_options(
+    files: RunFiles,
+    cell: Cell,
+    scenario: Scenario,
+    dataset: Path,
+    mode: Literal["lockstep", "realtime"],
+) -> RunOptions:
+    """The options of a run folder written by :func:`write_run_scenario`."""
+    return RunOptions(
+        scenario_path=files.scenario.resolve(),
+        dataset=dataset.resolve(),
+        cell_path=files.cell.resolve(),
+        stations=tuple(s.name for s in cell.stations),
+        controller_params=files.controller.resolve(),
+        mode=mode,
+        duration_s=scenario.duration_s,
+        restart_at_s=scenario.faults.controller_restart_at_s,
+    )
+
+
+# -- processes ----------------------------------------------------------------------------------
 def _cli() -> list[str]:
     return [sys.executable, "-m", "twin.cli"]
 
@@ -296,77 +322,33 @@ def twin_command(options: RunOptions, episode: EpisodeSpec) -> list[str]:
     ]
 
 
-def controller_command(options: RunOptions, episode: EpisodeSpec, instance: int = 0) -> list[str]:
-    """The controller's command line; ``instance`` > 0 for a restarted controller."""
-    name = "controller.json" if instance == 0 else f"controller_{instance}.json"
+def controller_stem(station: str | None, stations: Sequence[str]) -> str:
+    """The stem of a station's controller files: ``controller`` in a one-station cell (or for
+    ``station`` None), ``controller-<station>`` otherwise."""
+    return "controller" if station is None or len(stations) <= 1 else f"controller-{station}"
+
+
+def stats_name(stem: str, instance: int) -> str:
+    """The stats file of controller ``instance`` (0 first, > 0 after restarts)."""
+    return f"{stem}.json" if instance == 0 else f"{stem}_{instance}.json"
+
+
+def controller_command(
+    options: RunOptions, episode: EpisodeSpec, station: str | None = None, instance: int = 0
+) -> list[str]:
+    """The command line of ``station``'s controller (None: the cell's first station);
+    ``instance`` > 0 for a restarted controller."""
+    name = stats_name(controller_stem(station, options.stations), instance)
     cmd = [*_cli(), "controller", "--stats-out", str(episode.folder / name)]
+    if options.cell_path is not None:
+        cmd += ["--cell", str(options.cell_path)]
+    if station is not None:
+        cmd += ["--station", station]
     if options.controller_params is not None:
         cmd += ["--params-file", str(options.controller_params)]
     if options.mode == "lockstep":
         cmd.append("--lockstep")
     return cmd
-
-
-def _controller_stats(folder: Path) -> list[dict[str, Any]]:
-    paths = sorted(folder.glob("controller*.json"), key=lambda p: (len(p.name), p.name))
-    return [json.loads(p.read_text(encoding="utf-8")) for p in paths]
-
-
-def _pick_counts(stats: list[dict[str, Any]]) -> tuple[int, dict[str, int]]:
-    """Targeted objects and untargeted ones by reason, summed over controller instances."""
-    targeted = 0
-    untargeted: dict[str, int] = {}
-    for ctl in stats:
-        pick = ctl.get("pick") or {}
-        targeted += int(pick.get("completed", 0))
-        targeted += sum(int(v) for v in (pick.get("aborted") or {}).values())
-        for key, value in (pick.get("untargeted") or {}).items():
-            untargeted[str(key)] = untargeted.get(str(key), 0) + int(value)
-    return targeted, untargeted
-
-
-def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
-    """The metrics of one finished episode folder."""
-    twin = json.loads((folder / "twin" / "summary.json").read_text(encoding="utf-8"))
-    stats = _controller_stats(folder)
-    targeted, untargeted = _pick_counts(stats)
-    # released into a bin just before the end, still falling: undecided, so not counted
-    targeted = max(0, targeted - len(twin.get("landing_in_bins", [])))
-    scores = twin["scores"]
-    placed_correct = int(scores["placed_correct"])
-    minutes = float(twin["sim_seconds"]) / 60.0
-    tracking = twin["tracking"]
-    kinds = [
-        str(event.get("data", {}).get("kind", ""))
-        for event in map(json.loads, (folder / "twin" / "events.jsonl").read_text().splitlines())
-        if event.get("type") == "fault"
-    ]
-    injected = sum(1 for k in kinds if k.startswith("injected_"))
-    return {
-        "speed_mps": twin.get("belt_speed_mps"),
-        "seed": twin["seed"],
-        "mode": mode,
-        "picks": int(scores["picked"]),
-        "placed_correct": placed_correct,
-        "targeted": targeted,
-        "untargeted": untargeted,
-        "untargeted_total": sum(untargeted.values()),
-        "processed": int(scores["processed"]),
-        "missed": int(scores["missed"]),
-        "success_rate": placed_correct / targeted if targeted else 0.0,
-        "miss_rate": float(scores["miss_rate"]),
-        "throughput_per_min": placed_correct / minutes if minutes > 0 else 0.0,
-        "tracking_time_4mm_mean_s": tracking["tracking_time_4mm_mean_s"],
-        "tracking_time_4mm_p95_s": tracking["tracking_time_4mm_p95_s"],
-        "tracking_pursuits": tracking["pursuits"],
-        "tracking_unsettled": tracking["unsettled"],
-        "real_time_factor": twin["real_time_factor"],
-        "faults": len(kinds) - injected,
-        "injected_faults": injected,
-        "controller_restarts": max(0, len(stats) - 1),
-        "complete": bool(twin["complete"]),
-        "failed": False,
-    }
 
 
 class ClockWatch:
@@ -376,10 +358,10 @@ class ClockWatch:
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from rclpy.signals import SignalHandlerOptions
-        from rosgraph_msgs.msg import Clock
 
+        from interfaces.contract import CLOCK_TOPIC
+        from interfaces.ros import message_class, qos_profile
         from twin.ros_isolation import local_ros_defaults
 
         local_ros_defaults()
@@ -391,15 +373,19 @@ class ClockWatch:
             signal_handler_options=SignalHandlerOptions.NO,
         )
         self._node = rclpy.create_node("cdw_run_clock", context=self._context)
-        qos = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT
+        self._node.create_subscription(
+            message_class(CLOCK_TOPIC),
+            CLOCK_TOPIC.name,
+            self._on_clock,
+            qos_profile(CLOCK_TOPIC.qos),
         )
-        self._node.create_subscription(Clock, "/clock", self._on_clock, qos)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self._node)
 
     def _on_clock(self, msg: Any) -> None:
-        self.time_s = msg.clock.sec + 1e-9 * msg.clock.nanosec
+        from interfaces.ros import msg_stamp_s
+
+        self.time_s = msg_stamp_s(msg.clock)
 
     def poll(self) -> float:
         """Take the newest ``/clock`` sample, if any; returns sim seconds."""
@@ -413,7 +399,7 @@ class ClockWatch:
         self._context.try_shutdown()
 
 
-def _stop(procs: list[subprocess.Popen[bytes]]) -> None:
+def _stop(procs: Sequence[subprocess.Popen[bytes]]) -> None:
     for proc in procs:
         if proc.poll() is None:
             proc.send_signal(signal.SIGTERM)
@@ -433,6 +419,137 @@ def _sim_seconds(summary: Path) -> float | None:
         return None
 
 
+@dataclass(frozen=True)
+class ControllerExit:
+    """A controller that exited by itself while the twin ran: its station and exit status."""
+
+    station: str | None
+    returncode: int
+
+
+class EpisodeProcesses:
+    """The processes of one episode: the twin and one controller per station, each with its
+    log in the episode folder, all stopped by :meth:`close`."""
+
+    def __init__(
+        self, options: RunOptions, episode: EpisodeSpec, env: dict[str, str], stack: ExitStack
+    ) -> None:
+        self.options = options
+        self.episode = episode
+        self._env = env
+        self._stack = stack
+        self.started: list[subprocess.Popen[bytes]] = []
+        self.twin: subprocess.Popen[bytes] | None = None
+        self.instance = 0
+        self.controllers: dict[str | None, subprocess.Popen[bytes]] = {}
+
+    def start(self) -> subprocess.Popen[bytes]:
+        """Start the twin, then every station's controller; returns the twin."""
+        self.twin = self._start("twin", twin_command(self.options, self.episode))
+        self._start_controllers()
+        return self.twin
+
+    def _start(self, log_name: str, cmd: list[str]) -> subprocess.Popen[bytes]:
+        log: IO[bytes] = self._stack.enter_context(
+            (self.episode.folder / f"{log_name}.log").open("ab")
+        )
+        proc = subprocess.Popen(cmd, env=self._env, stdout=log, stderr=subprocess.STDOUT)
+        self.started.append(proc)
+        return proc
+
+    def _start_controllers(self) -> None:
+        stations: Sequence[str | None] = self.options.stations or (None,)
+        for station in stations:
+            stem = controller_stem(station, self.options.stations)
+            cmd = controller_command(self.options, self.episode, station, self.instance)
+            self.controllers[station] = self._start(stem, cmd)
+
+    def restart_controllers(self) -> None:
+        """Stop every station's controller (SIGTERM: each saves its stats) and start new ones."""
+        _stop(list(self.controllers.values()))
+        self.instance += 1
+        self._start_controllers()
+
+    def exited_controller(self) -> ControllerExit | None:
+        """The first controller that has exited (by itself: the runner stops them only in
+        :meth:`restart_controllers` and :meth:`close`), if any."""
+        for station, proc in self.controllers.items():
+            code = proc.poll()
+            if code is not None:
+                return ControllerExit(station, code)
+        return None
+
+    def close(self) -> None:
+        """Stop every process still running."""
+        _stop(self.started)
+
+
+def _supervise(
+    procs: EpisodeProcesses,
+    twin: subprocess.Popen[bytes],
+    watch: ClockWatch | None,
+    cancel: threading.Event | None,
+    progress: Progress | None,
+) -> ControllerExit | None:
+    """Wait for the twin to end; restart the controllers on schedule; returns the controller
+    that exited by itself, if one did (the twin is then still running)."""
+    episode = procs.episode
+    restarts = sorted(procs.options.restart_at_s)
+    wall0 = time.monotonic()
+    while twin.poll() is None:
+        if cancel is not None and cancel.wait(POLL_S):
+            msg = f"episode {episode.index} (seed {episode.seed}) cancelled"
+            raise EpisodeCancelledError(msg)
+        if cancel is None:
+            time.sleep(POLL_S)
+        exited = procs.exited_controller()
+        if exited is not None:
+            return exited
+        if watch is None:
+            continue
+        sim_s = watch.poll()
+        if progress is not None:
+            progress(sim_s, time.monotonic() - wall0)
+        if restarts and sim_s >= restarts[0]:
+            restarts.pop(0)
+            procs.restart_controllers()
+    # the twin ended: a controller that exited meanwhile exited by itself, whenever it was
+    return procs.exited_controller()
+
+
+def _controller_reason(exited: ControllerExit, lost_s: float | None) -> str:
+    who = "controller" if exited.station is None else f"controller {exited.station!r}"
+    reason = f"{who} exited with {exit_text(exited.returncode)}"
+    if lost_s is not None:
+        reason += f" at sim {lost_s:.1f} s"
+    return reason
+
+
+def _check_outcome(
+    options: RunOptions,
+    episode: EpisodeSpec,
+    twin_code: int,
+    exited: ControllerExit | None,
+    watch_s: float | None,
+) -> None:
+    """Raise :class:`EpisodeFailedError` when a process ended the episode early."""
+    summary = episode.folder / "twin" / "summary.json"
+    if exited is not None:
+        if len(options.stations) <= 1:
+            exited = ControllerExit(None, exited.returncode)
+        # the twin stops within a step of its SIGTERM, a poll period after the controller died
+        lost_s = _sim_seconds(summary)
+        raise EpisodeFailedError(
+            episode, _controller_reason(exited, watch_s if lost_s is None else lost_s)
+        )
+    if twin_code != 0 or not summary.is_file():
+        log = (episode.folder / "twin.log").read_text(errors="replace")[-2000:]
+        reason = f"twin exited with {exit_text(twin_code)}"
+        if not summary.is_file():
+            reason += ", no summary.json"
+        raise EpisodeFailedError(episode, reason, log)
+
+
 def run_episode(
     options: RunOptions,
     episode: EpisodeSpec,
@@ -442,7 +559,7 @@ def run_episode(
 ) -> dict[str, Any]:
     """Run one closed-loop episode in its own ROS domain; returns its metrics.
 
-    Raises :class:`EpisodeFailedError` when the controller exits while the twin still runs
+    Raises :class:`EpisodeFailedError` when a controller exits while the twin still runs
     (other than for a planned restart), or the twin ends without a complete summary, and
     :class:`EpisodeCancelledError` when ``cancel`` is set; every process is stopped either way.
 
@@ -454,71 +571,28 @@ def run_episode(
 
     episode.folder.mkdir(parents=True, exist_ok=True)
     clean_stale_fastdds_shm()
-    restarts = sorted(options.restart_at_s)
-    controller_exit: int | None = None
     watch: ClockWatch | None = None
     with ros_domain() as domain, ExitStack() as stack:
         env = {**os.environ, **domain.env, PARENT_PID_VARIABLE: str(os.getpid())}
-        started: list[subprocess.Popen[bytes]] = []
-
-        def start(name: str, cmd: list[str]) -> subprocess.Popen[bytes]:
-            log: IO[bytes] = stack.enter_context((episode.folder / f"{name}.log").open("ab"))
-            proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
-            started.append(proc)
-            return proc
-
+        procs = EpisodeProcesses(options, episode, env, stack)
         try:
-            twin = start("twin", twin_command(options, episode))
-            controller = start("controller", controller_command(options, episode))
-            watch = ClockWatch(domain.domain_id) if restarts or progress else None
-            wall0 = time.monotonic()
-            while twin.poll() is None:
-                if cancel is not None and cancel.wait(POLL_S):
-                    msg = f"episode {episode.index} (seed {episode.seed}) cancelled"
-                    raise EpisodeCancelledError(msg)
-                if cancel is None:
-                    time.sleep(POLL_S)
-                if controller.poll() is not None:
-                    break
-                if watch is None:
-                    continue
-                sim_s = watch.poll()
-                if progress is not None:
-                    progress(sim_s, time.monotonic() - wall0)
-                if restarts and sim_s >= restarts[0]:
-                    restarts.pop(0)
-                    _stop([controller])
-                    instance = len(options.restart_at_s) - len(restarts)
-                    controller = start("controller", controller_command(options, episode, instance))
-            # exited by itself (the runner stops it only below): unplanned, whenever it was
-            controller_exit = controller.poll()
+            twin = procs.start()
+            if options.restart_at_s or progress:
+                watch = ClockWatch(domain.domain_id)
+            exited = _supervise(procs, twin, watch, cancel, progress)
         finally:
             if watch is not None:
                 watch.close()
-            _stop(started)
+            procs.close()
     code = twin.returncode
-    summary = episode.folder / "twin" / "summary.json"
-    if (controller_exit is not None or code != 0) and cancel is not None and cancel.is_set():
+    if (exited is not None or code != 0) and cancel is not None and cancel.is_set():
         # a Ctrl-C reaches the whole process group: the processes may have stopped first
         msg = f"episode {episode.index} (seed {episode.seed}) cancelled"
         raise EpisodeCancelledError(msg)
-    if controller_exit is not None:
-        # the twin stops within a step of its SIGTERM, a poll period after the controller died
-        lost_s = _sim_seconds(summary)
-        if lost_s is None and watch is not None:
-            lost_s = watch.time_s
-        reason = f"controller exited with {exit_text(controller_exit)}"
-        if lost_s is not None:
-            reason += f" at sim {lost_s:.1f} s"
-        raise EpisodeFailedError(episode, reason)
-    if code != 0 or not summary.is_file():
-        log = (episode.folder / "twin.log").read_text(errors="replace")[-2000:]
-        reason = f"twin exited with {exit_text(code)}"
-        if not summary.is_file():
-            reason += ", no summary.json"
-        raise EpisodeFailedError(episode, reason, log)
+    _check_outcome(options, episode, code, exited, None if watch is None else watch.time_s)
     metrics = episode_metrics(episode.folder, options.mode)
     if not metrics["complete"]:
+        summary = episode.folder / "twin" / "summary.json"
         reason = (
             f"the twin stopped before the end, at sim {_sim_seconds(summary) or 0.0:.1f} "
             f"of {options.duration_s:.1f} s"
@@ -527,6 +601,141 @@ def run_episode(
     return {"episode": episode.index, **metrics}
 
 
+# -- metrics ------------------------------------------------------------------------------------
+def _instance_of(path: Path, stem: str) -> int | None:
+    match = re.fullmatch(rf"{re.escape(stem)}(?:_(\d+))?\.json", path.name)
+    if match is None:
+        return None
+    return int(match.group(1) or 0)
+
+
+def controller_stats(folder: Path, stations: Sequence[str]) -> dict[str, list[dict[str, Any]]]:
+    """Every controller's stats in an episode folder, per station, in instance order."""
+    out: dict[str, list[dict[str, Any]]] = {}
+    for station in stations:
+        stem = controller_stem(station, stations)
+        found = []
+        for path in folder.glob(f"{stem}*.json"):
+            instance = _instance_of(path, stem)
+            if instance is not None:
+                found.append((instance, json.loads(path.read_text(encoding="utf-8"))))
+        out[station] = [stats for _, stats in sorted(found, key=lambda pair: pair[0])]
+    return out
+
+
+def read_events(path: Path) -> list[Event]:
+    """The events of an ``events.jsonl``."""
+    from interfaces.events import Event
+
+    return [Event.from_json(line) for line in path.read_text(encoding="utf-8").splitlines()]
+
+
+def episode_cell(folder: Path) -> Cell:
+    """The cell an episode folder ran: its run folder's ``cell.yaml``, else the default cell
+    (a run folder written before cells were data)."""
+    from interfaces.cell import load_cell
+
+    copy = folder.parent / CELL_COPY
+    return load_cell(copy if copy.is_file() else None)
+
+
+@dataclass(frozen=True, kw_only=True)
+class EpisodeRecord:
+    """What an episode folder holds that the metrics are computed from."""
+
+    summary: dict[str, Any]
+    events: list[Event]
+    stats: dict[str, list[dict[str, Any]]]
+    line_exit: str | None = None
+    """The station whose window ends the line (:func:`interfaces.metrics.exit_station`)."""
+
+    @property
+    def duration_s(self) -> float:
+        """The episode's simulated seconds."""
+        return float(self.summary["sim_seconds"])
+
+    @property
+    def landing(self) -> list[int]:
+        """Objects still falling into a bin when the episode ended."""
+        return [int(i) for i in self.summary.get("landing_in_bins", [])]
+
+
+def scope_metrics(record: EpisodeRecord, station: str | None) -> dict[str, Any]:
+    """The table's metrics of the line (``station`` None) or of one station, and
+    ``untargeted``."""
+    from interfaces.metrics import (
+        controller_scores,
+        count_events,
+        event_scores,
+        fault_counts,
+        landing_by_station,
+        targeted_objects,
+        tracking_metrics,
+        untargeted_objects,
+    )
+
+    counts = count_events(
+        record.events, record.duration_s, station=station, line_exit=record.line_exit
+    )
+    if station is None:
+        stats = [s for instances in record.stats.values() for s in instances]
+        landing = len(record.landing)
+        tracking = record.summary.get("tracking")
+        restarts = max((len(s) for s in record.stats.values()), default=1) - 1
+    else:
+        stats = record.stats.get(station, [])
+        landing = landing_by_station(record.events, record.landing).get(station, 0)
+        tracking = ((record.summary.get("stations") or {}).get(station) or {}).get("tracking")
+        if tracking is None and len(record.stats) == 1:
+            tracking = record.summary.get("tracking")
+        restarts = len(stats) - 1
+    targeted = targeted_objects(stats, landing)
+    untargeted = untargeted_objects(stats)
+    values: dict[str, Any] = {
+        **event_scores(counts),
+        **controller_scores(counts, targeted),
+        **tracking_metrics(tracking),
+        **fault_counts(record.events, station=station),
+        "targeted": targeted,
+        "untargeted_total": sum(untargeted.values()),
+        "controller_restarts": max(0, restarts),
+        "real_time_factor": record.summary.get("real_time_factor"),
+    }
+    names = in_scope("line" if station is None else "station")
+    return {**{name: values[name] for name in names}, "untargeted": untargeted}
+
+
+def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
+    """The metrics of one finished episode folder: the line's, per station and per class.
+
+    The stations are those of the run folder's ``cell.yaml`` (:func:`episode_cell`).
+    """
+    from interfaces.metrics import class_scores, exit_station
+
+    summary = json.loads((folder / "twin" / "summary.json").read_text(encoding="utf-8"))
+    cell = episode_cell(folder)
+    names = tuple(s.name for s in cell.stations)
+    record = EpisodeRecord(
+        summary=summary,
+        events=read_events(folder / "twin" / "events.jsonl"),
+        stats=controller_stats(folder, names),
+        line_exit=exit_station(cell.stations),
+    )
+    line = scope_metrics(record, None)
+    return {
+        "speed_mps": summary.get("belt_speed_mps"),
+        "seed": summary["seed"],
+        "mode": mode,
+        "picks": line["picked"],
+        **line,
+        "stations": {name: scope_metrics(record, name) for name in names},
+        "classes": class_scores(record.events, record.duration_s, line_exit=record.line_exit),
+        "complete": bool(summary["complete"]),
+        "failed": False,
+    }
+
+
+# -- tables -------------------------------------------------------------------------------------
 def succeeded(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The rows of episodes that did not fail (the ones metrics are aggregated over)."""
     return [r for r in rows if not r.get("failed")]
@@ -541,11 +750,27 @@ def failures(rows: list[dict[str, Any]]) -> list[str]:
     ]
 
 
+def _means(blocks: Sequence[dict[str, Any]], keys: Sequence[str]) -> dict[str, Any]:
+    return {k: mean_of([b.get(k) for b in blocks]) for k in keys}
+
+
 def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Means over the successful episodes of every numeric metric (failed ones left out)."""
+    """Means over the successful episodes of every numeric line metric (failed ones left out)."""
     keys = [k for k in METRIC_KEYS if k not in ("mode", "seed", "speed_mps")]
-    good = succeeded(rows)
-    return {k: mean_of([r.get(k) for r in good]) for k in keys}
+    return _means(succeeded(rows), keys)
+
+
+def aggregate_blocks(rows: list[dict[str, Any]], block: str) -> dict[str, dict[str, Any]]:
+    """Means over the successful episodes of each entry of a per-episode ``block``
+    (``stations``: the station metrics; ``classes``: the class metrics)."""
+    keys = in_scope("station" if block == "stations" else "class")
+    names: dict[str, None] = {}
+    for row in succeeded(rows):
+        names.update(dict.fromkeys(row.get(block) or {}))
+    return {
+        name: _means([r[block][name] for r in succeeded(rows) if name in r.get(block, {})], keys)
+        for name in names
+    }
 
 
 def write_tables(
@@ -555,6 +780,8 @@ def write_tables(
 
     ``rows`` may hold failed episodes (:func:`failed_row`): they are listed in the tables, and
     counted in ``run.json`` as ``failed`` with their ``failures``, never in the means.
+    ``run.json`` gives the line's means (``mean``) and each station's and class's
+    (``mean_by_station``, ``mean_by_class``).
     """
     write_atomic(out / "episodes.json", json.dumps(rows, indent=2) + "\n")
     buffer = io.StringIO()
@@ -570,11 +797,14 @@ def write_tables(
         "failures": failed,
         **extra,
         "mean": aggregate(rows),
+        "mean_by_station": aggregate_blocks(rows, "stations"),
+        "mean_by_class": aggregate_blocks(rows, "classes"),
     }
     write_atomic(out / "run.json", json.dumps(summary, indent=2) + "\n")
     return summary
 
 
+# -- the command --------------------------------------------------------------------------------
 def raise_interrupt(signum: int, frame: FrameType | None) -> None:
     """Signal handler: a ``KeyboardInterrupt`` carrying the signal's name."""
     del frame
@@ -597,8 +827,19 @@ def _terminal_progress(index: int, total: int, duration_s: float) -> Progress:
     return show
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run the episodes and summarise them."""
+@dataclass(frozen=True, kw_only=True)
+class PreparedRun:
+    """A validated run: its scenario, options, folder and the ``run.json`` header."""
+
+    scenario: Scenario
+    options: RunOptions
+    out: Path
+    extra: dict[str, Any]
+
+
+def prepare_run(args: argparse.Namespace) -> PreparedRun:
+    """Validate the scenario, its cell and its controller parameters; write the run folder's
+    ``scenario.yaml``, ``cell.yaml`` and ``controller.yaml``."""
     from twin.cmd_node import build_scenario
 
     if args.episodes < 1:
@@ -607,88 +848,93 @@ def run(args: argparse.Namespace) -> int:
     node_args = argparse.Namespace(
         scenario=args.scenario,
         dataset=args.dataset,
+        cell=args.cell,
         speed=args.speed,
         duration=args.duration,
         seed=args.seed,
         objects=None,
         prefill=None,
     )
-    scenario, dataset = build_scenario(node_args)
-    params = controller_params(
-        scenario.controller, args.scenario.parent if args.scenario is not None else None
-    )
+    scenario, dataset, cell = build_scenario(node_args)
+    scenario_dir = args.scenario.parent if args.scenario is not None else None
+    params = controller_params(scenario.controller, scenario_dir)
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out: Path = args.out or Path("runs") / f"{scenario.name}-{stamp}"
-    out.mkdir(parents=True, exist_ok=True)
     own_dataset = args.dataset is not None or scenario.dataset != "builtin"
-    scenario_path, params = write_run_scenario(
-        scenario, params, out, Path(dataset) if own_dataset else None
-    )
-    options = RunOptions(
-        scenario_path=scenario_path.resolve(),
-        dataset=Path(dataset).resolve(),
-        controller_params=params.resolve(),
-        mode=args.mode,
-        duration_s=scenario.duration_s,
-        restart_at_s=scenario.faults.controller_restart_at_s,
-    )
+    files = write_run_scenario(scenario, params, cell, out, Path(dataset) if own_dataset else None)
+    options = run_options(files, cell, scenario, Path(dataset), args.mode)
     extra: dict[str, Any] = {
         "scenario": scenario.name,
         "scenario_path": str(args.scenario) if args.scenario is not None else None,
         "dataset": str(options.dataset),
+        "cell": cell.name,
+        "stations": list(options.stations),
         "mode": args.mode,
         "speed_mps": scenario.system.belt_speed_mps,
         "episodes_planned": args.episodes,
     }
+    return PreparedRun(scenario=scenario, options=options, out=out, extra=extra)
+
+
+def _run_episodes(
+    run: PreparedRun, episodes: int, *, quiet: bool, tty: bool
+) -> tuple[list[dict[str, Any]], str | None, int]:
+    """Run the episodes one after another; returns the rows, why the run stopped early (None
+    when it did not) and the exit status."""
     rows: list[dict[str, Any]] = []
-    write_tables(out, rows, complete=False, extra=extra)
-    stopped: str | None = None
-    code = 0
+    speed = run.scenario.system.belt_speed_mps
     # SIGINT too: a process started in the background inherits SIGINT ignored, and Python then
     # installs no KeyboardInterrupt handler of its own
     previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
-    tty = sys.stdout.isatty() and not args.json
     try:
-        for i in range(args.episodes):
-            episode = EpisodeSpec(index=i, seed=scenario.seed + i, folder=out / f"ep{i:03d}")
-            if not args.json:
-                print(f"episode {i + 1}/{args.episodes} (seed {episode.seed}) ...", flush=True)
-            progress = (
-                _terminal_progress(i + 1, args.episodes, scenario.duration_s) if tty else None
+        for i in range(episodes):
+            episode = EpisodeSpec(
+                index=i, seed=run.scenario.seed + i, folder=run.out / f"ep{i:03d}"
             )
+            if not quiet:
+                print(f"episode {i + 1}/{episodes} (seed {episode.seed}) ...", flush=True)
+            progress = _terminal_progress(i + 1, episodes, run.scenario.duration_s) if tty else None
             try:
-                metrics = run_episode(options, episode, progress=progress)
+                metrics = run_episode(run.options, episode, progress=progress)
             except EpisodeFailedError as exc:
-                row = failed_row(episode, args.mode, exc.reason)
-                row["speed_mps"] = scenario.system.belt_speed_mps
-                rows.append(row)
-                stopped, code = failure_text(i, episode.seed, exc.reason), 1
+                rows.append(
+                    {**failed_row(episode, run.options.mode, exc.reason), "speed_mps": speed}
+                )
                 print(f"cdw-twin run: {exc}", file=sys.stderr)
-                break
+                return rows, failure_text(i, episode.seed, exc.reason), 1
             finally:
                 if tty:
                     print()
-            metrics["speed_mps"] = scenario.system.belt_speed_mps
-            rows.append(metrics)
-            write_tables(out, rows, complete=False, extra=extra)
+            rows.append({**metrics, "speed_mps": speed})
+            write_tables(run.out, rows, complete=False, extra=run.extra)
     except KeyboardInterrupt as exc:
-        stopped, code = f"interrupted ({exc.args[0] if exc.args else 'SIGINT'})", 130
+        return rows, f"interrupted ({exc.args[0] if exc.args else 'SIGINT'})", 130
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
-    if stopped is not None:
-        extra = {**extra, "stopped": stopped}
+    return rows, None, 0
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the episodes and summarise them."""
+    prepared = prepare_run(args)
+    out = prepared.out
+    write_tables(out, [], complete=False, extra=prepared.extra)
+    tty = sys.stdout.isatty() and not args.json
+    rows, stopped, code = _run_episodes(prepared, args.episodes, quiet=args.json, tty=tty)
+    extra = prepared.extra if stopped is None else {**prepared.extra, "stopped": stopped}
     summary = write_tables(out, rows, complete=stopped is None, extra=extra)
     good = succeeded(rows)
     result = {
         **summary["mean"],
-        "speed_mps": scenario.system.belt_speed_mps,
+        "speed_mps": prepared.scenario.system.belt_speed_mps,
         "mode": args.mode,
         "complete": summary["complete"],
         "episodes": summary["episodes"],
         "failed": summary["failed"],
         "out": str(out),
         "untargeted": good[-1]["untargeted"] if good else {},
+        "mean_by_station": summary["mean_by_station"],
     }
     if stopped is not None:
         result["stopped"] = stopped
@@ -702,6 +948,15 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
     elif stopped is None:
-        for key, value in result.items():
-            print(f"{key:>28}: {value}")
+        _print_result(result)
     return code
+
+
+def _print_result(result: dict[str, Any]) -> None:
+    for key, value in result.items():
+        if key != "mean_by_station":
+            print(f"{key:>28}: {value}")
+    stations = result["mean_by_station"]
+    if len(stations) > 1:
+        for name, means in stations.items():
+            print(f"{'station ' + name:>28}: " + ", ".join(f"{k} {v}" for k, v in means.items()))

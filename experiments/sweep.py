@@ -10,17 +10,21 @@ Example grid file (paths relative to the grid file)::
       mode: [lockstep]
     dataset: ../data/meshes   # optional; default: each scenario's own
 
-Each cell (a scenario with one choice of every override) is a run folder with the layout of
-``cdw-twin run`` (``scenario.yaml``, ``epNNN/``, ``episodes.json``, ``run.json``). Every
-cell x seed is one episode through :func:`experiments.run.run_episode` on its own ROS domain;
-``N`` run at once, each driven by a thread. ``sweep.json`` and ``sweep.csv`` hold per-cell
-means with 95 % confidence intervals:
+Each grid cell (a scenario with one choice of every override) is a run folder with the layout
+of ``cdw-twin run`` (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``, ``epNNN/``,
+``episodes.json``, ``run.json``): its scenario's cell runs one controller per station. Every
+grid cell x seed is one episode through :func:`experiments.run.run_episode` on its own ROS
+domain; ``N`` run at once, each driven by a thread. ``sweep.json`` and ``sweep.csv`` hold per
+grid cell the means with 95 % confidence intervals, for the line and (``sweep.json``
+``aggregate.stations``; ``sweep.csv`` rows with a ``station``, for a cell of several stations)
+per station:
 
-- every numeric metric: Student t interval over the cell's episodes,
-  ``mean +- t(0.975, n-1) * s / sqrt(n)`` (none for n < 2);
-- ``success_rate`` and ``miss_rate`` also as Wilson score intervals over the counts pooled
-  across the episodes (placed_correct of targeted; missed of processed), which stay inside
-  [0, 1] and are meaningful with few episodes.
+- every metric of the table (``docs/metrics.md``): Student t interval over the cell's
+  episodes, ``mean +- t(0.975, n-1) * s / sqrt(n)`` (none for n < 2);
+- every rate of the table (a ratio of two counts, such as ``success_rate``, placed_correct of
+  targeted, and ``miss_rate``, missed of processed) also as a Wilson score interval over the
+  counts pooled across the episodes, which stays inside [0, 1] and is meaningful with few
+  episodes.
 
 A grid's ``seeds`` must be distinct: a seed run twice in a cell would count one sample as two
 and narrow the interval for nothing.
@@ -28,7 +32,7 @@ and narrow the interval for nothing.
 An interrupted sweep (Ctrl-C, SIGTERM) stops the running episodes, keeps every finished one in
 its cell's tables and writes ``"complete": false`` with ``"stopped"`` (``--json`` prints it,
 and the command exits 130); so does a sweep in which an episode failed (the other episodes
-still run; exit 1). A failed episode (see :mod:`experiments.run`: its twin or controller died,
+still run; exit 1). A failed episode (see :mod:`experiments.run`: its twin or a controller died,
 or the twin left no complete summary) is a row of its cell's ``episodes.json`` with
 ``"failed": true`` and its ``"reason"``, is listed in its cell's ``failures`` and counted in
 ``failed``, and is left out of every mean and interval: a cell's ``episodes`` counts only the
@@ -59,33 +63,32 @@ import yaml
 
 from experiments.stats import wilson_interval
 from interfaces.dataclass_io import from_data
+from interfaces.errors import ConfigError
 from interfaces.fileio import write_atomic
-from twin.errors import ConfigError
+from interfaces.metrics import RATES, Scope, in_scope
 
 if TYPE_CHECKING:
+    from experiments.run import EpisodeSpec, RunOptions
+    from interfaces.cell import Cell
     from twin.scenario import Scenario
 
-CI_METRICS = (
-    "picks",
-    "placed_correct",
-    "targeted",
-    "untargeted_total",
-    "success_rate",
-    "miss_rate",
-    "throughput_per_min",
-    "tracking_time_4mm_mean_s",
-    "tracking_time_4mm_p95_s",
-    "real_time_factor",
-    "faults",
-    "controller_restarts",
-)
-"""Metrics aggregated with Student t intervals."""
 
-WILSON_RATES = {
-    "success_rate": ("placed_correct", "targeted"),
-    "miss_rate": ("missed", "processed"),
-}
-"""Rates also given as Wilson intervals: (successes, trials) columns pooled over episodes."""
+def _pooled_rates(scope: Scope) -> dict[str, tuple[str, str]]:
+    return {m.name: m.ratio_of for m in RATES if scope in m.scopes and m.ratio_of is not None}
+
+
+CI_METRICS = in_scope("line")
+"""Metrics aggregated with Student t intervals: every line metric of the table."""
+
+WILSON_RATES = _pooled_rates("line")
+"""Rates also given as Wilson intervals: (successes, trials) counts pooled over episodes, the
+table's ``ratio_of`` of every line rate."""
+
+STATION_CI_METRICS = in_scope("station")
+"""The per-station metrics aggregated with Student t intervals."""
+
+STATION_WILSON_RATES = _pooled_rates("station")
+"""The per-station rates also given as Wilson intervals."""
 
 
 @dataclass(frozen=True)
@@ -161,7 +164,7 @@ class Grid:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Cell:
+class GridCell:
     """One grid cell: a resolved scenario, its run mode, seeds and folder name."""
 
     name: str
@@ -176,7 +179,7 @@ def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "cell"
 
 
-def expand(grid: Grid, base: Path) -> list[Cell]:
+def expand(grid: Grid, base: Path) -> list[GridCell]:
     """The grid's cells in a fixed order (scenarios, then overrides as a product).
 
     Every scenario is loaded and every override applied (and validated) here, before anything
@@ -186,7 +189,7 @@ def expand(grid: Grid, base: Path) -> list[Cell]:
 
     axes = [(k, v) for k, v in dataclasses.asdict(grid.overrides).items() if v]
     names = [k for k, _ in axes]
-    cells: list[Cell] = []
+    cells: list[GridCell] = []
     for entry in grid.scenarios:
         path = (base / entry).resolve()
         scenario = Scenario.load(path)
@@ -203,7 +206,7 @@ def expand(grid: Grid, base: Path) -> list[Cell]:
             )
             suffix = "".join(f"-{k}{v}" for k, v in chosen.items())
             cells.append(
-                Cell(
+                GridCell(
                     name=_slug(f"{scenario.name}{suffix}"),
                     scenario=resolved,
                     scenario_path=path,
@@ -221,7 +224,7 @@ def expand(grid: Grid, base: Path) -> list[Cell]:
     return unique
 
 
-def _own_dataset(grid: Grid, grid_path: Path, cell: Cell) -> Path | None:
+def _own_dataset(grid: Grid, grid_path: Path, cell: GridCell) -> Path | None:
     """The dataset a cell names (the grid's, else its scenario's), None for the built-in one."""
     if grid.dataset is not None:
         return (grid_path.parent / grid.dataset).resolve()
@@ -245,21 +248,27 @@ def student_t_interval(values: Sequence[float]) -> tuple[float | None, float | N
     return mean, mean - half, mean + half
 
 
-def aggregate_cell(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+def aggregate_cell(
+    rows: Sequence[dict[str, Any]],
+    metrics: Sequence[str] = CI_METRICS,
+    rates: dict[str, tuple[str, str]] | None = None,
+) -> dict[str, Any]:
     """Per-metric ``{mean, ci95_low, ci95_high, n}`` and pooled Wilson intervals of the rates.
 
-    ``rows`` are :func:`experiments.run.episode_metrics` dicts; a metric that is None in an
-    episode (e.g. no settled pursuit) leaves that episode out of that metric only. Failed
-    episodes (``"failed": true``) are counted in ``failed`` and left out of everything else.
+    ``rows`` are :func:`experiments.run.episode_metrics` dicts (or their ``stations`` blocks,
+    with ``metrics`` and ``rates`` of the station scope); a metric that is None in an episode
+    (e.g. no settled pursuit) leaves that episode out of that metric only. Failed episodes
+    (``"failed": true``) are counted in ``failed`` and left out of everything else.
     """
+    rates = WILSON_RATES if rates is None else rates
     failed = sum(1 for r in rows if r.get("failed"))
     rows = [r for r in rows if not r.get("failed")]
     out: dict[str, Any] = {"episodes": len(rows), "failed": failed, "metrics": {}, "wilson": {}}
-    for key in CI_METRICS:
+    for key in metrics:
         values = [float(r[key]) for r in rows if r.get(key) is not None]
         mean, low, high = student_t_interval(values)
         out["metrics"][key] = {"mean": mean, "ci95_low": low, "ci95_high": high, "n": len(values)}
-    for rate, (num, den) in WILSON_RATES.items():
+    for rate, (num, den) in rates.items():
         successes = sum(int(r.get(num) or 0) for r in rows)
         trials = sum(int(r.get(den) or 0) for r in rows)
         low, high = wilson_interval(successes, trials)
@@ -273,9 +282,60 @@ def aggregate_cell(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def aggregate_stations(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """:func:`aggregate_cell` of each station's block over the successful episodes."""
+    good = [r for r in rows if not r.get("failed")]
+    names: dict[str, None] = {}
+    for row in good:
+        names.update(dict.fromkeys(row.get("stations") or {}))
+    return {
+        name: aggregate_cell(
+            [r["stations"][name] for r in good if name in (r.get("stations") or {})],
+            STATION_CI_METRICS,
+            STATION_WILSON_RATES,
+        )
+        for name in names
+    }
+
+
+CSV_HEADER = (
+    "cell",
+    "station",
+    "scenario",
+    "mode",
+    "speed_mps",
+    "duration_s",
+    "episodes",
+    "failed",
+)
+"""The leading columns of ``sweep.csv``; then mean and interval of every metric and rate."""
+
+
+def _csv_row(cell: dict[str, Any], station: str, agg: dict[str, Any]) -> list[Any]:
+    row: list[Any] = [
+        cell["cell"],
+        station,
+        cell["scenario"],
+        cell["mode"],
+        cell["speed_mps"],
+        cell["duration_s"],
+        agg["episodes"],
+        agg.get("failed", 0),
+    ]
+    for key in CI_METRICS:
+        m = agg["metrics"].get(key)
+        row += [None, None, None] if m is None else [m["mean"], m["ci95_low"], m["ci95_high"]]
+    for rate in WILSON_RATES:
+        w = agg["wilson"].get(rate)
+        row += [None, None, None] if w is None else [w["pooled"], w["ci95_low"], w["ci95_high"]]
+    return ["" if v is None else v for v in row]
+
+
 def sweep_csv(cells: Sequence[dict[str, Any]]) -> str:
-    """``sweep.csv``: one row per cell, mean and interval of every metric."""
-    header = ["cell", "scenario", "mode", "speed_mps", "duration_s", "episodes", "failed"]
+    """``sweep.csv``: one row per grid cell (``station`` empty: the line), mean and interval of
+    every metric, and for a cell of several stations one more row per station (a metric not
+    given per station is left empty)."""
+    header = list(CSV_HEADER)
     for key in CI_METRICS:
         header += [f"{key}_mean", f"{key}_ci95_low", f"{key}_ci95_high"]
     for rate in WILSON_RATES:
@@ -285,22 +345,11 @@ def sweep_csv(cells: Sequence[dict[str, Any]]) -> str:
     writer.writerow(header)
     for cell in cells:
         agg = cell["aggregate"]
-        row: list[Any] = [
-            cell["cell"],
-            cell["scenario"],
-            cell["mode"],
-            cell["speed_mps"],
-            cell["duration_s"],
-            agg["episodes"],
-            agg.get("failed", 0),
-        ]
-        for key in CI_METRICS:
-            m = agg["metrics"][key]
-            row += [m["mean"], m["ci95_low"], m["ci95_high"]]
-        for rate in WILSON_RATES:
-            w = agg["wilson"][rate]
-            row += [w["pooled"], w["ci95_low"], w["ci95_high"]]
-        writer.writerow(["" if v is None else v for v in row])
+        writer.writerow(_csv_row(cell, "", agg))
+        stations = agg.get("stations") or {}
+        if len(stations) > 1:
+            for name, station_agg in stations.items():
+                writer.writerow(_csv_row(cell, name, station_agg))
     return buffer.getvalue()
 
 
@@ -313,194 +362,264 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 @dataclass
-class _CellState:
-    cell: Cell
+class CellRun:
+    """One grid cell being run: its run folder, options, finished rows and failures."""
+
+    cell: GridCell
     folder: Path
+    options: RunOptions
     extra: dict[str, Any]
     rows: dict[int, dict[str, Any]] = field(default_factory=dict)
     failures: list[str] = field(default_factory=list)
+
+    def ordered_rows(self) -> list[dict[str, Any]]:
+        """The finished rows in episode order."""
+        return [self.rows[k] for k in sorted(self.rows)]
+
+    def episodes(self) -> list[EpisodeSpec]:
+        """One episode per seed of the grid cell."""
+        from experiments.run import EpisodeSpec
+
+        return [
+            EpisodeSpec(index=i, seed=seed, folder=self.folder / f"ep{i:03d}")
+            for i, seed in enumerate(self.cell.seeds)
+        ]
+
+    def summary(self) -> dict[str, Any]:
+        """The cell's entry of ``sweep.json``."""
+        rows = self.ordered_rows()
+        agg = aggregate_cell(rows)
+        agg["stations"] = aggregate_stations(rows)
+        scenario = self.cell.scenario
+        return {
+            "cell": self.cell.name,
+            "folder": str(self.folder),
+            "scenario": scenario.name,
+            "stations": list(self.options.stations),
+            "mode": self.cell.mode,
+            "speed_mps": scenario.system.belt_speed_mps,
+            "duration_s": scenario.duration_s,
+            "overrides": self.cell.overrides,
+            "complete": agg["episodes"] == len(self.cell.seeds),
+            "failed": agg["failed"],
+            "failures": self.failures,
+            "aggregate": agg,
+        }
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Checked:
+    """A grid cell validated before anything is written: its cell, parameters and dataset."""
+
+    cell: GridCell
+    params: Path
+    station_cell: Cell
+    dataset: Path
+    own_dataset: Path | None
+
+
+def _check_cells(grid: Grid, grid_path: Path) -> list[_Checked]:
+    """Every grid cell's scenario, cell file, controller parameters and dataset, checked."""
+    from experiments.run import controller_params
+    from twin.builtin import builtin_dataset
+    from twin.scenario import scenario_cell
+    from twin.scenario_check import check_scenario
+
+    checked = []
+    for cell in expand(grid, grid_path.parent):
+        where = str(cell.scenario_path)
+        params = controller_params(cell.scenario.controller, cell.scenario_path.parent)
+        station_cell = scenario_cell(cell.scenario, cell.scenario_path.parent, where)
+        own = _own_dataset(grid, grid_path, cell)
+        dataset = own or builtin_dataset()
+        check_scenario(cell.scenario, dataset, where=where, cell=station_cell)
+        checked.append(
+            _Checked(
+                cell=cell,
+                params=params,
+                station_cell=station_cell,
+                dataset=dataset,
+                own_dataset=own,
+            )
+        )
+    return checked
+
+
+def prepare_sweep(grid_path: Path, out: Path) -> list[CellRun]:
+    """Check every grid cell (before anything is written), then write each one's run folder
+    (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``, empty tables)."""
+    from experiments.run import run_options, write_run_scenario, write_tables
+
+    checked = _check_cells(Grid.load(grid_path), grid_path)
+    out.mkdir(parents=True, exist_ok=True)
+    runs = []
+    for c in checked:
+        folder = out / c.cell.name
+        files = write_run_scenario(c.cell.scenario, c.params, c.station_cell, folder, c.own_dataset)
+        options = run_options(files, c.station_cell, c.cell.scenario, c.dataset, c.cell.mode)
+        extra = {
+            "scenario": c.cell.scenario.name,
+            "scenario_path": str(c.cell.scenario_path),
+            "dataset": str(options.dataset),
+            "cell": c.station_cell.name,
+            "stations": list(options.stations),
+            "mode": c.cell.mode,
+            "speed_mps": c.cell.scenario.system.belt_speed_mps,
+            "duration_s": c.cell.scenario.duration_s,
+            "overrides": c.cell.overrides,
+            "episodes_planned": len(c.cell.seeds),
+        }
+        runs.append(CellRun(cell=c.cell, folder=folder, options=options, extra=extra))
+        write_tables(folder, [], complete=False, extra=extra)
+    return runs
+
+
+class Sweep:
+    """The state of a running sweep: every grid cell's rows, shared by the worker threads
+    under one lock, written to ``sweep.json``/``sweep.csv`` and the cells' tables as episodes
+    finish."""
+
+    def __init__(
+        self, grid_path: Path, out: Path, workers: int, runs: list[CellRun], *, quiet: bool = False
+    ) -> None:
+        self.grid_path = grid_path
+        self.out = out
+        self.workers = workers
+        self.runs = runs
+        self.jobs = [(r, e) for r in runs for e in r.episodes()]
+        self.lock = threading.Lock()
+        self.cancel = threading.Event()
+        self.stopped: list[str] = []
+        self.quiet = quiet
+        self._wall0 = time.monotonic()
+
+    def summary(self, complete: bool) -> dict[str, Any]:
+        """The content of ``sweep.json``."""
+        cells = [r.summary() for r in self.runs]
+        data: dict[str, Any] = {
+            "complete": complete,
+            "grid": str(self.grid_path),
+            "workers": self.workers,
+            "episodes_planned": len(self.jobs),
+            "episodes": sum(c["aggregate"]["episodes"] for c in cells),
+            "failed": sum(c["failed"] for c in cells),
+            "wall_s": time.monotonic() - self._wall0,
+            "cells": cells,
+        }
+        if self.stopped:
+            data["stopped"] = "; ".join(self.stopped)
+        return data
+
+    def write_all(self, complete: bool) -> dict[str, Any]:
+        """Write ``sweep.json`` and ``sweep.csv``; returns the summary."""
+        data = self.summary(complete)
+        write_atomic(self.out / "sweep.json", json.dumps(data, indent=2) + "\n")
+        write_atomic(self.out / "sweep.csv", sweep_csv(data["cells"]))
+        return data
+
+    def finish_cell(self, run: CellRun, final: bool) -> None:
+        """Write one grid cell's run tables (``stopped`` on the final write of a cell that did
+        not finish)."""
+        from experiments.run import write_tables
+
+        rows = run.ordered_rows()
+        done = sum(1 for r in rows if not r.get("failed")) == len(run.cell.seeds)
+        extra = dict(run.extra)
+        if not done and final and (run.failures or self.stopped):
+            extra["stopped"] = "; ".join(run.failures + self.stopped)
+        write_tables(run.folder, rows, complete=done, extra=extra)
+
+    def record(self, run: CellRun, index: int, row: dict[str, Any], failure: str = "") -> int:
+        """Keep one finished (or failed) episode's row and write the tables; returns how many
+        episodes have finished."""
+        with self.lock:
+            run.rows[index] = row
+            if failure:
+                run.failures.append(failure)
+            self.finish_cell(run, final=False)
+            self.write_all(False)
+            return sum(len(r.rows) for r in self.runs)
+
+    def job(self, run: CellRun, episode: EpisodeSpec) -> None:
+        """Run one episode (a worker thread's task) and record its row."""
+        from experiments.run import (
+            EpisodeCancelledError,
+            EpisodeFailedError,
+            failed_row,
+            failure_text,
+            run_episode,
+        )
+
+        if self.cancel.is_set():
+            return
+        speed = run.cell.scenario.system.belt_speed_mps
+        try:
+            metrics = run_episode(run.options, episode, cancel=self.cancel)
+        except EpisodeCancelledError:
+            return
+        except EpisodeFailedError as exc:
+            row = {**failed_row(episode, run.options.mode, exc.reason), "speed_mps": speed}
+            self.record(
+                run, episode.index, row, failure_text(episode.index, episode.seed, exc.reason)
+            )
+            if not self.quiet:
+                print(f"FAILED {run.cell.name}: {exc}", file=sys.stderr)
+            return
+        done = self.record(run, episode.index, {**metrics, "speed_mps": speed})
+        if not self.quiet:
+            print(
+                f"[{done}/{len(self.jobs)}] {run.cell.name} seed {episode.seed}: "
+                f"placed {metrics['placed_correct']}, rtf {metrics['real_time_factor']:.2f}",
+                flush=True,
+            )
+
+    def execute(self) -> None:
+        """Run every job on ``workers`` threads; Ctrl-C or SIGTERM cancels the running ones."""
+        from experiments.run import raise_interrupt
+
+        # SIGINT too: a process started in the background inherits SIGINT ignored, and Python
+        # then installs no KeyboardInterrupt handler of its own
+        previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
+        pool = concurrent.futures.ThreadPoolExecutor(max_workers=self.workers)
+        try:
+            futures = [pool.submit(self.job, *j) for j in self.jobs]
+            pending = set(futures)
+            while pending:
+                _, pending = concurrent.futures.wait(pending, timeout=0.5)
+            for f in futures:
+                f.result()
+        except KeyboardInterrupt as exc:
+            self.stopped.append(f"interrupted ({exc.args[0] if exc.args else 'SIGINT'})")
+            self.cancel.set()
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
+
+    def finish(self) -> tuple[dict[str, Any], int]:
+        """The final tables; returns the ``sweep.json`` content and the exit status."""
+        failures = [f for r in self.runs for f in r.failures]
+        complete = not self.stopped and not failures
+        if failures and not self.stopped:
+            self.stopped.append(f"{len(failures)} episode(s) failed")
+        with self.lock:
+            for run in self.runs:
+                self.finish_cell(run, final=True)
+            data = self.write_all(complete)
+        return data, 0 if complete else (130 if self.cancel.is_set() else 1)
 
 
 def run_sweep(
     grid_path: Path, out: Path, workers: int, *, quiet: bool = False
 ) -> tuple[dict[str, Any], int]:
     """Run a grid; returns the ``sweep.json`` content and the exit status."""
-    from experiments.run import (
-        EpisodeCancelledError,
-        EpisodeFailedError,
-        EpisodeSpec,
-        RunOptions,
-        controller_params,
-        failed_row,
-        failure_text,
-        raise_interrupt,
-        run_episode,
-        write_run_scenario,
-        write_tables,
-    )
-    from twin.builtin import builtin_dataset
-    from twin.scenario_check import check_scenario
-
     if workers < 1:
         msg = f"--workers = {workers}: must be >= 1"
         raise ConfigError(msg)
-    grid = Grid.load(grid_path)
-    cells = expand(grid, grid_path.parent)
-    params = {  # checked before anything starts
-        cell.name: controller_params(cell.scenario.controller, cell.scenario_path.parent)
-        for cell in cells
-    }
-    own_datasets = {cell.name: _own_dataset(grid, grid_path, cell) for cell in cells}
-    datasets = {name: own or builtin_dataset() for name, own in own_datasets.items()}
-    for cell in cells:
-        check_scenario(cell.scenario, datasets[cell.name], where=str(cell.scenario_path))
-    out.mkdir(parents=True, exist_ok=True)
-    states: list[_CellState] = []
-    jobs: list[tuple[_CellState, RunOptions, EpisodeSpec]] = []
-    for cell in cells:
-        own_dataset = own_datasets[cell.name]
-        dataset = datasets[cell.name]
-        folder = out / cell.name
-        scenario_file, cell_params = write_run_scenario(
-            cell.scenario, params[cell.name], folder, own_dataset
-        )
-        options = RunOptions(
-            scenario_path=scenario_file.resolve(),
-            dataset=dataset,
-            controller_params=cell_params.resolve(),
-            mode=cell.mode,
-            duration_s=cell.scenario.duration_s,
-            restart_at_s=cell.scenario.faults.controller_restart_at_s,
-        )
-        extra = {
-            "scenario": cell.scenario.name,
-            "scenario_path": str(cell.scenario_path),
-            "dataset": str(dataset),
-            "mode": cell.mode,
-            "speed_mps": cell.scenario.system.belt_speed_mps,
-            "duration_s": cell.scenario.duration_s,
-            "overrides": cell.overrides,
-            "episodes_planned": len(cell.seeds),
-        }
-        state = _CellState(cell=cell, folder=folder, extra=extra)
-        states.append(state)
-        write_tables(folder, [], complete=False, extra=extra)
-        for i, seed in enumerate(cell.seeds):
-            jobs.append(
-                (state, options, EpisodeSpec(index=i, seed=seed, folder=folder / f"ep{i:03d}"))
-            )
-    lock = threading.Lock()
-    cancel = threading.Event()
-    stopped: list[str] = []
-    wall0 = time.monotonic()
-
-    def summary(complete: bool) -> dict[str, Any]:
-        rows_out = []
-        for st in states:
-            rows = [st.rows[k] for k in sorted(st.rows)]
-            agg = aggregate_cell(rows)
-            rows_out.append(
-                {
-                    "cell": st.cell.name,
-                    "folder": str(st.folder),
-                    "scenario": st.cell.scenario.name,
-                    "mode": st.cell.mode,
-                    "speed_mps": st.cell.scenario.system.belt_speed_mps,
-                    "duration_s": st.cell.scenario.duration_s,
-                    "overrides": st.cell.overrides,
-                    "complete": agg["episodes"] == len(st.cell.seeds),
-                    "failed": agg["failed"],
-                    "failures": st.failures,
-                    "aggregate": agg,
-                }
-            )
-        data: dict[str, Any] = {
-            "complete": complete,
-            "grid": str(grid_path),
-            "workers": workers,
-            "episodes_planned": len(jobs),
-            "episodes": sum(c["aggregate"]["episodes"] for c in rows_out),
-            "failed": sum(c["failed"] for c in rows_out),
-            "wall_s": time.monotonic() - wall0,
-            "cells": rows_out,
-        }
-        if stopped:
-            data["stopped"] = "; ".join(stopped)
-        return data
-
-    def write_all(complete: bool) -> dict[str, Any]:
-        data = summary(complete)
-        write_atomic(out / "sweep.json", json.dumps(data, indent=2) + "\n")
-        write_atomic(out / "sweep.csv", sweep_csv(data["cells"]))
-        return data
-
-    def finish_cell(st: _CellState, final: bool) -> None:
-        rows = [st.rows[k] for k in sorted(st.rows)]
-        done = sum(1 for r in rows if not r.get("failed")) == len(st.cell.seeds)
-        extra = dict(st.extra)
-        if not done and final and (st.failures or stopped):
-            extra["stopped"] = "; ".join(st.failures + stopped)
-        write_tables(st.folder, rows, complete=done, extra=extra)
-
-    def job(state: _CellState, options: RunOptions, episode: EpisodeSpec) -> None:
-        if cancel.is_set():
-            return
-        try:
-            metrics = run_episode(options, episode, cancel=cancel)
-        except EpisodeCancelledError:
-            return
-        except EpisodeFailedError as exc:
-            row = failed_row(episode, options.mode, exc.reason)
-            row["speed_mps"] = state.cell.scenario.system.belt_speed_mps
-            with lock:
-                state.rows[episode.index] = row
-                state.failures.append(failure_text(episode.index, episode.seed, exc.reason))
-                finish_cell(state, final=False)
-                write_all(False)
-            if not quiet:
-                print(f"FAILED {state.cell.name}: {exc}", file=sys.stderr)
-            return
-        metrics["speed_mps"] = state.cell.scenario.system.belt_speed_mps
-        with lock:
-            state.rows[episode.index] = metrics
-            finish_cell(state, final=False)
-            write_all(False)
-            done = sum(len(st.rows) for st in states)  # finished, failed or not
-        if not quiet:
-            print(
-                f"[{done}/{len(jobs)}] {state.cell.name} seed {episode.seed}: "
-                f"placed {metrics['placed_correct']}, rtf {metrics['real_time_factor']:.2f}",
-                flush=True,
-            )
-
-    write_all(False)
-    # SIGINT too: a process started in the background inherits SIGINT ignored, and Python then
-    # installs no KeyboardInterrupt handler of its own
-    previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
-    pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers)
-    try:
-        futures = [pool.submit(job, *j) for j in jobs]
-        pending = set(futures)
-        while pending:
-            _, pending = concurrent.futures.wait(pending, timeout=0.5)
-        for f in futures:
-            f.result()
-    except KeyboardInterrupt as exc:
-        stopped.append(f"interrupted ({exc.args[0] if exc.args else 'SIGINT'})")
-        cancel.set()
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-    failures = [f for st in states for f in st.failures]
-    complete = not stopped and not failures
-    if failures and not stopped:
-        stopped.append(f"{len(failures)} episode(s) failed")
-    with lock:
-        for st in states:
-            finish_cell(st, final=True)
-        data = write_all(complete)
-    return data, 0 if complete else (130 if cancel.is_set() else 1)
+    sweep = Sweep(grid_path, out, workers, prepare_sweep(grid_path, out), quiet=quiet)
+    sweep.write_all(False)
+    sweep.execute()
+    return sweep.finish()
 
 
 def run(args: argparse.Namespace) -> int:

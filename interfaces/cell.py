@@ -33,7 +33,7 @@ from pathlib import Path
 import yaml
 
 from interfaces.dataclass_io import from_data, to_data
-from interfaces.errors import ConfigError
+from interfaces.errors import ConfigError, require
 from interfaces.fileio import write_atomic
 from interfaces.robots import RobotSpec, robot_from_data
 from interfaces.tools import ToolSpec, tool_from_data
@@ -48,12 +48,6 @@ DEFAULT_CELL = CELLS_DIR / "default.yaml"
 
 class CellError(ConfigError):
     """A cell description is malformed or inconsistent (the message names file and key)."""
-
-
-def _require(condition: bool, key: str, value: object, what: str) -> None:
-    if not condition:
-        msg = f"{key} = {value!r}: {what}"
-        raise CellError(msg)
 
 
 def _finite(values: tuple[float, ...]) -> bool:
@@ -75,18 +69,18 @@ class BeltSpec:
     lateral_friction: float = 0.8
 
     def __post_init__(self) -> None:
-        _require(self.width_m > 0, "belt.width_m", self.width_m, "must be positive")
-        _require(
+        require(self.width_m > 0, "belt.width_m", self.width_m, "must be positive")
+        require(
             self.end_x_m > self.start_x_m, "belt.end_x_m", self.end_x_m, "must exceed start_x_m"
         )
-        _require(
+        require(
             self.start_x_m <= self.infeed_x_m < self.end_x_m,
             "belt.infeed_x_m",
             self.infeed_x_m,
             "must lie on the belt",
         )
-        _require(self.thickness_m > 0, "belt.thickness_m", self.thickness_m, "must be positive")
-        _require(self.lateral_friction >= 0, "belt.lateral_friction", self.lateral_friction, ">= 0")
+        require(self.thickness_m > 0, "belt.thickness_m", self.thickness_m, "must be positive")
+        require(self.lateral_friction >= 0, "belt.lateral_friction", self.lateral_friction, ">= 0")
 
     @property
     def length_m(self) -> float:
@@ -140,9 +134,9 @@ class DriveSpec:
     step_s: float | None = None
 
     def __post_init__(self) -> None:
-        _require(bool(self.fmu), "drive.fmu", self.fmu, "must not be empty")
+        require(bool(self.fmu), "drive.fmu", self.fmu, "must not be empty")
         if self.step_s is not None:
-            _require(
+            require(
                 0 < self.step_s <= MAX_DRIVE_STEP_S,
                 "drive.step_s",
                 self.step_s,
@@ -175,17 +169,17 @@ class PhysicsSpec:
     gravity_mps2: float = 9.81
 
     def __post_init__(self) -> None:
-        _require(self.physics_hz > 0, "physics.physics_hz", self.physics_hz, "must be positive")
-        _require(
+        require(self.physics_hz > 0, "physics.physics_hz", self.physics_hz, "must be positive")
+        require(
             self.solver_iterations >= 1, "physics.solver_iterations", self.solver_iterations, ">= 1"
         )
-        _require(
+        require(
             self.hull_merge_tolerance >= 0,
             "physics.hull_merge_tolerance",
             self.hull_merge_tolerance,
             "must be >= 0",
         )
-        _require(
+        require(
             self.max_convex_pieces >= 1, "physics.max_convex_pieces", self.max_convex_pieces, ">= 1"
         )
 
@@ -204,7 +198,7 @@ class CameraSpec:
     fov_max_x_m: float = 0.45
 
     def __post_init__(self) -> None:
-        _require(
+        require(
             self.fov_max_x_m > self.fov_min_x_m,
             "camera.fov_max_x_m",
             self.fov_max_x_m,
@@ -231,14 +225,14 @@ class BinSpec:
 
     def __post_init__(self) -> None:
         key = f"bins[{self.class_name}]"
-        _require(bool(self.class_name), "bins.class_name", self.class_name, "must not be empty")
-        _require(
+        require(bool(self.class_name), "bins.class_name", self.class_name, "must not be empty")
+        require(
             self.size_m > 2 * self.wall_m,
             f"{key}.size_m",
             self.size_m,
             "must exceed twice the wall thickness",
         )
-        _require(
+        require(
             self.top_z_m > self.floor_z_m, f"{key}.top_z_m", self.top_z_m, "must be above floor"
         )
 
@@ -272,28 +266,28 @@ class StationSpec:
     bins: tuple[BinSpec, ...] = ()
 
     def __post_init__(self) -> None:
-        _require(
+        require(
             bool(self.name) and self.name.replace("_", "").isalnum(),
             "station.name",
             self.name,
             "letters, digits and underscores only",
         )
-        _require(
+        require(
             self.namespace == "" or self.namespace.replace("_", "").isalnum(),
             "station.namespace",
             self.namespace,
             "empty, or letters, digits and underscores (a ROS namespace without slashes)",
         )
         lo, hi = self.pick_window_x_m
-        _require(lo < hi, "station.pick_window_x_m", self.pick_window_x_m, "needs min < max")
-        _require(
+        require(lo < hi, "station.pick_window_x_m", self.pick_window_x_m, "needs min < max")
+        require(
             _finite(self.base_position_m),
             "station.base_position_m",
             self.base_position_m,
             "must be finite",
         )
         classes = [b.class_name for b in self.bins]
-        _require(
+        require(
             len(set(classes)) == len(classes),
             "station.bins",
             classes,
@@ -337,11 +331,11 @@ class Cell:
     source: str = ""
 
     def __post_init__(self) -> None:
-        _require(len(self.stations) > 0, "stations", self.stations, "list at least one station")
+        require(len(self.stations) > 0, "stations", self.stations, "list at least one station")
         names = [s.name for s in self.stations]
-        _require(len(set(names)) == len(names), "stations", names, "station names must differ")
+        require(len(set(names)) == len(names), "stations", names, "station names must differ")
         spaces = [s.namespace for s in self.stations]
-        _require(
+        require(
             len(set(spaces)) == len(spaces),
             "stations",
             spaces,
@@ -349,7 +343,7 @@ class Cell:
         )
         for i, station in enumerate(self.stations):
             for b in station.bins:
-                _require(
+                require(
                     not self.belt.on_belt_xy(b.centre_x_m, b.centre_y_m),
                     f"stations[{i}].bins[{b.class_name}]",
                     (b.centre_x_m, b.centre_y_m),

@@ -41,48 +41,62 @@ def _fail(where: str, value: object, what: str) -> typing.NoReturn:
 
 
 def _convert(tp: Any, value: object, where: str) -> object:
-    origin = get_origin(tp)
     if tp is Any:
         return value
+    origin = get_origin(tp)
     if origin in (Union, types.UnionType):
-        options = get_args(tp)
-        if value is None and type(None) in options:
-            return None
-        errors = []
-        for option in options:
-            if option is type(None):
-                continue
-            try:
-                return _convert(option, value, where)
-            except ConfigError as exc:
-                errors.append(str(exc))
-        _fail(where, value, "matches none of the allowed types")
+        return _convert_union(tp, value, where)
     if dataclasses.is_dataclass(tp) and isinstance(tp, type):
         return _convert_dataclass(tp, value, where)
     if origin is tuple:
-        args = get_args(tp)
-        if not isinstance(value, list | tuple):
-            _fail(where, value, "expected a list")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
-        if len(args) != len(value):
-            _fail(where, value, f"expected {len(args)} values")
-        return tuple(
-            _convert(a, v, f"{where}[{i}]")
-            for i, (a, v) in enumerate(zip(args, value, strict=True))
-        )
+        return _convert_tuple(tp, value, where)
     if origin is dict:
-        key_type, value_type = get_args(tp)
-        if not isinstance(value, dict):
-            _fail(where, value, "expected a mapping")
-        return {
-            _convert(key_type, k, f"{where}.{k}"): _convert(value_type, v, f"{where}.{k}")
-            for k, v in value.items()
-        }
+        return _convert_dict(tp, value, where)
     if origin is typing.Literal:
         if value not in get_args(tp):
             _fail(where, value, f"must be one of {list(get_args(tp))}")
         return value
+    return _convert_scalar(tp, value, where)
+
+
+def _convert_union(tp: Any, value: object, where: str) -> object:
+    options = get_args(tp)
+    if value is None and type(None) in options:
+        return None
+    for option in options:
+        if option is type(None):
+            continue
+        try:
+            return _convert(option, value, where)
+        except ConfigError:
+            continue
+    _fail(where, value, "matches none of the allowed types")
+
+
+def _convert_tuple(tp: Any, value: object, where: str) -> tuple[object, ...]:
+    args = get_args(tp)
+    if not isinstance(value, list | tuple):
+        _fail(where, value, "expected a list")
+    if len(args) == 2 and args[1] is Ellipsis:
+        return tuple(_convert(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
+    if len(args) != len(value):
+        _fail(where, value, f"expected {len(args)} values")
+    return tuple(
+        _convert(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
+    )
+
+
+def _convert_dict(tp: Any, value: object, where: str) -> dict[object, object]:
+    key_type, value_type = get_args(tp)
+    if not isinstance(value, dict):
+        _fail(where, value, "expected a mapping")
+    return {
+        _convert(key_type, k, f"{where}.{k}"): _convert(value_type, v, f"{where}.{k}")
+        for k, v in value.items()
+    }
+
+
+def _convert_scalar(tp: Any, value: object, where: str) -> object:
     if tp is bool:
         if not isinstance(value, bool):
             _fail(where, value, "expected true or false")
@@ -116,7 +130,8 @@ def _convert_dataclass(cls: type, value: object, where: str) -> object:
     for key in value:
         if key not in names:
             allowed = ", ".join(sorted(names))
-            msg = f"{where}: unknown key {key!r} (allowed: {allowed})"
+            prefix = f"{where}: " if where else ""
+            msg = f"{prefix}unknown key {key!r} (allowed: {allowed})"
             raise ConfigError(msg)
     kwargs = {
         key: _convert(hints[key], item, f"{where}.{key}" if where else key)
@@ -128,5 +143,5 @@ def _convert_dataclass(cls: type, value: object, where: str) -> object:
         msg = f"{where}: {exc}" if where else str(exc)
         raise ConfigError(msg) from None
     except TypeError as exc:
-        msg = f"{where}: {exc}"
+        msg = f"{where}: {exc}" if where else str(exc)
         raise ConfigError(msg) from None

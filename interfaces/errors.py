@@ -14,3 +14,10 @@ class CdwTwinError(Exception):
 
 class ConfigError(CdwTwinError):
     """A configuration value (cell, scenario, robot, CLI option) is missing or out of range."""
+
+
+def require(condition: bool, key: str, value: object, what: str) -> None:
+    """Raise :class:`ConfigError` ``"<key> = <value>: <what>"`` unless ``condition`` holds."""
+    if not condition:
+        msg = f"{key} = {value!r}: {what}"
+        raise ConfigError(msg)

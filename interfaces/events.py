@@ -1,7 +1,7 @@
 """Sorting events: what happened to which object, and when (simulation time).
 
 The twin emits these from its step loop; scores are computed from them alone
-(:mod:`twin.scores`), so an event log is enough to recompute every metric offline.
+(:mod:`interfaces.metrics`), so an event log is enough to recompute every metric offline.
 """
 
 from __future__ import annotations

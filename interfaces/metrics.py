@@ -9,10 +9,16 @@ competitor, computes them; ``targeted`` comes from the controllers' statistics, 
 only the controller knows. An object's fate is its last deciding event: ``pick_success`` makes
 it picked, a later ``pick_dropped`` or ``fell_off`` makes it lost (until it is picked again),
 ``missed`` makes it missed unless it is picked afterwards; *processed* objects are those with
-a fate. For one station, the same rules apply to the events that station's ``detail`` names.
+a fate. For one station, the same rules apply to the events that name that station (their
+``data["station"]``); for one class, to the events about objects of that class.
+
+Every metric has *scopes*: ``line`` (the whole cell), ``station`` (one station's events and
+controller) and ``class`` (the objects of one class). A rate (``kind`` ``rate``) is the ratio
+of two counts of the table (``ratio_of``); pooled over episodes it is the ratio of the summed
+counts (with a Wilson interval), never the mean of the ratios.
 
 The reference's equations: (1) success rate = picked / processed, (2) miss rate = missed /
-processed, (3) throughput = picked per minute. Every rate is 0 when its denominator is 0.
+processed, (3) throughput = picked per minute. Every ratio is 0 when its denominator is 0.
 """
 
 from __future__ import annotations
@@ -23,12 +29,19 @@ from typing import Any, Literal
 
 from interfaces.events import Event, EventType
 
+Scope = Literal["line", "station", "class"]
+"""Where a metric is given: for the whole line, per station, per object class."""
+
+EVENT_SCOPES: tuple[Scope, ...] = ("line", "station", "class")
+CELL_SCOPES: tuple[Scope, ...] = ("line", "station")
+
 
 @dataclass(frozen=True, kw_only=True)
 class Metric:
     """One metric: ``name`` (the key in every table), unit, formula, what the reference calls
-    it, and how it pools over episodes (``count``: summed; ``rate``: a ratio of two counts, also
-    given as a Wilson interval over pooled counts; ``time``: averaged)."""
+    it, how it pools over episodes (``count``: summed; ``rate``: a ratio of two counts, also
+    given as a Wilson interval over pooled counts; ``time``: averaged) and where it is given
+    (``scopes``)."""
 
     name: str
     unit: str
@@ -36,38 +49,60 @@ class Metric:
     reference: str = ""
     kind: Literal["count", "rate", "time"]
     ratio_of: tuple[str, str] | None = None
+    scopes: tuple[Scope, ...] = CELL_SCOPES
 
 
 METRICS: tuple[Metric, ...] = (
-    Metric(name="spawned", unit="objects", formula="objects that entered the belt", kind="count"),
+    Metric(
+        name="spawned",
+        unit="objects",
+        formula="objects that entered the belt (for a station: that entered its pick window)",
+        kind="count",
+        scopes=EVENT_SCOPES,
+    ),
     Metric(
         name="processed",
         unit="objects",
         formula="objects whose fate is decided: picked + missed + lost",
         reference="processed objects (eq. 1, 2)",
         kind="count",
+        scopes=EVENT_SCOPES,
     ),
-    Metric(name="picked", unit="objects", formula="objects whose fate is picked", kind="count"),
+    Metric(
+        name="picked",
+        unit="objects",
+        formula="objects whose fate is picked",
+        kind="count",
+        scopes=EVENT_SCOPES,
+    ),
     Metric(
         name="missed",
         unit="objects",
-        formula="objects that left the (last) pick window downstream unpicked",
+        formula="objects that left the pick window downstream unpicked (for the line: the "
+        "most downstream station's) and were not picked later",
         kind="count",
+        scopes=EVENT_SCOPES,
     ),
     Metric(
         name="lost",
         unit="objects",
         formula="objects dropped away from every bin or fallen off, not picked again",
         kind="count",
+        scopes=EVENT_SCOPES,
     ),
     Metric(
-        name="placed", unit="objects", formula="objects that came to rest in a bin", kind="count"
+        name="placed",
+        unit="objects",
+        formula="objects that came to rest in a bin (for a station: in one of its bins)",
+        kind="count",
+        scopes=EVENT_SCOPES,
     ),
     Metric(
         name="placed_correct",
         unit="objects",
         formula="objects that came to rest in their class's bin",
         kind="count",
+        scopes=EVENT_SCOPES,
     ),
     Metric(
         name="targeted",
@@ -79,7 +114,7 @@ METRICS: tuple[Metric, ...] = (
     Metric(
         name="untargeted_total",
         unit="objects",
-        formula="objects a controller never targeted (by reason in untargeted)",
+        formula="objects a controller never targeted (by reason in `untargeted`)",
         kind="count",
     ),
     Metric(
@@ -95,6 +130,7 @@ METRICS: tuple[Metric, ...] = (
         reference="eq. 1, success rate",
         kind="rate",
         ratio_of=("picked", "processed"),
+        scopes=EVENT_SCOPES,
     ),
     Metric(
         name="miss_rate",
@@ -103,6 +139,7 @@ METRICS: tuple[Metric, ...] = (
         reference="eq. 2, miss rate",
         kind="rate",
         ratio_of=("missed", "processed"),
+        scopes=EVENT_SCOPES,
     ),
     Metric(
         name="pick_throughput_per_min",
@@ -130,6 +167,7 @@ METRICS: tuple[Metric, ...] = (
         formula="placed_correct / spawned",
         kind="rate",
         ratio_of=("placed_correct", "spawned"),
+        scopes=EVENT_SCOPES,
     ),
     Metric(
         name="correct_bin_ratio",
@@ -137,6 +175,7 @@ METRICS: tuple[Metric, ...] = (
         formula="placed_correct / placed",
         kind="rate",
         ratio_of=("placed_correct", "placed"),
+        scopes=EVENT_SCOPES,
     ),
     Metric(
         name="time_per_object_s",
@@ -158,16 +197,56 @@ METRICS: tuple[Metric, ...] = (
         kind="time",
     ),
     Metric(
+        name="tracking_pursuits",
+        unit="pursuits",
+        formula="targets the twin measured a tracking time for (settled or not)",
+        kind="count",
+    ),
+    Metric(
+        name="tracking_unsettled",
+        unit="pursuits",
+        formula="pursuits whose TCP never stayed within 4 mm until they ended",
+        kind="count",
+    ),
+    Metric(
         name="real_time_factor",
         unit="1",
         formula="simulated seconds / wall seconds of the twin's step loop",
         kind="time",
+        scopes=("line",),
+    ),
+    Metric(
+        name="faults",
+        unit="faults",
+        formula="fault events other than injected ones (rejected commands, controller timeouts)",
+        kind="count",
+    ),
+    Metric(
+        name="injected_faults",
+        unit="faults",
+        formula="the scenario's injected-fault window edges (fault events of kind `injected_*`)",
+        kind="count",
+        scopes=("line",),
+    ),
+    Metric(
+        name="controller_restarts",
+        unit="restarts",
+        formula="controller processes started after the first (the scenario's planned restarts)",
+        kind="count",
     ),
 )
 """Every metric, in the order tables list them."""
 
 BY_NAME: dict[str, Metric] = {m.name: m for m in METRICS}
 """The metric table by name."""
+
+RATES: tuple[Metric, ...] = tuple(m for m in METRICS if m.kind == "rate" and m.ratio_of)
+"""The rates: each the ratio of two counts of the table."""
+
+
+def in_scope(scope: Scope) -> tuple[str, ...]:
+    """The names of the metrics given for ``scope``, in table order."""
+    return tuple(m.name for m in METRICS if scope in m.scopes)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -187,27 +266,56 @@ class Counts:
     spawned_by_class: Mapping[str, int] = field(default_factory=dict)
 
 
-def _station_of(event: Event) -> str | None:
+def station_of(event: Event) -> str | None:
+    """The station an event names (its ``data["station"]``), None for a cell-wide event."""
     station = event.data.get("station")
     return None if station is None else str(station)
 
 
+def _selected(
+    events: Iterable[Event], station: str | None, class_name: str | None
+) -> Iterable[Event]:
+    for event in events:
+        if station is not None and station_of(event) != station:
+            continue
+        if class_name is not None and event.class_name != class_name:
+            continue
+        yield event
+
+
+def exit_station(stations: Iterable[Any]) -> str:
+    """The name of the station whose pick window ends the line (the most downstream one): an
+    object it misses is missed by the line. ``stations`` are a cell's
+    (:class:`interfaces.cell.StationSpec`: ``name``, ``pick_window_x_m``)."""
+    return str(max(stations, key=lambda s: s.pick_window_x_m[1]).name)
+
+
 def count_events(
-    events: Iterable[Event], duration_s: float, *, station: str | None = None
+    events: Iterable[Event],
+    duration_s: float,
+    *,
+    station: str | None = None,
+    class_name: str | None = None,
+    line_exit: str | None = None,
 ) -> Counts:
     """The counts of an episode of ``duration_s`` simulated seconds from its events.
 
     With ``station``, only events that name that station count, and ``spawned`` is the number
-    of objects that entered its pick window.
+    of objects that entered its pick window. With ``class_name``, only events about objects of
+    that class count.
+
+    ``line_exit`` (for the line, ``station`` None) names the station whose window ends the line
+    (:func:`exit_station`): then only its ``missed`` events (and those naming no station) make
+    an object missed for the line; an object an upstream station missed is still on its way to
+    the next window (undecided) unless it is picked, lost or missed there. Without it every
+    ``missed`` event counts, which is exact for a cell of one station.
     """
     spawned: dict[int, str] = {}
     fate: dict[int, str] = {}
     placed: set[int] = set()
     placed_correct: dict[int, str] = {}
     unintended = 0
-    for event in events:
-        if station is not None and _station_of(event) != station:
-            continue
+    for event in _selected(events, station, class_name):
         oid, kind = event.object_id, event.type
         if kind is EventType.SPAWNED and station is None:
             spawned[oid] = event.class_name
@@ -216,7 +324,8 @@ def count_events(
         elif kind is EventType.PICK_SUCCESS:
             fate[oid] = "picked"
         elif kind is EventType.MISSED:
-            fate.setdefault(oid, "missed")
+            if station is not None or line_exit is None or station_of(event) in (None, line_exit):
+                fate.setdefault(oid, "missed")
         elif kind in (EventType.FELL_OFF, EventType.PICK_DROPPED):
             if fate.get(oid) != "missed":
                 fate[oid] = "lost"
@@ -254,9 +363,18 @@ def ratio(numerator: float, denominator: float) -> float:
     return numerator / denominator if denominator else 0.0
 
 
-def event_scores(counts: Counts) -> dict[str, Any]:
-    """The metrics the events alone give (the twin's ``summary.json`` ``scores``)."""
-    minutes = counts.duration_s / 60.0
+def rate(name: str, counts: Mapping[str, float]) -> float:
+    """The rate ``name`` of the table from ``counts`` (its two counts by name, e.g. summed
+    over episodes): ``ratio(counts[numerator], counts[denominator])``."""
+    metric = BY_NAME[name]
+    if metric.ratio_of is None:
+        msg = f"metric {name!r} is not a ratio of two counts"
+        raise KeyError(msg)
+    numerator, denominator = metric.ratio_of
+    return ratio(counts[numerator], counts[denominator])
+
+
+def _count_values(counts: Counts) -> dict[str, float]:
     return {
         "spawned": counts.spawned,
         "processed": counts.processed,
@@ -265,19 +383,72 @@ def event_scores(counts: Counts) -> dict[str, Any]:
         "lost": counts.lost,
         "placed": counts.placed,
         "placed_correct": counts.placed_correct,
-        "pick_success_rate": ratio(counts.picked, counts.processed),
-        "miss_rate": ratio(counts.missed, counts.processed),
+    }
+
+
+def event_scores(counts: Counts) -> dict[str, Any]:
+    """The metrics the events alone give (the twin's ``summary.json`` ``scores``)."""
+    minutes = counts.duration_s / 60.0
+    values = _count_values(counts)
+    return {
+        "spawned": counts.spawned,
+        "processed": counts.processed,
+        "picked": counts.picked,
+        "missed": counts.missed,
+        "lost": counts.lost,
+        "placed": counts.placed,
+        "placed_correct": counts.placed_correct,
+        "pick_success_rate": rate("pick_success_rate", values),
+        "miss_rate": rate("miss_rate", values),
         "pick_throughput_per_min": ratio(counts.picked, minutes),
-        "recovery_rate": ratio(counts.placed_correct, counts.spawned),
-        "correct_bin_ratio": ratio(counts.placed_correct, counts.placed),
+        "recovery_rate": rate("recovery_rate", values),
+        "correct_bin_ratio": rate("correct_bin_ratio", values),
         "time_per_object_s": ratio(counts.duration_s, counts.picked),
         "unintended_contacts": counts.unintended_contacts,
         "duration_s": counts.duration_s,
         "recovery_by_class": {
-            name: ratio(counts.placed_correct_by_class.get(name, 0), n)
+            name: rate(
+                "recovery_rate",
+                {"placed_correct": counts.placed_correct_by_class.get(name, 0), "spawned": n},
+            )
             for name, n in sorted(counts.spawned_by_class.items())
         },
     }
+
+
+def class_names(events: Iterable[Event]) -> list[str]:
+    """The object classes the events name, sorted (events about no object left out)."""
+    return sorted({e.class_name for e in events if e.class_name})
+
+
+def class_scores(
+    events: Sequence[Event],
+    duration_s: float,
+    *,
+    station: str | None = None,
+    line_exit: str | None = None,
+) -> dict[str, dict[str, Any]]:
+    """Per object class, the metrics of scope ``class`` (of the line, or of one station;
+    ``line_exit`` as for :func:`count_events`)."""
+    names = in_scope("class")
+    out: dict[str, dict[str, Any]] = {}
+    for class_name in class_names(events):
+        counts = count_events(
+            events, duration_s, station=station, class_name=class_name, line_exit=line_exit
+        )
+        scores = event_scores(counts)
+        out[class_name] = {name: scores[name] for name in names}
+    return out
+
+
+def station_names(events: Iterable[Event]) -> list[str]:
+    """The stations the events name, in order of first appearance."""
+    seen: dict[str, None] = {}
+    for event in events:
+        station = station_of(event)
+        if station is not None:
+            seen.setdefault(station)
+    return list(seen)
 
 
 def targeted_objects(controller_stats: Sequence[Mapping[str, Any]], landing: int) -> int:
@@ -302,12 +473,48 @@ def untargeted_objects(controller_stats: Sequence[Mapping[str, Any]]) -> dict[st
     return out
 
 
+def landing_by_station(events: Iterable[Event], landing: Iterable[int]) -> dict[str, int]:
+    """How many of the ``landing`` objects (still falling into a bin at the end) each station
+    released: the station of each one's last ``pick_success``."""
+    last_picker: dict[int, str] = {}
+    for event in events:
+        station = station_of(event)
+        if event.type is EventType.PICK_SUCCESS and station is not None:
+            last_picker[event.object_id] = station
+    return _tally(last_picker[oid] for oid in landing if oid in last_picker)
+
+
 def controller_scores(counts: Counts, targeted: int) -> dict[str, float]:
     """The metrics that need the controllers' ``targeted`` count."""
     minutes = counts.duration_s / 60.0
     return {
-        "success_rate": ratio(counts.placed_correct, targeted),
+        "success_rate": rate(
+            "success_rate", {"placed_correct": counts.placed_correct, "targeted": targeted}
+        ),
         "throughput_per_min": ratio(counts.placed_correct, minutes),
+    }
+
+
+def fault_counts(events: Iterable[Event], *, station: str | None = None) -> dict[str, int]:
+    """``faults`` (fault events other than injected ones) and ``injected_faults``; with
+    ``station``, only the fault events that name it."""
+    kinds = [
+        str(e.data.get("kind", ""))
+        for e in _selected(events, station, None)
+        if e.type is EventType.FAULT
+    ]
+    injected = sum(1 for k in kinds if k.startswith("injected_"))
+    return {"faults": len(kinds) - injected, "injected_faults": injected}
+
+
+def tracking_metrics(tracking: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The tracking metrics of a twin ``tracking`` block (None values without one)."""
+    tracking = tracking or {}
+    return {
+        "tracking_time_4mm_mean_s": tracking.get("tracking_time_4mm_mean_s"),
+        "tracking_time_4mm_p95_s": tracking.get("tracking_time_4mm_p95_s"),
+        "tracking_pursuits": tracking.get("pursuits"),
+        "tracking_unsettled": tracking.get("unsettled"),
     }
 
 

@@ -7,13 +7,7 @@ from pathlib import Path
 
 from interfaces.catalog import entry
 from interfaces.dataclass_io import from_data
-from interfaces.errors import ConfigError
-
-
-def _require(condition: bool, key: str, value: object, what: str) -> None:
-    if not condition:
-        msg = f"{key} = {value!r}: {what}"
-        raise ConfigError(msg)
+from interfaces.errors import ConfigError, require
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -46,8 +40,8 @@ class RobotSpec:
 
     def __post_init__(self) -> None:
         n = len(self.arm_joints)
-        _require(n > 0, "robot.arm_joints", self.arm_joints, "must not be empty")
-        _require(
+        require(n > 0, "robot.arm_joints", self.arm_joints, "must not be empty")
+        require(
             len(set(self.arm_joints)) == n, "robot.arm_joints", self.arm_joints, "must be unique"
         )
         for key in (
@@ -57,10 +51,10 @@ class RobotSpec:
             "joint_max_jerk_rps3",
         ):
             values: tuple[float, ...] = getattr(self, key)
-            _require(len(values) == n, f"robot.{key}", values, f"needs {n} values, one per joint")
+            require(len(values) == n, f"robot.{key}", values, f"needs {n} values, one per joint")
         for key in ("joint_max_acceleration_rps2", "joint_max_jerk_rps3"):
             values = getattr(self, key)
-            _require(all(v > 0 for v in values), f"robot.{key}", values, "must be positive")
+            require(all(v > 0 for v in values), f"robot.{key}", values, "must be positive")
 
 
 def robot_from_data(value: object, where: str) -> RobotSpec:

@@ -11,13 +11,7 @@ from typing import Literal
 
 from interfaces.catalog import entry
 from interfaces.dataclass_io import from_data
-from interfaces.errors import ConfigError
-
-
-def _require(condition: bool, key: str, value: object, what: str) -> None:
-    if not condition:
-        msg = f"{key} = {value!r}: {what}"
-        raise ConfigError(msg)
+from interfaces.errors import ConfigError, require
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -57,14 +51,14 @@ class ParallelJawSpec:
 
     def __post_init__(self) -> None:
         n = len(self.joints)
-        _require(n > 0, "tool.joints", self.joints, "must not be empty")
-        _require(len(self.joint_open) == n, "tool.joint_open", self.joint_open, "one per joint")
-        _require(
+        require(n > 0, "tool.joints", self.joints, "must not be empty")
+        require(len(self.joint_open) == n, "tool.joint_open", self.joint_open, "one per joint")
+        require(
             len(self.joint_closed) == n, "tool.joint_closed", self.joint_closed, "one per joint"
         )
-        _require(self.max_opening_m > 0, "tool.max_opening_m", self.max_opening_m, "must be > 0")
-        _require(self.dwell_s >= 0, "tool.dwell_s", self.dwell_s, "must be >= 0")
-        _require(
+        require(self.max_opening_m > 0, "tool.max_opening_m", self.max_opening_m, "must be > 0")
+        require(self.dwell_s >= 0, "tool.dwell_s", self.dwell_s, "must be >= 0")
+        require(
             all(v > 0 for v in self.tcp_half_extents_m),
             "tool.tcp_half_extents_m",
             self.tcp_half_extents_m,
@@ -79,7 +73,7 @@ class ParallelJawSpec:
             "palm_above_tcp_m",
         ):
             value: float = getattr(self, key)
-            _require(value >= 0, f"tool.{key}", value, "must be >= 0")
+            require(value >= 0, f"tool.{key}", value, "must be >= 0")
 
 
 ToolSpec = ParallelJawSpec

@@ -22,6 +22,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Self
 
+from interfaces.cell import MAX_DRIVE_STEP_S, DriveMapping
 from twin.errors import FmuError
 
 _FLOAT_TYPES = {"Real", "Float64"}
@@ -29,7 +30,7 @@ _INT_TYPES = {"Integer", "Int32"}
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 """Range of an FMI ``Int32`` (FMI 3) / ``Integer`` (FMI 2, a C ``int``) variable."""
 
-MAX_STEP_S = 1.0
+MAX_STEP_S = MAX_DRIVE_STEP_S
 """Longest communication step :meth:`BeltDrive.step` accepts, in seconds.
 
 The inputs are held constant over a step and the FMU integrates it with its own fixed internal
@@ -82,19 +83,9 @@ class BeltState:
     motor_current_A: float
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
-class VariableMapping:
-    """Names of the FMU variables that play each role; the defaults are our BeltDrive FMU's.
-
-    ``load_mass``, ``motor_torque`` and ``motor_current`` may be None for drives without them.
-    """
-
-    speed_setpoint: str = "speed_setpoint_mps"
-    load_mass: str | None = "load_mass_kg"
-    belt_speed: str = "belt_speed_mps"
-    belt_position: str = "belt_position_m"
-    motor_torque: str | None = "motor_torque_Nm"
-    motor_current: str | None = "motor_current_A"
+VariableMapping = DriveMapping
+"""Names of the FMU variables that play each role (a cell's ``drive.mapping``); the defaults are
+our BeltDrive FMU's."""
 
 
 class BeltDrive:

@@ -42,12 +42,9 @@ def _twin_command(objects: int, seconds: float) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark."""
     import rclpy
-    from cdw_interfaces.msg import Ping
-    from rosgraph_msgs.msg import Clock
 
     from interfaces.lifecycle import PARENT_PID_VARIABLE
     from twin.ros_isolation import clean_stale_fastdds_shm, ros_domain
-    from twin.ros_node import CLOCK_QOS, STREAM_QOS, make_executor
 
     clean_stale_fastdds_shm()
     seconds = args.count / args.rate + 30.0
@@ -61,62 +58,8 @@ def run(args: argparse.Namespace) -> int:
         )
         rclpy.init()
         node = rclpy.create_node("rtt_client")
-        executor = make_executor()
-        executor.add_node(node)
-        clock_seen = {"n": 0}
-        rtts: dict[int, float] = {}
-        sent: dict[int, int] = {}
-
-        def on_clock(_: Clock) -> None:
-            clock_seen["n"] += 1
-
-        def on_echo(msg: Ping) -> None:
-            now = time.monotonic_ns()
-            if msg.seq in sent and msg.seq not in rtts:
-                rtts[msg.seq] = (now - msg.client_send_ns) / 1e6
-
-        node.create_subscription(Clock, "/clock", on_clock, CLOCK_QOS)
-        node.create_subscription(Ping, "/ping/echo", on_echo, STREAM_QOS)
-        pub = node.create_publisher(Ping, "/ping", STREAM_QOS)
-        result: dict[str, Any]
         try:
-            deadline = time.monotonic() + 120.0
-            while (
-                clock_seen["n"] < 240 or pub.get_subscription_count() == 0
-            ) and time.monotonic() < deadline:
-                if twin.poll() is not None:
-                    err = twin.stderr.read().decode() if twin.stderr else ""
-                    msg = f"the twin node exited early: {err[-2000:]}"
-                    raise RuntimeError(msg)
-                executor.spin_once(timeout_sec=0.05)
-            period_ns = int(1e9 / args.rate)
-            next_ns = time.monotonic_ns()
-            for seq in range(args.count):
-                while True:
-                    wait = (next_ns - time.monotonic_ns()) / 1e9
-                    if wait <= 0:
-                        break
-                    executor.spin_once(timeout_sec=wait)
-                sent[seq] = time.monotonic_ns()
-                pub.publish(Ping(seq=seq, client_send_ns=sent[seq]))
-                next_ns += period_ns
-            end = time.monotonic() + 1.0
-            while time.monotonic() < end and len(rtts) < len(sent):
-                executor.spin_once(timeout_sec=0.05)
-            values = np.array([rtts[s] for s in sorted(rtts)])
-            result = {
-                "rate_hz": args.rate,
-                "count": args.count,
-                "objects": args.objects,
-                "received": int(values.size),
-                "lost": len(sent) - int(values.size),
-                "p50_ms": float(np.percentile(values, 50)),
-                "p95_ms": float(np.percentile(values, 95)),
-                "p99_ms": float(np.percentile(values, 99)),
-                "max_ms": float(values.max()),
-                "mean_ms": float(values.mean()),
-                "series_ms": [round(float(v), 4) for v in values],
-            }
+            result = _ping(node, twin, args)
         finally:
             node.destroy_node()
             rclpy.shutdown()
@@ -132,3 +75,65 @@ def run(args: argparse.Namespace) -> int:
             if key != "series_ms":
                 print(f"{key:>10}: {value}")
     return 0
+
+
+def _ping(node: Any, twin: subprocess.Popen[bytes], args: argparse.Namespace) -> dict[str, Any]:
+    """Wait for the twin's clock, ping it ``args.count`` times, return the figures."""
+    from cdw_interfaces.msg import Ping
+    from rosgraph_msgs.msg import Clock
+
+    from interfaces.contract import CLOCK_TOPIC, PING, PING_ECHO
+    from interfaces.ros import qos_profile
+    from twin.ros_node import make_executor
+
+    executor = make_executor()
+    executor.add_node(node)
+    clock_seen = {"n": 0}
+    rtts: dict[int, float] = {}
+    sent: dict[int, int] = {}
+
+    def on_clock(_: Clock) -> None:
+        clock_seen["n"] += 1
+
+    def on_echo(msg: Ping) -> None:
+        now = time.monotonic_ns()
+        if msg.seq in sent and msg.seq not in rtts:
+            rtts[msg.seq] = (now - msg.client_send_ns) / 1e6
+
+    node.create_subscription(Clock, CLOCK_TOPIC.name, on_clock, qos_profile(CLOCK_TOPIC.qos))
+    node.create_subscription(Ping, PING_ECHO.name, on_echo, qos_profile(PING_ECHO.qos))
+    pub = node.create_publisher(Ping, PING.name, qos_profile(PING.qos))
+    deadline = time.monotonic() + 120.0
+    while (
+        clock_seen["n"] < 240 or pub.get_subscription_count() == 0
+    ) and time.monotonic() < deadline:
+        if twin.poll() is not None:
+            err = twin.stderr.read().decode() if twin.stderr else ""
+            msg = f"the twin node exited early: {err[-2000:]}"
+            raise RuntimeError(msg)
+        executor.spin_once(timeout_sec=0.05)
+    period_ns = int(1e9 / args.rate)
+    next_ns = time.monotonic_ns()
+    for seq in range(args.count):
+        while (wait := (next_ns - time.monotonic_ns()) / 1e9) > 0:
+            executor.spin_once(timeout_sec=wait)
+        sent[seq] = time.monotonic_ns()
+        pub.publish(Ping(seq=seq, client_send_ns=sent[seq]))
+        next_ns += period_ns
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end and len(rtts) < len(sent):
+        executor.spin_once(timeout_sec=0.05)
+    values = np.array([rtts[s] for s in sorted(rtts)])
+    return {
+        "rate_hz": args.rate,
+        "count": args.count,
+        "objects": args.objects,
+        "received": int(values.size),
+        "lost": len(sent) - int(values.size),
+        "p50_ms": float(np.percentile(values, 50)),
+        "p95_ms": float(np.percentile(values, 95)),
+        "p99_ms": float(np.percentile(values, 99)),
+        "max_ms": float(values.max()),
+        "mean_ms": float(values.mean()),
+        "series_ms": [round(float(v), 4) for v in values],
+    }

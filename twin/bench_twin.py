@@ -101,8 +101,7 @@ def _measure(scenario: Scenario, dataset: Path, args: argparse.Namespace) -> dic
     seconds = scenario.duration_s
     with Twin(scenario, dataset_dir=dataset, perception_enabled=False) as twin:
         twin.reset(seed=0)
-        assert twin.robot is not None
-        home = np.array(twin.cell.robot.home_joint_positions)
+        home = np.array(twin.cell.stations[0].robot.home_joint_positions)
         on_belt = sum(1 for o in twin.observe().objects if o.on_belt)
         steps = round(seconds / twin.dt_s)
         if args.realtime:

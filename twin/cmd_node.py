@@ -5,6 +5,10 @@ Example (two shells, same ``ROS_DOMAIN_ID``)::
     cdw-twin twin-node --speed 0.4 --duration 60 --mode realtime --out runs/ep0
     cdw-twin controller
 
+The cell is the scenario's ``cell`` (default: the reference cell) unless ``--cell`` names
+another (a shipped cell's name, such as ``two_pandas``, or a path); a cell of several stations
+takes one controller per station, each on its station's namespace.
+
 The episode log goes to ``--out`` (see :mod:`twin.episode_log`): the folder and its
 ``status.json`` exist from the start, ``events.jsonl`` is appended as events happen (flushed at
 least every 0.5 s of wall time, so even ``kill -9`` keeps every event up to the last second),
@@ -32,8 +36,9 @@ from typing import TYPE_CHECKING, Any
 from interfaces.lifecycle import STOP_SIGNALS, die_with_parent
 
 if TYPE_CHECKING:
-    from experiments.record import McapRecording
+    from interfaces.cell import Cell
     from twin.episode_log import EventLog
+    from twin.recording import McapRecording
     from twin.scenario import Scenario
     from twin.sim import Twin
 
@@ -65,6 +70,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     """Add the node's options."""
     parser.add_argument("--scenario", type=Path, default=None, help="scenario YAML")
     parser.add_argument(
+        "--cell",
+        default=None,
+        metavar="PATH_OR_NAME",
+        help="cell file, or the name of a shipped cell (default: the scenario's)",
+    )
+    parser.add_argument(
         "--dataset",
         type=Path,
         default=None,
@@ -88,10 +99,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path]:
-    """The scenario with command-line overrides, and the dataset folder."""
+def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path, Cell]:
+    """The scenario with command-line overrides, the dataset folder and the cell, checked
+    together (:func:`twin.scenario_check.check_scenario`).
+
+    The scenario's ``cell`` and ``dataset`` are relative to its file; ``args.cell`` (when set)
+    names the cell instead, relative to the working directory.
+    """
+    from interfaces.cell import load_cell
     from twin.builtin import builtin_dataset
-    from twin.scenario import Scenario
+    from twin.scenario import Scenario, scenario_cell
     from twin.scenario_check import check_scenario
 
     scenario = Scenario.load(args.scenario) if args.scenario else Scenario()
@@ -118,32 +135,43 @@ def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path]:
             dataset = (args.scenario.parent / dataset).resolve()
     else:
         dataset = builtin_dataset()
-    check_scenario(scenario, dataset, where=str(args.scenario or "default scenario"))
-    return scenario, dataset
+    where = str(args.scenario or "default scenario")
+    cell_arg = getattr(args, "cell", None)
+    if cell_arg is not None:
+        cell = load_cell(cell_arg)
+    else:
+        base = args.scenario.parent if args.scenario is not None else None
+        cell = scenario_cell(scenario, base, where)
+    check_scenario(scenario, dataset, where=where, cell=cell)
+    return scenario, dataset, cell
 
 
 def _final_state(twin: Twin) -> dict[str, object]:
-    """Exact end state (for determinism checks): joints and every object's pose."""
+    """Exact end state (for determinism checks): every station's arm joints (in station order)
+    and every object's pose."""
     obs = twin.observe()
     return {
         "step": obs.step,
-        "joint_positions": list(obs.joint_positions),
+        "joint_positions": [q for arm in obs.arms for q in arm.joint_positions],
         "belt_position_m": obs.belt.belt_position_m,
         "objects": {str(o.id): [*o.position_m, *o.orientation_xyzw] for o in obs.objects},
     }
 
 
-def _open_recording(out: Path | None) -> McapRecording | None:
-    """The episode's MCAP of every topic, written as ``OUT.partial`` until it is closed.
+def _open_recording(out: Path | None, cell: Cell) -> McapRecording | None:
+    """The episode's MCAP of every topic of the cell (every station's under its namespace),
+    written as ``OUT.partial`` until it is closed.
 
     Chunks are flushed every 0.5 s, so a killed twin leaves a readable ``OUT.partial`` (see
-    :mod:`experiments.record`).
+    :mod:`twin.recording`).
     """
     if out is None:
         return None
-    from experiments.record import DEFAULT_FLUSH_INTERVAL_S, TOPICS, McapRecording
+    from interfaces.contract import resolved_topics
+    from twin.recording import DEFAULT_FLUSH_INTERVAL_S, McapRecording
 
-    return McapRecording(out, TOPICS, flush_interval_s=DEFAULT_FLUSH_INTERVAL_S)
+    topics = resolved_topics(tuple(s.namespace for s in cell.stations))
+    return McapRecording(out, topics, flush_interval_s=DEFAULT_FLUSH_INTERVAL_S)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -171,7 +199,7 @@ def _run_episode(args: argparse.Namespace, stop: list[int]) -> bool:
     from twin.ros_isolation import clean_stale_fastdds_shm, local_ros_defaults
     from twin.sim import Twin
 
-    scenario, dataset = build_scenario(args)
+    scenario, dataset, cell = build_scenario(args)
     perception = PerceptionConfig.zero_noise() if args.perception == "zero" else None
     local_ros_defaults()
     clean_stale_fastdds_shm()
@@ -187,6 +215,7 @@ def _run_episode(args: argparse.Namespace, stop: list[int]) -> bool:
                 Twin(
                     scenario,
                     dataset_dir=dataset,
+                    cell=cell,
                     perception=perception,
                     event_sink=None if log is None else log.append,
                 )
@@ -210,7 +239,7 @@ def _serve(args: argparse.Namespace, twin: Twin, stop: list[int], log: EventLog 
 
     scenario = twin.scenario
     twin.reset()
-    recording = _open_recording(args.record)
+    recording = _open_recording(args.record, twin.cell)
     # rclpy's own SIGINT handler would shut the context down under the step loop
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = TwinNode(
@@ -231,8 +260,7 @@ def _serve(args: argparse.Namespace, twin: Twin, stop: list[int], log: EventLog 
         recording.close()
     if log is not None:
         log.close()
-    twin.targets.finish(twin.time_s)
-    scores = twin.scores()
+    twin.finish_pursuits()
     summary = {
         "scenario": scenario.name,
         "seed": scenario.seed,
@@ -242,12 +270,21 @@ def _serve(args: argparse.Namespace, twin: Twin, stop: list[int], log: EventLog 
         "sim_seconds": twin.time_s,
         "wall_seconds": wall,
         "real_time_factor": twin.time_s / wall if wall > 0 else 0.0,
-        "scores": dataclasses.asdict(scores),
+        "cell": twin.cell.name,
+        "scores": twin.scores(),
+        "stations": {
+            link.name: {
+                "scores": twin.scores(link.name),
+                "tracking": tracking_summary(twin.tracking_results(link.name)),
+                "latency": link.telemetry.summary()["latency"],
+            }
+            for link in node.links
+        },
         "landing_in_bins": twin.landing_in_bins(),
-        "tracking": tracking_summary(twin.targets.results),
+        "tracking": tracking_summary(twin.tracking_results()),
         "published": dict(node.counters.published),
         "received_commands": node.counters.received_commands,
-        "rejected_commands": dict(node.counters.rejected or {}),
+        "rejected_commands": dict(node.counters.rejected),
         "lockstep_timeouts": node.counters.lockstep_timeouts,
         "priorities": list(node.priorities),
         "final_state": _final_state(twin),

@@ -19,27 +19,12 @@ import numpy as np
 
 from interfaces.fileio import write_atomic
 from twin.errors import SceneError
-from twin.objects import read_lines
+from twin.objects import read_mesh
 
 
 def read_pieces(path: Path) -> list[np.ndarray]:
     """Vertices of each ``o`` block of a convex-pieces OBJ, ``[(n, 3) float, ...]``."""
-    pieces: list[list[list[float]]] = []
-    current: list[list[float]] | None = None
-    for number, line in enumerate(read_lines(path), start=1):
-        if line.startswith("o "):
-            current = []
-            pieces.append(current)
-        elif line.startswith("v "):
-            if current is None:
-                current = []
-                pieces.append(current)
-            try:
-                current.append([float(v) for v in line.split()[1:4]])
-            except ValueError:
-                msg = f"{path}:{number}: malformed vertex line {line!r}"
-                raise SceneError(msg) from None
-    arrays = [np.asarray(p, dtype=float) for p in pieces if len(p) >= 4]
+    arrays = [v for v in read_mesh(path).group_vertices() if len(v) >= 4]
     if not arrays:
         msg = f"{path}: no convex piece with at least 4 vertices"
         raise SceneError(msg)

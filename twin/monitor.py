@@ -1,59 +1,51 @@
 """Event detection, the grasp approximation and ground truth, evaluated after every physics step.
 
-Grasp approximation (as the reference defines it): finger contacts come from the contact points
-on each finger link; a small box around the TCP is the overlap volume. A pick succeeds when the
-TCP volume has overlapped the object continuously for the dwell time (0.6 s default) *and* the
-fingers touch it from opposite sides (contact normals pointing against each other) while the
-gripper presses: its commanded opening is narrower than its measured one (by more than
-``GRIP_TOLERANCE_M``; the fingers stop on the object while the target lies inside it, whatever
-the object's width) *and* the object is in the pick window at that step: on the belt with its
-centre of mass's x in ``[min_x_m, max_x_m]`` (``CellConfig.workspace``). A grasp that completes
-outside the window (past it, or off the belt, e.g. an object dragged along by the fingers) is
-not a pick; an object that left the window downstream unpicked is ``missed``. The object is
-then held by a fixed constraint to the TCP link; it is released once the gripper no longer
-presses: commanded no narrower than measured, within half the tolerance (so a jaw-wide object,
-which holds the fingers at full opening where commanding "open" cannot exceed the measured
-opening, is let go too).
+Grasp approximation (as the reference defines it), per station: contacts come from the contact
+points on the links of the station's tool (:mod:`twin.tools`); a small box about its TCP (the
+tool's ``tcp_half_extents_m``) is the overlap volume. A pick succeeds when the TCP volume has
+overlapped the object continuously for the tool's dwell time (0.6 s default) *and* the tool's
+grasp rule holds (a parallel jaw: opposite finger contacts while it presses) *and* the object
+is in that station's pick window at that step: on the belt with its centre of mass's x in
+``StationSpec.pick_window_x_m``. A grasp that completes outside the window (past it, or off the
+belt, e.g. an object dragged along by the fingers) is not a pick; an object that left a
+station's window downstream unpicked is ``missed`` there. The object is then held by a fixed
+constraint to the tool's TCP link until the tool lets it go (its release rule).
 
-Fates and events:
+Fates and events (every event about a robot or a window names its ``station``):
 
-- ``entered_workspace`` / ``left_workspace``: the object's centre of mass crosses the pick window
-  while on the belt. Leaving it downstream without having been picked also emits ``missed``.
+- ``entered_workspace`` / ``left_workspace``: the object's centre of mass crosses a station's
+  pick window while on the belt. Leaving it downstream without having been picked also emits
+  ``missed``.
 - ``fell_off``: the object dropped below the belt surface outside any bin (over the belt's end
   or its side); it is removed from the scene.
 - ``placed_in_bin``: the object came to lie inside a bin (``correct`` when the bin sorts its
-  class); it is removed from the physics (it is sorted) but keeps its ground truth.
+  class; ``station`` is the bin's); it is removed from the physics (it is sorted) but keeps its
+  ground truth.
 - ``pick_dropped``: a held object was released (or lost) away from every bin.
-- ``unintended_contact``: a robot link touches an object the robot is not picking (neither held,
-  nor overlapping the TCP volume, nor under the open gripper).
+- ``unintended_contact``: a robot link touches an object the robot is not picking (neither held
+  by it, nor overlapping its TCP volume, nor within its tool's engaged radius).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 
 import pybullet as pb
 
+from interfaces.cell import BinSpec, Cell
 from interfaces.events import Event, EventType
-from twin.config import CellConfig
 from twin.objects import read_obj_triangles
-from twin.robot import Robot
+from twin.station import Station
 from twin.stream import Placement
+from twin.tools import Normal, Pose
 from twin.top_view import FloatArray, TopView, top_view
 from twin.world import SpawnedBody, World
 
 _NEAR_TCP_M = 0.25
-
-GRIP_TOLERANCE_M = 0.0005
-"""How much narrower than the measured opening the gripper must be commanded to count as
-pressing (a grip starts)."""
-
-RELEASE_GAP_M = -0.5 * GRIP_TOLERANCE_M
-"""Commanded minus measured opening above which a held object is let go: the gripper no longer
-presses. Between this and ``-GRIP_TOLERANCE_M`` a grip neither starts nor ends (no flicker)."""
+_NEAR2_M2 = _NEAR_TCP_M**2
 
 LANDING_S = 0.5
 """An object released over a bin this recently and still above its top is landing (a 0.25 m
@@ -63,13 +55,13 @@ _MAX_SINKING_SPEED_MPS = 1.0
 """Bound on how fast the centre of mass of an object riding the belt can sink towards it."""
 
 _MAX_CLOSING_SPEED_MPS = 4.0
-"""Bound on how fast an object riding the belt and the TCP approach each other or a boundary.
+"""Bound on how fast an object riding the belt and a TCP approach each other or a boundary.
 
-An object on the fast path (riding, away from the TCP, untouched) is polled again only when it
-could have reached a boundary (belt edge, workspace limit, the TCP's near zone) at this speed,
-or its centre of mass the belt surface at :data:`_MAX_SINKING_SPEED_MPS`;
-until then nothing about it can change. Objects touched by the arm are polled every step, and
-poses asked for (ground truth, the target metric) are always read fresh."""
+An object on the fast path (riding, away from every TCP, untouched) is polled again only when
+it could have reached a boundary (belt edge, a pick window's limit, a TCP's near zone) at this
+speed, or its centre of mass the belt surface at :data:`_MAX_SINKING_SPEED_MPS`; until then
+nothing about it can change. Objects touched by an arm are polled every step, and poses asked
+for (ground truth, the target metric) are always read fresh."""
 
 
 @dataclass(frozen=True)
@@ -78,7 +70,8 @@ class GroundTruth:
 
     ``orientation_xyzw`` is the object (mesh) frame's; ``length_m``, ``width_m`` and ``height_m``
     are the object's own extents (footprint and extrusion, whatever way it lies); ``top_view`` is
-    what a camera above sees: the heading and extents of the face turned up.
+    what a camera above sees: the heading and extents of the face turned up. ``in_workspace``:
+    in some station's pick window; ``held``: by some station's tool.
     """
 
     id: int
@@ -102,6 +95,17 @@ class GroundTruth:
 
 
 @dataclass
+class _AtStation:
+    """One object's state with respect to one station."""
+
+    in_window: bool = False
+    missed: bool = False
+    overlap_since: float | None = None
+    fingers: frozenset[int] = frozenset()
+    arm_links: frozenset[int] = frozenset()
+
+
+@dataclass
 class _Record:
     id: int
     placement: Placement
@@ -109,32 +113,87 @@ class _Record:
     mass_kg: float
     height_m: float
     inertial_inv: tuple[float, float, float, float]
+    at: list[_AtStation]
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
     active: bool = True
     on_belt: bool = False
-    in_workspace: bool = False
-    held: bool = False
+    held_by: int | None = None
     picked: bool = False
-    missed: bool = False
     in_bin: bool = False
-    overlap_since: float | None = None
-    fingers: frozenset[int] = frozenset()
-    arm_links: frozenset[int] = frozenset()
+    busy: bool = False
+    """Some station overlaps it or touches it (it stays off the fast path)."""
     constraint: int | None = None
     polled_step: int = -1
     next_poll_step: int = 0
     released_step: int = -1
 
+    @property
+    def held(self) -> bool:
+        return self.held_by is not None
+
+    @property
+    def in_workspace(self) -> bool:
+        return any(a.in_window for a in self.at)
+
+    @property
+    def class_name(self) -> str:
+        return self.placement.spec.class_name
+
+
+@dataclass
+class _Watch:
+    """What the monitor keeps of one station between steps."""
+
+    station: Station
+    tcp_shape: int
+    lo_x_m: float
+    hi_x_m: float
+    tcp_pose: Pose
+    held: _Record | None = None
+    fingers: dict[int, dict[int, Normal]] = field(default_factory=dict)
+    arm: dict[int, set[int]] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.station.spec.name
+
+
+_Tcp = tuple[float, float, float, float, int]
+"""A station's TCP x and y, its pick window's limits and its index (for the fast path)."""
+
+
+class _Emitter:
+    """Appends one step's events (time and step fixed) to a list."""
+
+    def __init__(self, events: list[Event], step: int, time_s: float) -> None:
+        self.events = events
+        self.step = step
+        self.time_s = time_s
+
+    def __call__(self, kind: EventType, record: _Record, **data: object) -> None:
+        self.events.append(
+            Event(
+                time_s=self.time_s,
+                step=self.step,
+                type=kind,
+                object_id=record.id,
+                class_name=record.class_name,
+                data=data,
+            )
+        )
+
 
 class Monitor:
     """Watches every object of one episode; :meth:`update` returns the step's new events."""
 
-    def __init__(self, client: int, cell: CellConfig, world: World, robot: Robot) -> None:
+    def __init__(
+        self, client: int, cell: Cell, world: World, stations: tuple[Station, ...]
+    ) -> None:
         self.client = client
         self.cell = cell
         self.world = world
-        self.robot = robot
+        self.stations = stations
         self._records: list[_Record] = []
         self._vertex_cache: dict[tuple[str, float], FloatArray] = {}
         self._active: list[_Record] = []  # simulated ones, in spawn order
@@ -142,14 +201,27 @@ class Monitor:
         self._poll_reach_m = _MAX_CLOSING_SPEED_MPS / cell.physics.physics_hz
         self._poll_vertical_ratio = _MAX_CLOSING_SPEED_MPS / _MAX_SINKING_SPEED_MPS
         self._by_body: dict[int, _Record] = {}
-        self._tcp_shape = pb.createCollisionShape(
-            pb.GEOM_BOX, halfExtents=list(cell.grasp.tcp_half_extents_m), physicsClientId=client
+        self._bins: list[tuple[BinSpec, str]] = [(b, s.name) for s in cell.stations for b in s.bins]
+        self._watches = tuple(
+            _Watch(
+                station=station,
+                tcp_shape=pb.createCollisionShape(
+                    pb.GEOM_BOX,
+                    halfExtents=list(station.tool.spec.tcp_half_extents_m),
+                    physicsClientId=client,
+                ),
+                lo_x_m=station.spec.pick_window_x_m[0],
+                hi_x_m=station.spec.pick_window_x_m[1],
+                tcp_pose=station.tool.tcp_pose(),
+            )
+            for station in stations
         )
-        self._finger_set = {link: i for i, link in enumerate(robot.finger_links)}
         self.load_mass_kg = 0.0
-        self._held: _Record | None = None
         self._pending: list[Event] = []
-        self.tcp_pose = robot.tcp_pose()
+
+    def tcp_pose(self, station: int = 0) -> Pose:
+        """A station's TCP pose after the last step (no new forward kinematics)."""
+        return self._watches[station].tcp_pose
 
     def add(self, placement: Placement, spawned: SpawnedBody, step: int, time_s: float) -> Event:
         """Register a freshly spawned object; returns its ``spawned`` event."""
@@ -161,6 +233,7 @@ class Monitor:
             mass_kg=spawned.mass_kg,
             height_m=spawned.height_m,
             inertial_inv=(-qx, -qy, -qz, qw),
+            at=[_AtStation() for _ in self._watches],
             position=placement.position_m,
             on_belt=True,
         )
@@ -183,9 +256,7 @@ class Monitor:
         self._pending.append(event)
         return event
 
-    def pose_of(
-        self, object_id: int
-    ) -> tuple[tuple[float, float, float], tuple[float, float, float, float]] | None:
+    def pose_of(self, object_id: int) -> Pose | None:
         """True pose (position, mesh-frame xyzw) of a simulated object, None once it is gone."""
         if not 1 <= object_id <= len(self._records):
             return None
@@ -198,9 +269,7 @@ class Monitor:
         )
         return record.position, (orientation[0], orientation[1], orientation[2], orientation[3])
 
-    def poses(
-        self,
-    ) -> dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
+    def poses(self) -> dict[int, Pose]:
         """True poses of every simulated object on the belt."""
         out = {}
         for record in self._active:
@@ -228,236 +297,309 @@ class Monitor:
 
     # -- per step ---------------------------------------------------------------------------
     def update(self, step: int, time_s: float) -> list[Event]:
-        """Evaluate contacts, overlaps and fates after a physics step."""
+        """Evaluate contacts, overlaps and fates after a physics step.
+
+        Objects riding the belt away from every TCP, untouched, take the fast path here (only
+        their pick-window crossings can happen; they are polled again when they could have
+        reached a boundary, see :data:`_MAX_CLOSING_SPEED_MPS`); every other object goes
+        through every rule (:meth:`_evaluate`). A one-station cell's fast path is written out
+        here (it runs for most objects at every step); a line's is :meth:`_ride`.
+        """
         events, self._pending = self._pending, []
-        c = self.client
+        emit = _Emitter(events, step, time_s)
+        touched, stations = self._read_contacts()
+        one = len(stations) == 1
+        tcp_x, tcp_y, lo, hi, _ = stations[0]
         belt = self.cell.belt
-        ws = self.cell.workspace
-        fingers: dict[int, dict[int, tuple[float, float, float]]] = {}
-        arm: dict[int, set[int]] = {}
-        for cp in pb.getContactPoints(bodyA=self.robot.body, physicsClientId=c):
-            record = self._by_body.get(cp[2])
-            if record is None:
-                continue
-            finger = self._finger_set.get(cp[3])
-            if finger is not None:
-                fingers.setdefault(record.id, {})[finger] = cp[7]
-            else:
-                arm.setdefault(record.id, set()).add(cp[3])
-        self.tcp_pose = self.robot.tcp_pose()
-        tcp_pos, tcp_orn = self.tcp_pose
-        load = 0.0
-
-        def emit(kind: EventType, record: _Record, **data: object) -> None:
-            events.append(
-                Event(
-                    time_s=time_s,
-                    step=step,
-                    type=kind,
-                    object_id=record.id,
-                    class_name=record.placement.spec.class_name,
-                    data=dict(data),
-                )
-            )
-
-        surface_z = belt.surface_z_m
-        start_x, end_x = belt.start_x_m, belt.end_x_m
+        surface_z, start_x, end_x = belt.surface_z_m, belt.start_x_m, belt.end_x_m
         centre_y, half_w = belt.centre_y_m, 0.5 * belt.width_m
-        ws_lo, ws_hi = ws.min_x_m, ws.max_x_m
-        tcp_x, tcp_y = tcp_pos[0], tcp_pos[1]
-        near2 = _NEAR_TCP_M**2
-        get_pose = pb.getBasePositionAndOrientation
-        reach_m = self._poll_reach_m
+        get_pose, c = pb.getBasePositionAndOrientation, self.client
+        reach_m, vertical = self._poll_reach_m, self._poll_vertical_ratio
+        load = 0.0
         self._step = step
         for record in tuple(self._active):  # a record may be deactivated in the loop
-            if record.next_poll_step > step and record.id not in fingers and record.id not in arm:
-                load += record.mass_kg  # still riding the belt (see _MAX_CLOSING_SPEED_MPS)
+            if record.next_poll_step > step and record.id not in touched:
+                load += record.mass_kg  # still riding the belt
                 continue
             pos, orn = get_pose(record.body, physicsClientId=c)
             record.position, record.orientation = pos, orn
             record.polled_step = step
             record.next_poll_step = step + 1
             x, y, z = pos
-            # fast path: riding the belt, away from the robot, nothing to detect but the window
+            margin_m = None
             if (
-                not record.held
+                record.held_by is None
+                and not record.busy
+                and record.id not in touched
                 and z > surface_z
                 and start_x <= x <= end_x
                 and abs(y - centre_y) <= half_w
-                and (x - tcp_x) ** 2 + (y - tcp_y) ** 2 >= near2
-                and record.overlap_since is None
-                and not record.fingers
-                and not record.arm_links
-                and record.id not in fingers
-                and record.id not in arm
             ):
+                if not one:
+                    belt_m = min(
+                        (z - surface_z) * vertical,
+                        x - start_x,
+                        end_x - x,
+                        half_w - abs(y - centre_y),
+                    )
+                    margin_m = self._ride(record, emit, belt_m, stations)
+                elif (d2 := (x - tcp_x) ** 2 + (y - tcp_y) ** 2) >= _NEAR2_M2:
+                    margin_m = min(
+                        (z - surface_z) * vertical,
+                        x - start_x,
+                        end_x - x,
+                        half_w - abs(y - centre_y),
+                        abs(x - lo),
+                        abs(x - hi),
+                        math.sqrt(d2) - _NEAR_TCP_M,
+                    )
+                    if (lo <= x <= hi) != record.at[0].in_window:
+                        self._cross(record, 0, x, emit)
+            if margin_m is not None:  # riding, away from every TCP: the fast path
                 record.on_belt = True
                 load += record.mass_kg
-                in_ws = ws_lo <= x <= ws_hi
-                if in_ws != record.in_workspace:
-                    if in_ws:
-                        emit(EventType.ENTERED_WORKSPACE, record, x_m=x)
-                    else:
-                        self._left_workspace(record, x, emit)
-                    record.in_workspace = in_ws
-                margin_m = min(
-                    (z - surface_z) * self._poll_vertical_ratio,
-                    x - start_x,
-                    end_x - x,
-                    half_w - abs(y - centre_y),
-                    abs(x - ws_lo),
-                    abs(x - ws_hi),
-                    math.sqrt((x - tcp_x) ** 2 + (y - tcp_y) ** 2) - _NEAR_TCP_M,
-                )
                 record.next_poll_step = step + max(1, int(margin_m / reach_m))
-                continue
-            over = self.cell.bin_at(x, y)
-            # -- release of a held object
-            if record.held and self._grip_gap_m() > RELEASE_GAP_M:
-                self._release(record)
-                if over is None:
-                    emit(EventType.PICK_DROPPED, record, position_m=list(pos))
-            # -- fates
-            bin_hit = None
-            if over is not None and over.floor_z_m - 0.05 < z < over.top_z_m:
-                bin_hit = over
-            if bin_hit is not None and not record.held:
+            elif self._evaluate(record, emit, time_s):
+                load += record.mass_kg
+        self.load_mass_kg = load
+        return events
+
+    def _ride(
+        self, record: _Record, emit: _Emitter, belt_m: float, stations: tuple[_Tcp, ...]
+    ) -> float | None:
+        """The fast path of an object riding the belt ``belt_m`` from its edges: None when it
+        is near a TCP (the full evaluation follows, and finds the same window crossings in the
+        same order), else its pick-window crossings and how far it is from every boundary."""
+        x, y, _ = record.position
+        margin_m = belt_m
+        for tcp_x, tcp_y, lo, hi, s in stations:
+            d2 = (x - tcp_x) ** 2 + (y - tcp_y) ** 2
+            if d2 < _NEAR2_M2:
+                return None
+            margin_m = min(margin_m, abs(x - lo), abs(x - hi), math.sqrt(d2) - _NEAR_TCP_M)
+            if (lo <= x <= hi) != record.at[s].in_window:
+                self._cross(record, s, x, emit)
+        return margin_m
+
+    def _cross(self, record: _Record, s: int, x: float, emit: _Emitter) -> None:
+        """An object riding the belt crossed station ``s``'s pick window limit."""
+        watch, at = self._watches[s], record.at[s]
+        if not at.in_window:
+            emit(EventType.ENTERED_WORKSPACE, record, x_m=x, station=watch.name)
+        else:
+            self._left_window(record, watch, at, x, emit)
+        at.in_window = not at.in_window
+
+    def _read_contacts(self) -> tuple[set[int], tuple[_Tcp, ...]]:
+        """Every tool and arm contact of every station's robot with an object, and the TCPs.
+
+        Returns the ids of the objects a robot touches, and per station its TCP's x and y, its
+        pick window's limits and its index (what the fast path needs)."""
+        touched: set[int] = set()
+        tcps = []
+        by_body = self._by_body
+        for i, watch in enumerate(self._watches):
+            fingers: dict[int, dict[int, Normal]] = {}
+            arm: dict[int, set[int]] = {}
+            tool_links = watch.station.tool.contact_links
+            body = watch.station.robot.body
+            for cp in pb.getContactPoints(bodyA=body, physicsClientId=self.client):
+                record = by_body.get(cp[2])
+                if record is None:
+                    continue
+                touched.add(record.id)
+                finger = tool_links.get(cp[3])
+                if finger is not None:
+                    fingers.setdefault(record.id, {})[finger] = cp[7]
+                else:
+                    arm.setdefault(record.id, set()).add(cp[3])
+            watch.fingers, watch.arm = fingers, arm
+            watch.tcp_pose = tcp = watch.station.tool.tcp_pose()
+            tcps.append((tcp[0][0], tcp[0][1], watch.lo_x_m, watch.hi_x_m, i))
+        return touched, tuple(tcps)
+
+    def _evaluate(self, record: _Record, emit: _Emitter, time_s: float) -> bool:
+        """Every rule for an object off the fast path; whether it lay on the belt at this step
+        (before a grasp in it lifts it: its mass is on the belt drive's load this step)."""
+        x, y, z = record.position
+        over = self._bin_at(x, y)
+        if record.held_by is not None:
+            self._release_check(record, over, emit)
+        if self._fate(record, over, emit):
+            return False
+        belt = self.cell.belt
+        on_belt = (not record.held) and belt.on_belt_xy(x, y) and z > belt.surface_z_m
+        record.on_belt = on_belt
+        for watch, at in zip(self._watches, record.at, strict=True):
+            in_ws = record.on_belt and watch.lo_x_m <= x <= watch.hi_x_m
+            if in_ws and not at.in_window:
+                emit(EventType.ENTERED_WORKSPACE, record, x_m=x, station=watch.name)
+            elif at.in_window and not in_ws:
+                self._left_window(record, watch, at, x, emit)
+            at.in_window = in_ws
+        busy = False
+        for watch, at in zip(self._watches, record.at, strict=True):
+            busy = self._station_rules(watch, at, record, emit, time_s) or busy
+        record.busy = busy
+        return on_belt
+
+    def _bin_at(self, x_m: float, y_m: float) -> tuple[BinSpec, str] | None:
+        """The first bin (and its station's name) whose inner area holds the point."""
+        for entry in self._bins:
+            if entry[0].contains_xy(x_m, y_m):
+                return entry
+        return None
+
+    def _release_check(
+        self, record: _Record, over: tuple[BinSpec, str] | None, emit: _Emitter
+    ) -> None:
+        """Let go of a held object once its station's tool releases it."""
+        assert record.held_by is not None
+        watch = self._watches[record.held_by]
+        if watch.station.tool.releases():
+            self._release(record)
+            if over is None:
+                emit(
+                    EventType.PICK_DROPPED,
+                    record,
+                    position_m=list(record.position),
+                    station=watch.name,
+                )
+
+    def _fate(self, record: _Record, over: tuple[BinSpec, str] | None, emit: _Emitter) -> bool:
+        """Placed in a bin or fallen off: the object leaves the physics (returns True)."""
+        x, _, z = record.position
+        if over is not None and not record.held:
+            bin_spec, station = over
+            if bin_spec.floor_z_m - 0.05 < z < bin_spec.top_z_m:
                 record.in_bin = True
                 self._deactivate(record)
                 emit(
                     EventType.PLACED_IN_BIN,
                     record,
-                    bin=bin_hit.class_name,
-                    correct=bin_hit.class_name == record.placement.spec.class_name,
+                    bin=bin_spec.class_name,
+                    correct=bin_spec.class_name == record.class_name,
+                    station=station,
                 )
-                continue
-            falling_into_bin = over is not None and z > self.cell.physics.floor_z_m + 0.05
-            if z < belt.surface_z_m - 0.05 and not record.held and not falling_into_bin:
-                where = "belt_end" if x > belt.end_x_m else "side"
-                if record.in_workspace:
-                    record.in_workspace = False
-                    emit(EventType.LEFT_WORKSPACE, record, direction="fell")
-                self._deactivate(record)
-                emit(EventType.FELL_OFF, record, where=where, position_m=list(pos))
-                continue
-            record.on_belt = (not record.held) and belt.on_belt_xy(x, y) and z > belt.surface_z_m
-            if record.on_belt:
-                load += record.mass_kg
-            in_ws = record.on_belt and ws.min_x_m <= x <= ws.max_x_m
-            if in_ws and not record.in_workspace:
-                emit(EventType.ENTERED_WORKSPACE, record, x_m=x)
-            elif record.in_workspace and not in_ws:
-                self._left_workspace(record, x, emit)
-            record.in_workspace = in_ws
-            # -- TCP overlap
-            overlap = False
-            dx, dy = x - tcp_pos[0], y - tcp_pos[1]
-            if dx * dx + dy * dy < _NEAR_TCP_M**2 and abs(z - tcp_pos[2]) < _NEAR_TCP_M:
-                overlap = bool(
-                    pb.getClosestPoints(
-                        bodyA=-1,
-                        bodyB=record.body,
-                        distance=0.0,
-                        collisionShapeA=self._tcp_shape,
-                        collisionShapePositionA=tcp_pos,
-                        collisionShapeOrientationA=tcp_orn,
-                        physicsClientId=c,
-                    )
-                )
-            if overlap and record.overlap_since is None:
-                record.overlap_since = time_s
-                emit(EventType.TCP_OVERLAP_START, record)
-            elif not overlap and record.overlap_since is not None:
-                record.overlap_since = None
-                emit(EventType.TCP_OVERLAP_END, record)
-            # -- finger and arm contacts
-            touching = fingers.get(record.id, {})
-            engaged = (
-                record.held or overlap or (dx * dx + dy * dy < self.robot.config.max_opening_m**2)
-            )
-            for finger in sorted(set(touching) - record.fingers):
-                emit(
-                    EventType.FINGER_CONTACT, record, finger=self.robot.config.finger_links[finger]
-                )
-                if not engaged:
-                    emit(
-                        EventType.UNINTENDED_CONTACT,
-                        record,
-                        link=self.robot.config.finger_links[finger],
-                    )
-            record.fingers = frozenset(touching)
-            links = frozenset(arm.get(record.id, set()))
-            if not engaged:
-                for link in sorted(links - record.arm_links):
-                    emit(EventType.UNINTENDED_CONTACT, record, link=self._link_name(link))
-            record.arm_links = links
-            # -- pick success: only in the pick window (on the belt, centre of mass inside)
-            if (
-                self._held is None
-                and in_ws
-                and record.overlap_since is not None
-                and time_s - record.overlap_since >= self.cell.grasp.dwell_s - 1e-9
-                and self._opposite(touching)
-                and self._grip_gap_m() < -GRIP_TOLERANCE_M
-            ):
-                self._attach(record, tcp_pos, tcp_orn)
-                emit(
-                    EventType.PICK_SUCCESS,
-                    record,
-                    dwell_s=time_s - record.overlap_since,
-                    position_m=list(pos),
-                )
-        self.load_mass_kg = load
-        return events
+                return True
+        belt = self.cell.belt
+        falling_into_bin = over is not None and z > self.cell.physics.floor_z_m + 0.05
+        if z < belt.surface_z_m - 0.05 and not record.held and not falling_into_bin:
+            where = "belt_end" if x > belt.end_x_m else "side"
+            for watch, at in zip(self._watches, record.at, strict=True):
+                if at.in_window:
+                    at.in_window = False
+                    emit(EventType.LEFT_WORKSPACE, record, direction="fell", station=watch.name)
+            self._deactivate(record)
+            emit(EventType.FELL_OFF, record, where=where, position_m=list(record.position))
+            return True
+        return False
 
-    def _left_workspace(self, record: _Record, x: float, emit: Callable[..., None]) -> None:
-        ws = self.cell.workspace
+    def _left_window(
+        self, record: _Record, watch: _Watch, at: _AtStation, x: float, emit: _Emitter
+    ) -> None:
         if record.held:
             direction = "lifted"
-        elif x > ws.max_x_m:
+        elif x > watch.hi_x_m:
             direction = "downstream"
-        elif x < ws.min_x_m:
+        elif x < watch.lo_x_m:
             direction = "upstream"
         else:
             direction = "off_belt"
-        emit(EventType.LEFT_WORKSPACE, record, direction=direction, x_m=x)
-        if direction == "downstream" and not record.picked and not record.missed:
-            record.missed = True
-            emit(EventType.MISSED, record)
+        emit(EventType.LEFT_WORKSPACE, record, direction=direction, x_m=x, station=watch.name)
+        if direction == "downstream" and not record.picked and not at.missed:
+            at.missed = True
+            emit(EventType.MISSED, record, station=watch.name)
 
-    def _grip_gap_m(self) -> float:
-        """Commanded minus measured gripper opening: below ``-GRIP_TOLERANCE_M`` the fingers press
-        (a grip on an object wider than half the opening is a grip too), above
-        ``RELEASE_GAP_M`` they let go. Read only where a grasp or release is decided."""
-        return self.robot.gripper_width_target_m - self.robot.gripper_width_m()
+    def _station_rules(
+        self, watch: _Watch, at: _AtStation, record: _Record, emit: _Emitter, time_s: float
+    ) -> bool:
+        """TCP overlap, contacts and the grasp of one station; whether it is busy with the
+        object (overlapping or touching it)."""
+        x, y, z = record.position
+        tcp_pos, tcp_orn = watch.tcp_pose
+        overlap = False
+        dx, dy = x - tcp_pos[0], y - tcp_pos[1]
+        if dx * dx + dy * dy < _NEAR_TCP_M**2 and abs(z - tcp_pos[2]) < _NEAR_TCP_M:
+            overlap = bool(
+                pb.getClosestPoints(
+                    bodyA=-1,
+                    bodyB=record.body,
+                    distance=0.0,
+                    collisionShapeA=watch.tcp_shape,
+                    collisionShapePositionA=tcp_pos,
+                    collisionShapeOrientationA=tcp_orn,
+                    physicsClientId=self.client,
+                )
+            )
+        if overlap and at.overlap_since is None:
+            at.overlap_since = time_s
+            emit(EventType.TCP_OVERLAP_START, record, station=watch.name)
+        elif not overlap and at.overlap_since is not None:
+            at.overlap_since = None
+            emit(EventType.TCP_OVERLAP_END, record, station=watch.name)
+        tool = watch.station.tool
+        engaged = (
+            record.held_by == watch.station.index
+            or overlap
+            or (dx * dx + dy * dy < tool.engaged_radius_m**2)
+        )
+        touching = self._contacts(watch, at, record, engaged, emit)
+        if (
+            watch.held is None
+            and record.held_by is None
+            and at.in_window
+            and at.overlap_since is not None
+            and time_s - at.overlap_since >= tool.spec.dwell_s - 1e-9
+            and tool.grasps(touching)
+        ):
+            self._attach(record, watch)
+            emit(
+                EventType.PICK_SUCCESS,
+                record,
+                dwell_s=time_s - at.overlap_since,
+                position_m=list(record.position),
+                station=watch.name,
+            )
+        return at.overlap_since is not None or bool(at.fingers) or bool(at.arm_links)
 
-    def _opposite(self, touching: dict[int, tuple[float, float, float]]) -> bool:
-        if len(self.robot.finger_links) < 2 or len(touching) < len(self.robot.finger_links):
-            return False
-        normals = list(touching.values())
-        dot = sum(a * b for a, b in zip(normals[0], normals[1], strict=True))
-        return dot < 0.0
+    def _contacts(
+        self, watch: _Watch, at: _AtStation, record: _Record, engaged: bool, emit: _Emitter
+    ) -> dict[int, Normal]:
+        """New tool-link contacts (``finger_contact``) and unintended contacts of the robot;
+        returns the tool's contacts with the object (contact link index -> normal)."""
+        tool = watch.station.tool
+        touching = watch.fingers.get(record.id, {})
+        for finger in sorted(set(touching) - at.fingers):
+            name = tool.contact_name(finger)
+            emit(EventType.FINGER_CONTACT, record, finger=name, station=watch.name)
+            if not engaged:
+                emit(EventType.UNINTENDED_CONTACT, record, link=name, station=watch.name)
+        at.fingers = frozenset(touching)
+        links = frozenset(watch.arm.get(record.id, set()))
+        if not engaged:
+            robot = watch.station.robot
+            for link in sorted(links - at.arm_links):
+                emit(
+                    EventType.UNINTENDED_CONTACT,
+                    record,
+                    link=robot.link_name(link),
+                    station=watch.name,
+                )
+        at.arm_links = links
+        return touching
 
-    def _link_name(self, link: int) -> str:
-        if link < 0:
-            return "base"
-        info = pb.getJointInfo(self.robot.body, link, physicsClientId=self.client)
-        return str(info[12].decode())
-
-    def _attach(
-        self,
-        record: _Record,
-        tcp_pos: tuple[float, float, float],
-        tcp_orn: tuple[float, float, float, float],
-    ) -> None:
+    def _attach(self, record: _Record, watch: _Watch) -> None:
         c = self.client
-        inv_pos, inv_orn = pb.invertTransform(tcp_pos, tcp_orn)
+        station = watch.station
+        link_pos, link_orn = station.tool.link_pose()
+        inv_pos, inv_orn = pb.invertTransform(link_pos, link_orn)
         rel_pos, rel_orn = pb.multiplyTransforms(
             inv_pos, inv_orn, record.position, record.orientation
         )
         record.constraint = pb.createConstraint(
-            self.robot.body,
-            self.robot.tcp_link,
+            station.robot.body,
+            station.tool.tcp_link,
             record.body,
             -1,
             pb.JOINT_FIXED,
@@ -468,19 +610,21 @@ class Monitor:
             physicsClientId=c,
         )
         pb.changeConstraint(record.constraint, maxForce=500.0, physicsClientId=c)
-        record.held = True
+        record.held_by = station.index
         record.picked = True
         record.on_belt = False
-        self._held = record
+        watch.held = record
 
     def _release(self, record: _Record) -> None:
         if record.constraint is not None:
             pb.removeConstraint(record.constraint, physicsClientId=self.client)
             record.constraint = None
-        record.held = False
+        if record.held_by is not None:
+            watch = self._watches[record.held_by]
+            if watch.held is record:
+                watch.held = None
+        record.held_by = None
         record.released_step = self._step
-        if self._held is record:
-            self._held = None
 
     def _deactivate(self, record: _Record) -> None:
         if record.held:
@@ -488,8 +632,10 @@ class Monitor:
         record.active = False
         self._active.remove(record)
         record.on_belt = False
-        record.in_workspace = False
-        record.overlap_since = None
+        record.busy = False
+        for at in record.at:
+            at.in_window = False
+            at.overlap_since = None
         self._by_body.pop(record.body, None)
         self.world.remove(record.body)
 
@@ -517,54 +663,53 @@ class Monitor:
             if record.held or record.in_bin or record.released_step < max(0.0, recent):
                 continue
             (x, y, z), _ = pb.getBasePositionAndOrientation(record.body, physicsClientId=c)
-            over = self.cell.bin_at(x, y)
-            if over is not None and z >= over.top_z_m:
+            over = self._bin_at(x, y)
+            if over is not None and z >= over[0].top_z_m:
                 ids.append(record.id)
         return ids
 
     def ground_truth(self) -> tuple[GroundTruth, ...]:
         """Every object that is on the belt, held, or in a bin (not those that fell off)."""
-        out = []
-        for record in self._records:
-            if not record.active and not record.in_bin:
-                continue
-            if record.active:
-                self._fresh(record)
-                lin, ang = pb.getBaseVelocity(record.body, physicsClientId=self.client)
-            else:
-                lin, ang = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-            spec = record.placement.spec
-            scale = record.height_m / spec.height_m
-            _, orientation = pb.multiplyTransforms(
-                (0.0, 0.0, 0.0), record.orientation, (0.0, 0.0, 0.0), record.inertial_inv
-            )
-            out.append(
-                GroundTruth(
-                    id=record.id,
-                    source_id=spec.object_id,
-                    class_name=spec.class_name,
-                    position_m=record.position,
-                    orientation_xyzw=tuple(orientation),
-                    linear_velocity_mps=tuple(lin),
-                    angular_velocity_radps=tuple(ang),
-                    top_view=top_view(
-                        orientation,
-                        spec.yaw_rad,
-                        length_m=spec.length_m,
-                        width_m=spec.width_m,
-                        height_m=record.height_m,
-                        vertices_m=partial(self._vertices, record),
-                    ),
-                    length_m=spec.length_m,
-                    width_m=spec.width_m,
-                    area_m2=spec.area_m2,
-                    volume_m3=spec.volume_m3 * scale,
-                    height_m=record.height_m,
-                    mass_kg=record.mass_kg,
-                    on_belt=record.on_belt,
-                    in_workspace=record.in_workspace,
-                    held=record.held,
-                    in_bin=record.in_bin,
-                )
-            )
-        return tuple(out)
+        return tuple(
+            self._truth(record) for record in self._records if record.active or record.in_bin
+        )
+
+    def _truth(self, record: _Record) -> GroundTruth:
+        if record.active:
+            self._fresh(record)
+            lin, ang = pb.getBaseVelocity(record.body, physicsClientId=self.client)
+        else:
+            lin, ang = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        spec = record.placement.spec
+        scale = record.height_m / spec.height_m
+        _, orientation = pb.multiplyTransforms(
+            (0.0, 0.0, 0.0), record.orientation, (0.0, 0.0, 0.0), record.inertial_inv
+        )
+        vertices: Callable[[], FloatArray] = partial(self._vertices, record)
+        return GroundTruth(
+            id=record.id,
+            source_id=spec.object_id,
+            class_name=spec.class_name,
+            position_m=record.position,
+            orientation_xyzw=tuple(orientation),
+            linear_velocity_mps=tuple(lin),
+            angular_velocity_radps=tuple(ang),
+            top_view=top_view(
+                orientation,
+                spec.yaw_rad,
+                length_m=spec.length_m,
+                width_m=spec.width_m,
+                height_m=record.height_m,
+                vertices_m=vertices,
+            ),
+            length_m=spec.length_m,
+            width_m=spec.width_m,
+            area_m2=spec.area_m2,
+            volume_m3=spec.volume_m3 * scale,
+            height_m=record.height_m,
+            mass_kg=record.mass_kg,
+            on_belt=record.on_belt,
+            in_workspace=record.in_workspace,
+            held=record.held,
+            in_bin=record.in_bin,
+        )

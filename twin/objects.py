@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from meshgen.errors import ObjFileError
+from meshgen.objfile import ObjMesh, read_obj
 from twin.errors import SceneError
 
 _FLOAT_FIELDS = (
@@ -203,41 +205,22 @@ def load_dataset(out_dir: Path, classes: Iterable[str] | None = None) -> tuple[I
     return tuple(layouts)
 
 
-def read_lines(path: Path) -> list[str]:
-    """The lines of a UTF-8 text file (a mesh); :class:`SceneError` naming it when unreadable."""
+def read_mesh(path: Path) -> ObjMesh:
+    """An OBJ file meshgen wrote (:func:`meshgen.objfile.read_obj`); :class:`SceneError`
+    naming the file and line when it cannot be read or is malformed."""
     try:
-        return path.read_text(encoding="utf-8").splitlines()
-    except OSError as exc:
-        msg = f"{path}: cannot read: {exc.strerror}"
-        raise SceneError(msg) from None
+        return read_obj(path)
+    except ObjFileError as exc:
+        raise SceneError(str(exc)) from None
 
 
 def read_obj_triangles(path: Path) -> np.ndarray:
-    """Triangles of an OBJ file, ``(t, 3, 3)`` float; polygons are fan-triangulated.
-
-    Reads ``v`` and ``f`` lines only (``f`` may carry ``/vt/vn`` parts and negative indices).
-    """
-    vertices: list[tuple[float, float, float]] = []
-    triangles: list[tuple[int, int, int]] = []
-    for number, line in enumerate(read_lines(path), start=1):
-        try:
-            if line.startswith("v "):
-                x, y, z = line.split()[1:4]
-                vertices.append((float(x), float(y), float(z)))
-            elif line.startswith("f "):
-                ids = [int(token.split("/")[0]) for token in line.split()[1:]]
-                ids = [i - 1 if i > 0 else len(vertices) + i for i in ids]
-                if any(not 0 <= i < len(vertices) for i in ids):
-                    msg = f"{path}:{number}: face {line!r} refers to a vertex not defined before it"
-                    raise SceneError(msg)
-                triangles.extend((ids[0], ids[k], ids[k + 1]) for k in range(1, len(ids) - 1))
-        except ValueError:
-            msg = f"{path}:{number}: malformed line {line!r}"
-            raise SceneError(msg) from None
-    if not triangles:
+    """Triangles of an OBJ file, ``(t, 3, 3)`` float; polygons are fan-triangulated."""
+    mesh = read_mesh(path)
+    if not len(mesh.faces):
         msg = f"{path}: no faces"
         raise SceneError(msg)
-    return np.asarray(vertices, dtype=float)[np.asarray(triangles, dtype=np.int64)]
+    return mesh.triangles()
 
 
 def unit_mass_inertia(triangles: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:

@@ -1,7 +1,9 @@
 """Simulated perception: what a camera-based detector over the belt would report.
 
 Every ``1 / rate_hz`` seconds a frame is captured from the ground truth: objects lying on the belt
-inside the camera's field of view (an x interval over the belt's width). Each detection carries
+inside the camera's field of view (an x interval over the belt's width: the cell's
+:class:`interfaces.cell.CameraSpec`, where the camera is; the error model here is the
+scenario's). Each detection carries
 the footprint centroid (its z at the object's underside: the belt surface, or the top of the
 object it lies on), the long-axis yaw (modulo pi), length, width and height as seen from above
 (``twin.top_view``: an object that has tipped over shows a side), with Gaussian position and yaw
@@ -33,6 +35,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from interfaces.cell import CameraSpec
 from twin.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -41,11 +44,9 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class PerceptionConfig:
-    """Camera field of view, rate and error model."""
+    """Camera rate and error model (its field of view is the cell's ``camera``)."""
 
     rate_hz: float = 30.0
-    fov_min_x_m: float = -1.4
-    fov_max_x_m: float = 0.45
     position_noise_m: float = 0.002
     yaw_noise_rad: float = 0.02
     latency_s: float = 0.03
@@ -61,7 +62,6 @@ class PerceptionConfig:
             ("confidence_wrong_mean", 0 < self.confidence_wrong_mean <= 1),
             ("confidence_concentration", self.confidence_concentration > 0),
             ("rate_hz", self.rate_hz > 0),
-            ("fov_max_x_m", self.fov_max_x_m > self.fov_min_x_m),
             ("position_noise_m", self.position_noise_m >= 0),
             ("yaw_noise_rad", self.yaw_noise_rad >= 0),
             ("latency_s", self.latency_s >= 0),
@@ -131,7 +131,11 @@ def wrap_half_pi(angle_rad: float) -> float:
 
 
 class Perception:
-    """Captures frames on a fixed step grid and releases them after the latency."""
+    """Captures frames on a fixed step grid and releases them after the latency.
+
+    ``classes`` are the names a misclassification chooses among; ``camera`` is the field of view
+    (default: the reference cell's).
+    """
 
     def __init__(
         self,
@@ -141,9 +145,11 @@ class Perception:
         dt_s: float,
         rng: np.random.Generator,
         *,
+        camera: CameraSpec | None = None,
         dropout_windows_s: Iterable[tuple[float, float]] = (),
     ) -> None:
         self.config = config
+        self.camera = camera if camera is not None else CameraSpec()
         self.dropout_windows_s = tuple((float(a), float(b)) for a, b in dropout_windows_s)
         self.dropped_frames = 0
         self.classes = tuple(classes)
@@ -168,10 +174,11 @@ class Perception:
         ``dropped_frames``): it is never released.
         """
         cfg = self.config
+        fov_min_x, fov_max_x = self.camera.fov_min_x_m, self.camera.fov_max_x_m
         detections = []
         for obj in objects:
             x, y, _ = obj.position_m
-            if not obj.on_belt or not cfg.fov_min_x_m <= x <= cfg.fov_max_x_m:
+            if not obj.on_belt or not fov_min_x <= x <= fov_max_x:
                 continue
             # draw every random number for every candidate so streams stay aligned
             drop, confuse, pick = self.rng.random(3)

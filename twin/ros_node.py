@@ -1,20 +1,23 @@
 """The twin as a ROS 2 node: a thin shell around :class:`twin.sim.Twin`.
 
 It converts messages to domain values and back and calls the twin; there is no simulation logic
-here. Topics, types, rates and QoS are documented in ``docs/interfaces.md``. The loop runs in one
-thread: it serves callbacks (commands, pings) while waiting for the next physics step, so a ping
-is echoed at once, from inside the step loop.
+here. Every topic's name, type and QoS comes from :mod:`interfaces.contract` (documented in
+``docs/interfaces.md``): the cell topics once, the station topics once per station of the cell
+under the station's namespace (``/s1/joint_states``; the bare name for the empty namespace of a
+one-station cell). The loop runs in one thread: it serves callbacks (commands, pings) while
+waiting for the next physics step, so a ping is echoed at once, from inside the step loop.
 
 With a tap (:data:`Tap`), every message the node publishes is serialized once, published as
 those bytes and handed to the tap; every message it subscribes to arrives as bytes, goes to the
 tap and is deserialized for its callback. The tap sees the whole contract, both directions, but
-the latched ``/cell/bins`` (static configuration, published once at start).
+the latched ``cell/bins`` (static configuration, published once at start).
 
 ``/events`` carries every event the twin logs, in the order of :attr:`twin.sim.Twin.events`:
 the monitor's, rejected commands, controller timeouts and injected faults alike.
 
-Modes: ``realtime`` paces the physics to the wall clock; ``lockstep`` steps tick k+1 only when the
-controller has acknowledged tick k (see the LockstepTick/StepAck handshake in the docs).
+Modes: ``realtime`` paces the physics to the wall clock; ``lockstep`` steps tick k+1 only when
+every station's controller has acknowledged tick k (see the LockstepTick/StepAck handshake in
+the docs).
 """
 
 from __future__ import annotations
@@ -24,10 +27,10 @@ import json
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
-from builtin_interfaces.msg import Time as TimeMsg
 from cdw_interfaces.msg import (
     BeltState,
     Detection,
@@ -46,14 +49,16 @@ from cdw_interfaces.msg import (
 from geometry_msgs.msg import Point, PoseStamped
 from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from trajectory_msgs.msg import JointTrajectory
 
+from interfaces import contract as c
+from interfaces.contract import Topic
 from interfaces.events import Event
+from interfaces.ros import message_class, msg_stamp_ns, msg_stamp_s, qos_profile, time_msg
 from twin.commands import (
     JointTarget,
     Rejected,
@@ -64,6 +69,7 @@ from twin.commands import (
 )
 from twin.perception import DetectionFrame
 from twin.sim import ArmCommand, Twin
+from twin.station import Station
 from twin.telemetry import TelemetryRecorder
 
 Tap = Callable[[str, bytes, int], None]
@@ -72,41 +78,63 @@ since the Unix epoch) of the send or receipt. ``cdw-twin run`` records the episo
 way, in the twin's process (see ``twin-node --record``)."""
 
 
-def _qos(depth: int, *, reliable: bool = True, latched: bool = False) -> QoSProfile:
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=depth,
-        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
-    )
-
-
-STATE_QOS = _qos(10)
-EVENT_QOS = _qos(1000, latched=True)
-STREAM_QOS = _qos(100)
-CLOCK_QOS = _qos(1, reliable=False)
-GT_QOS = _qos(1, reliable=False)
-LATCHED_QOS = _qos(1, latched=True)
-
-
-def to_time(t_s: float) -> TimeMsg:
-    """A ROS time from seconds (``t_s >= 0``); a fraction that rounds up to 1 s carries."""
-    sec = int(t_s)
-    nanosec = round((t_s - sec) * 1e9)
-    if nanosec >= 1_000_000_000:
-        sec, nanosec = sec + 1, nanosec - 1_000_000_000
-    return TimeMsg(sec=sec, nanosec=nanosec)
-
-
 @dataclass
 class NodeCounters:
     """What the node has seen and done; written to the episode log."""
 
     published: Counter[str]
     received_commands: int = 0
-    pending_commands: int = 0
-    rejected: Counter[str] | None = None
+    rejected: Counter[str] = field(default_factory=Counter)
     lockstep_timeouts: int = 0
+
+
+@dataclass
+class StationLink:
+    """One station's side of the node: its topics, its controller's commands and acks.
+
+    ``pending`` counts commands received and not yet consumed by an acknowledged tick;
+    ``alive``, ``acks_at_loss`` and ``lost_at_s`` follow the lockstep controller's losses.
+    """
+
+    station: Station
+    namespace: str
+    pub_joints: Any
+    pub_tcp: Any
+    pub_bins: Any
+    telemetry: TelemetryRecorder
+    joint_names: list[str] = field(default_factory=list)
+    command_subs: list[Any] = field(default_factory=list)
+    sub_ack: Any = None
+    pending: int = 0
+    acks: dict[int, int] = field(default_factory=dict)
+    last_ack_tick: int = -1
+    alive: bool = True
+    acks_at_loss: int = -1
+    lost_at_s: float | None = None
+
+    @property
+    def name(self) -> str:
+        """The station's name."""
+        return self.station.name
+
+    def wire(self, topic: Topic) -> str:
+        """The station's name of a station topic."""
+        return topic.resolve(self.namespace)
+
+    def tick_ready(self, tick: int) -> bool:
+        """Lockstep: the ack of ``tick`` and all the commands it announces have arrived."""
+        n = self.acks.get(tick)
+        return n is not None and self.pending >= n
+
+    def consume_tick(self, tick: int) -> None:
+        """Lockstep: the commands of ``tick`` are applied; forget it and older acks.
+
+        The pending count never goes below zero: a command lost at a controller's start must
+        not make every later tick wait for one more command than it announces.
+        """
+        self.pending = max(self.pending - self.acks.pop(tick, 0), 0)
+        for old in [t for t in self.acks if t < tick]:
+            del self.acks[old]
 
 
 class TwinNode(Node):
@@ -122,49 +150,61 @@ class TwinNode(Node):
         tap: Tap | None = None,
     ) -> None:
         super().__init__("cdw_twin")
+        if not twin.stations:
+            msg = "the twin has no episode: call reset() before building its node"
+            raise RuntimeError(msg)
         self.twin = twin
         self._tap = tap
         self.lockstep = lockstep
         self.state_every = state_every
         self.ground_truth_every = ground_truth_every
-        self.counters = NodeCounters(published=Counter(), rejected=Counter())
+        self.counters = NodeCounters(published=Counter())
         self.telemetry = TelemetryRecorder()
         self.priorities: tuple[str, ...] = ()
-        self.acks: dict[int, int] = {}
-        self.last_ack_tick = -1
-        self._tick_counts: Counter[str] = Counter()
+        self._tick_counts: Counter[str] = Counter()  # by contract name (joint_states, ...)
         self._last_stamp_ns: dict[str, int] = {}
         self._events_sent = 0
-        self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
-        self.pub_joints = self.create_publisher(JointState, "/joint_states", STATE_QOS)
-        self.pub_tcp = self.create_publisher(PoseStamped, "/tcp_pose", STATE_QOS)
-        self.pub_belt = self.create_publisher(BeltState, "/conveyor/state", STATE_QOS)
-        self.pub_det = self.create_publisher(DetectionArray, "/objects/detections", STATE_QOS)
-        self.pub_gt = self.create_publisher(ObjectStateArray, "/objects/ground_truth", GT_QOS)
-        self.pub_events = self.create_publisher(SortingEvent, "/events", EVENT_QOS)
-        self.pub_echo = self.create_publisher(Ping, "/ping/echo", STREAM_QOS)
-        self.pub_tick = self.create_publisher(LockstepTick, "/lockstep/tick", STREAM_QOS)
-        self.pub_faults = self.create_publisher(String, "/twin/faults", STREAM_QOS)
-        self.pub_bins = self.create_publisher(SortingBins, "/cell/bins", LATCHED_QOS)
-        self._command_subs = (
-            self._subscribe(
-                JointTrajectory, "/arm_controller/joint_trajectory", self._on_trajectory, STATE_QOS
-            ),
-            self._subscribe(Float64, "/gripper/command", self._on_gripper, STATE_QOS),
-            self._subscribe(Float64, "/conveyor/speed_setpoint", self._on_setpoint, STATE_QOS),
-            self._subscribe(PickTarget, "/controller/target", self._on_target, STATE_QOS),
+        self.pub_clock = self._publisher(c.CLOCK_TOPIC)
+        self.pub_belt = self._publisher(c.BELT_STATE)
+        self.pub_det = self._publisher(c.DETECTIONS)
+        self.pub_gt = self._publisher(c.GROUND_TRUTH_TOPIC)
+        self.pub_events = self._publisher(c.EVENTS_TOPIC)
+        self.pub_echo = self._publisher(c.PING_ECHO)
+        self.pub_tick = self._publisher(c.LOCKSTEP_TICK)
+        self.pub_faults = self._publisher(c.FAULTS)
+        self.links = [self._station_link(station) for station in twin.stations]
+        self._cell_command_subs = [self._subscribe(c.BELT_SETPOINT, self._on_setpoint)]
+        self._subscribe(c.PRIORITIES, self._on_priorities)
+        self._subscribe(c.PING, self._on_ping)
+        for link in self.links:
+            self._send(link.pub_bins, self.bins_message(link))  # latched, once
+
+    def _station_link(self, station: Station) -> StationLink:
+        ns = station.spec.namespace
+        one = len(self.twin.stations) == 1
+        link = StationLink(
+            station=station,
+            namespace=ns,
+            pub_joints=self._publisher(c.JOINT_STATES, ns),
+            pub_tcp=self._publisher(c.TCP_POSE, ns),
+            pub_bins=self._publisher(c.BINS, ns),
+            telemetry=self.telemetry if one else TelemetryRecorder(),
+            joint_names=[*station.spec.robot.arm_joints, *station.tool.joint_names],
         )
-        self._subscribe(SortingPriorities, "/sorting/priorities", self._on_priorities, LATCHED_QOS)
-        self._subscribe(Ping, "/ping", self._on_ping, STREAM_QOS)
-        self.sub_ack = self._subscribe(StepAck, "/lockstep/ack", self._on_ack, STREAM_QOS)
-        assert twin.robot is not None
-        robot = twin.robot
-        self._arm_names = list(twin.cell.robot.arm_joints)
-        self._joint_names = self._arm_names + list(twin.cell.robot.finger_joints)
-        self._limits = robot.limits
-        self._send(self.pub_bins, self.bins_message())  # latched, once
+        link.command_subs = [
+            self._subscribe(c.ARM_TRAJECTORY, partial(self._on_trajectory, link), ns),
+            self._subscribe(c.GRIPPER_COMMAND, partial(self._on_gripper, link), ns),
+            self._subscribe(c.PICK_TARGET, partial(self._on_target, link), ns),
+        ]
+        link.sub_ack = self._subscribe(c.LOCKSTEP_ACK, partial(self._on_ack, link), ns)
+        return link
 
     # -- the wire: every message in or out also goes to the tap (the episode's recording) ---
+    def _publisher(self, topic: Topic, namespace: str = "") -> Any:
+        return self.create_publisher(
+            message_class(topic), topic.resolve(namespace), qos_profile(topic.qos)
+        )
+
     def _send(self, publisher: Any, msg: Any) -> None:
         """Publish ``msg``; with a tap, serialize it once and hand the same bytes to both."""
         if self._tap is None:
@@ -174,174 +214,164 @@ class TwinNode(Node):
         publisher.publish(data)
         self._tap(publisher.topic_name, data, time.time_ns())
 
-    def _subscribe(
-        self, msg_type: Any, topic: str, callback: Callable[[Any], None], qos: QoSProfile
-    ) -> Any:
+    def _subscribe(self, topic: Topic, callback: Callable[[Any], None], namespace: str = "") -> Any:
         """Subscribe ``callback``; with a tap, take the serialized bytes and record them too."""
+        msg_type = message_class(topic)
+        name = topic.resolve(namespace)
+        qos = qos_profile(topic.qos)
         tap = self._tap
         if tap is None:
-            return self.create_subscription(msg_type, topic, callback, qos)
+            return self.create_subscription(msg_type, name, callback, qos)
 
         def on_bytes(data: bytes) -> None:
             received_ns = time.time_ns()
             callback(deserialize_message(data, msg_type))  # first: a ping's echo waits for nothing
-            tap(topic, data, received_ns)
+            tap(name, data, received_ns)
 
-        return self.create_subscription(msg_type, topic, on_bytes, qos, raw=True)
+        return self.create_subscription(msg_type, name, on_bytes, qos, raw=True)
 
     # -- commands ---------------------------------------------------------------------------
-    def _received(self) -> None:
+    def _received(self, link: StationLink | None) -> None:
         self.counters.received_commands += 1
-        self.counters.pending_commands += 1
+        if link is not None:
+            link.pending += 1
 
-    def _reject(self, topic: str, rejected: Rejected) -> None:
-        assert self.counters.rejected is not None
+    def _reject(self, topic: str, rejected: Rejected, link: StationLink | None = None) -> None:
         self.counters.rejected[rejected.reason] += 1
         text = f"{topic}: rejected ({rejected.reason}): {rejected.detail}"
         self.get_logger().error(text)
         self._send(self.pub_faults, String(data=text))
-        self.twin.record_fault(rejected.reason, text)
+        self.twin.record_fault(rejected.reason, text, None if link is None else link.name)
         self.publish_new_events()
 
-    def _on_trajectory(self, msg: JointTrajectory) -> None:
-        stamp = msg.header.stamp
-        self.telemetry.on_command(stamp.sec + 1e-9 * stamp.nanosec, time.perf_counter())
-        self._received()
+    def _on_trajectory(self, link: StationLink, msg: JointTrajectory) -> None:
+        stamp_s, wall_s = msg_stamp_s(msg.header.stamp), time.perf_counter()
+        link.telemetry.on_command(stamp_s, wall_s)
+        if link.telemetry is not self.telemetry:
+            self.telemetry.on_command(stamp_s, wall_s)
+        self._received(link)
         if not msg.points:
-            self._reject("/arm_controller/joint_trajectory", Rejected("empty", "no points"))
+            self._reject(link.wire(c.ARM_TRAJECTORY), Rejected("empty", "no points"), link)
             return
         point = msg.points[0]
+        limits = link.station.robot.limits
         result = validate_joint_command(
             list(msg.joint_names),
             list(point.positions),
             list(point.velocities),
-            arm_joints=self._arm_names,
-            lower=self._limits.lower,
-            upper=self._limits.upper,
-            velocity_limit=self._limits.velocity,
+            arm_joints=link.station.spec.robot.arm_joints,
+            lower=limits.lower,
+            upper=limits.upper,
+            velocity_limit=limits.velocity,
         )
         if isinstance(result, Rejected):
-            self._reject("/arm_controller/joint_trajectory", result)
+            self._reject(link.wire(c.ARM_TRAJECTORY), result, link)
             return
         assert isinstance(result, JointTarget)
-        self.twin.command(ArmCommand(result.positions, result.velocities))
+        self.twin.command(ArmCommand(result.positions, result.velocities), link.station.index)
 
-    def _on_gripper(self, msg: Float64) -> None:
-        self._received()
-        result = validate_gripper(msg.data, self.twin.cell.robot.max_opening_m)
+    def _on_gripper(self, link: StationLink, msg: Float64) -> None:
+        self._received(link)
+        result = validate_gripper(msg.data, link.station.tool.max_command)
         if isinstance(result, Rejected):
-            self._reject("/gripper/command", result)
+            self._reject(link.wire(c.GRIPPER_COMMAND), result, link)
             return
-        self.twin.command_gripper(result)
+        self.twin.command_gripper(result, link.station.index)
+
+    def _on_target(self, link: StationLink, msg: PickTarget) -> None:
+        self._received(link)
+        p = msg.grasp_point
+        self.twin.announce_target(int(msg.track_id), (p.x, p.y, p.z), msg.phase, link.station.index)
+
+    def _on_ack(self, link: StationLink, msg: StepAck) -> None:
+        tick = int(msg.tick)
+        link.acks[tick] = int(msg.n_commands)
+        link.last_ack_tick = max(link.last_ack_tick, tick)
 
     def _on_setpoint(self, msg: Float64) -> None:
-        self._received()
+        self._received(None)
         result = validate_setpoint(msg.data)
         if isinstance(result, Rejected):
-            self._reject("/conveyor/speed_setpoint", result)
+            self._reject(c.BELT_SETPOINT.name, result)
             return
         self.twin.set_belt_setpoint(result)
 
     def _on_priorities(self, msg: SortingPriorities) -> None:
-        self._received()
-        result = validate_priorities(list(msg.classes), self.twin.scenario.objects.classes)
+        self._received(None)
+        result = validate_priorities(list(msg.classes), self.twin.classes)
         if isinstance(result, Rejected):
-            self._reject("/sorting/priorities", result)
+            self._reject(c.PRIORITIES.name, result)
             return
         self.priorities = result
-
-    def _on_target(self, msg: PickTarget) -> None:
-        self._received()
-        p = msg.grasp_point
-        self.twin.announce_target(int(msg.track_id), (p.x, p.y, p.z), msg.phase)
 
     def _on_ping(self, msg: Ping) -> None:
         msg.sim_step = self.twin.step_count
         msg.echo_ns = time.monotonic_ns()
         self._send(self.pub_echo, msg)
 
-    def _on_ack(self, msg: StepAck) -> None:
-        tick = int(msg.tick)
-        self.acks[tick] = int(msg.n_commands)
-        self.last_ack_tick = max(self.last_ack_tick, tick)
-
+    # -- lockstep -----------------------------------------------------------------------------
     def tick_ready(self, tick: int) -> bool:
-        """Lockstep: the ack of ``tick`` and all the commands it announces have arrived."""
-        n = self.acks.get(tick)
-        return n is not None and self.counters.pending_commands >= n
+        """Lockstep: every station's ack of ``tick`` and all the commands it announces are in."""
+        return all(link.tick_ready(tick) for link in self.links)
 
-    def consume_tick(self, tick: int) -> None:
-        """Lockstep: the commands of ``tick`` are applied; forget it and older acks.
-
-        The pending count never goes below zero: a command lost at a controller's start must
-        not make every later tick wait for one more command than it announces.
-        """
-        pending = self.counters.pending_commands - self.acks.pop(tick, 0)
-        self.counters.pending_commands = max(pending, 0)
-        for old in [t for t in self.acks if t < tick]:
-            del self.acks[old]
+    @property
+    def pending_commands(self) -> int:
+        """Commands received and not yet consumed, over every station."""
+        return sum(link.pending for link in self.links)
 
     def peers_matched(self) -> bool:
-        """Whether a controller is there and every subscriber of a counted topic has matched.
+        """Whether every station's controller is there and has matched (:meth:`link_matched`)."""
+        return all(self.link_matched(link) for link in self.links)
 
-        The controller is whoever publishes ``/lockstep/ack`` (a recorder or ``ros2 topic echo``
-        subscribes too, but acknowledges nothing). A volatile message sent before both its
-        writer and its reader have matched can be lost, and the controller would then wait for
-        a counted message that never comes. This checks the writer side of the twin's counted
-        topics, and the reader side of its command subscriptions (every publisher the graph
-        shows has matched; the controller announced them before its ack publisher). The
-        controller creates its ack publisher only once its own readers of the tick and the
-        counted topics have matched (see :mod:`control.node`), so seeing that publisher covers
-        the reader side of the counted topics.
+    def link_matched(self, link: StationLink) -> bool:
+        """Whether a station's controller is there and every subscriber of a counted topic has
+        matched.
+
+        The controller is whoever publishes the station's ``lockstep/ack`` (a recorder or
+        ``ros2 topic echo`` subscribes too, but acknowledges nothing). A volatile message sent
+        before both its writer and its reader have matched can be lost, and the controller would
+        then wait for a counted message that never comes. This checks the writer side of the
+        twin's counted topics, and the reader side of its command subscriptions (every
+        publisher the graph shows has matched; the controller announced them before its ack
+        publisher). The controller creates its ack publisher only once its own readers of the
+        tick and the counted topics have matched (see :mod:`control.node`), so seeing that
+        publisher covers the reader side of the counted topics.
         """
-        if self.sub_ack.get_publisher_count() == 0:
+        if link.sub_ack.get_publisher_count() == 0:
             return False
-        if any(
-            s.get_publisher_count() < self.count_publishers(s.topic_name)
-            for s in self._command_subs
-        ):
+        subs = (*link.command_subs, *self._cell_command_subs)
+        if any(s.get_publisher_count() < self.count_publishers(s.topic_name) for s in subs):
             return False
-        pubs = (self.pub_tick, self.pub_joints, self.pub_belt, self.pub_det)
+        pubs = (self.pub_tick, link.pub_joints, self.pub_belt, self.pub_det)
         return all(
             p.get_subscription_count() >= max(1, self.count_subscribers(p.topic_name)) for p in pubs
         )
 
     # -- publishing -------------------------------------------------------------------------
-    def _count(self, topic: str, stamp: TimeMsg) -> None:
-        self.counters.published[topic] += 1
-        self._tick_counts[topic] += 1
-        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-        self._last_stamp_ns[topic] = max(self._last_stamp_ns.get(topic, -1), stamp_ns)
+    def _count(self, topic: Topic, wire: str, stamp_ns: int, *, tick: bool = True) -> None:
+        """Count a message of a counted topic (every station's on its own wire name; a tick
+        counts one station's, the same for all)."""
+        self.counters.published[wire] += 1
+        if tick:
+            key = topic.name
+            self._tick_counts[key] += 1
+            self._last_stamp_ns[key] = max(self._last_stamp_ns.get(key, -1), stamp_ns)
 
     def publish_step(self) -> None:
         """Publish everything due after a physics step."""
         twin = self.twin
         step = twin.step_count
-        stamp = to_time(twin.time_s)
+        stamp = time_msg(twin.time_s)
+        stamp_ns = msg_stamp_ns(stamp)
         self._send(self.pub_clock, Clock(clock=stamp))
-        robot = twin.robot
-        assert robot is not None
-        q, qd = robot.joint_state()
-        width = robot.gripper_width_m()
-        fingers = [0.5 * width] * len(twin.cell.robot.finger_joints)
-        joints = JointState()
-        joints.header.stamp = stamp
-        joints.name = self._joint_names
-        joints.position = [float(v) for v in q] + fingers
-        joints.velocity = [float(v) for v in qd] + [0.0] * len(fingers)
         wall_s = time.perf_counter()
         self.telemetry.on_step(twin.time_s, wall_s)
         self.telemetry.on_state_published(twin.time_s, wall_s)
-        self._send(self.pub_joints, joints)
-        self._count("/joint_states", stamp)
-        pos, orn = twin.tcp_pose
-        pose = PoseStamped()
-        pose.header.stamp = stamp
-        pose.header.frame_id = "world"
-        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = pos
-        o = pose.pose.orientation
-        o.x, o.y, o.z, o.w = orn
-        self._send(self.pub_tcp, pose)
+        for i, link in enumerate(self.links):
+            if link.telemetry is not self.telemetry:
+                link.telemetry.on_state_published(twin.time_s, wall_s)
+            self._publish_station(link, stamp)
+            self._count(c.JOINT_STATES, link.wire(c.JOINT_STATES), stamp_ns, tick=i == 0)
         if step % self.state_every == 0:
             self.publish_belt(stamp)
         for frame in twin.take_detections():
@@ -352,28 +382,53 @@ class TwinNode(Node):
             self.publish_ground_truth(stamp)
         self.publish_new_events()
         if self.lockstep:
-            counts, last = self._tick_counts, self._last_stamp_ns
-            self._send(
-                self.pub_tick,
-                LockstepTick(
-                    tick=step,
-                    stamp=stamp,
-                    n_joint_states=counts["/joint_states"],
-                    n_belt_states=counts["/conveyor/state"],
-                    n_detections=counts["/objects/detections"],
-                    last_joint_state_ns=last.get("/joint_states", -1),
-                    last_belt_state_ns=last.get("/conveyor/state", -1),
-                    last_detections_ns=last.get("/objects/detections", -1),
-                ),
-            )
+            self._publish_tick(step, stamp)
         self._tick_counts = Counter()
 
-    def bins_message(self) -> SortingBins:
-        """``/cell/bins``: every bin of the cell (``CellConfig.bins``), stamped now."""
+    def _publish_station(self, link: StationLink, stamp: Any) -> None:
+        """A station's ``joint_states`` (the arm's joints, then the tool's report) and
+        ``tcp_pose``."""
+        station = link.station
+        q, qd = station.robot.joint_state()
+        tool_q, tool_qd = station.tool.joint_report()
+        joints = JointState()
+        joints.header.stamp = stamp
+        joints.name = link.joint_names
+        joints.position = [float(v) for v in q] + tool_q
+        joints.velocity = [float(v) for v in qd] + tool_qd
+        self._send(link.pub_joints, joints)
+        pos, orn = self.twin.tcp_pose(station.index)
+        pose = PoseStamped()
+        pose.header.stamp = stamp
+        pose.header.frame_id = "world"
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = pos
+        o = pose.pose.orientation
+        o.x, o.y, o.z, o.w = orn
+        self._send(link.pub_tcp, pose)
+
+    def _publish_tick(self, step: int, stamp: Any) -> None:
+        counts, last = self._tick_counts, self._last_stamp_ns
+        joints, belt, detections = (t.name for t in c.COUNTED)
+        self._send(
+            self.pub_tick,
+            LockstepTick(
+                tick=step,
+                stamp=stamp,
+                n_joint_states=counts[joints],
+                n_belt_states=counts[belt],
+                n_detections=counts[detections],
+                last_joint_state_ns=last.get(joints, -1),
+                last_belt_state_ns=last.get(belt, -1),
+                last_detections_ns=last.get(detections, -1),
+            ),
+        )
+
+    def bins_message(self, link: StationLink) -> SortingBins:
+        """A station's ``cell/bins``: its bins (``StationSpec.bins``), stamped now."""
         msg = SortingBins()
-        msg.header.stamp = to_time(self.twin.time_s)
+        msg.header.stamp = time_msg(self.twin.time_s)
         msg.header.frame_id = "world"
-        for b in self.twin.cell.bins:
+        for b in link.station.spec.bins:
             msg.bins.append(
                 SortingBin(
                     class_name=b.class_name,
@@ -385,7 +440,7 @@ class TwinNode(Node):
             )
         return msg
 
-    def publish_belt(self, stamp: TimeMsg) -> None:
+    def publish_belt(self, stamp: Any) -> None:
         """``/conveyor/state``."""
         twin = self.twin
         belt = twin.observe_belt()
@@ -401,12 +456,12 @@ class TwinNode(Node):
         msg.header.frame_id = "world"
         self._send(self.pub_belt, msg)
         self.telemetry.on_belt(twin.time_s, twin.setpoint_mps, belt.belt_speed_mps)
-        self._count("/conveyor/state", stamp)
+        self._count(c.BELT_STATE, c.BELT_STATE.name, msg_stamp_ns(stamp))
 
     def publish_detections(self, frame: DetectionFrame) -> None:
         """``/objects/detections``: one released frame, stamped with its capture time."""
         msg = DetectionArray()
-        msg.header.stamp = to_time(frame.capture_time_s)
+        msg.header.stamp = time_msg(frame.capture_time_s)
         msg.header.frame_id = "world"
         for d in frame.detections:
             det = Detection(
@@ -420,9 +475,9 @@ class TwinNode(Node):
             det.position.x, det.position.y, det.position.z = d.x_m, d.y_m, d.z_m
             msg.detections.append(det)
         self._send(self.pub_det, msg)
-        self._count("/objects/detections", msg.header.stamp)
+        self._count(c.DETECTIONS, c.DETECTIONS.name, msg_stamp_ns(msg.header.stamp))
 
-    def publish_ground_truth(self, stamp: TimeMsg) -> None:
+    def publish_ground_truth(self, stamp: Any) -> None:
         """``/objects/ground_truth`` (evaluation only)."""
         msg = ObjectStateArray()
         msg.header.stamp = stamp
@@ -466,7 +521,7 @@ class TwinNode(Node):
             class_name=event.class_name,
             detail=json.dumps(event.data),
         )
-        msg.header.stamp = to_time(event.time_s)
+        msg.header.stamp = time_msg(event.time_s)
         self._send(self.pub_events, msg)
 
 
@@ -485,7 +540,7 @@ def run_loop(
     gc.collect()
     gc.freeze()  # everything built so far is long-lived: keep the collector off it
     if node.lockstep:
-        _lockstep(node, spin_once, duration, ack_timeout_s, start_timeout_s)
+        Lockstep(node, spin_once, ack_timeout_s, start_timeout_s).run(duration)
         return
     node.publish_step()
     period = twin.dt_s / realtime_factor
@@ -510,76 +565,115 @@ def _serve_until(spin_once: Callable[..., None], wall_s: float) -> None:
 RESYNC_WAIT_S = 10.0
 
 
-def _lockstep(
-    node: TwinNode,
-    spin_once: Callable[..., None],
-    duration: float,
-    ack_timeout_s: float,
-    start_timeout_s: float,
-) -> None:
-    """Step tick k+1 once tick k is acknowledged with all its commands.
+class Lockstep:
+    """Step tick k+1 once every station's controller has acknowledged tick k with all its
+    commands.
 
-    A controller that does not answer within ``ack_timeout_s`` is lost: a
-    ``controller_timeout`` fault is logged and the cell goes on at the wall-clock pace, as a
-    real cell would while its controller restarts, so an outage costs about the sim time it
-    lasts. When acks come again (a restarted controller), the twin waits up to
-    ``RESYNC_WAIT_S`` for it to catch up, logs ``controller_resumed`` and is in lockstep again.
+    A station's controller that does not answer within ``ack_timeout_s`` is lost: a
+    ``controller_timeout`` fault naming the station is logged, and the cell goes on in lockstep
+    with the other stations' controllers, or at the wall-clock pace when none is left, as a
+    real cell would while a controller restarts, so an outage costs about the sim time it
+    lasts. When that station's acks come again (a restarted controller), the twin waits up to
+    ``RESYNC_WAIT_S`` for it to catch up, logs ``controller_resumed`` and waits for it again.
     """
-    twin = node.twin
-    deadline = time.monotonic() + start_timeout_s
-    while not node.peers_matched() and time.monotonic() < deadline:
-        spin_once(timeout_sec=0.05)
-    controller_alive = node.peers_matched()
-    if not controller_alive:
-        twin.record_fault("controller_timeout", "no controller subscribed before the start")
-    node.publish_step()
-    acks_at_loss = -1
-    lost_at_s: float | None = None if controller_alive else 0.0
-    next_wall = time.perf_counter()
-    while twin.time_s < duration - 1e-9:
-        tick = twin.step_count
-        resync = not controller_alive and node.last_ack_tick > acks_at_loss
-        if controller_alive or resync:
-            wait_s = ack_timeout_s
-            if tick == 0 or resync:
-                wait_s = start_timeout_s if tick == 0 else RESYNC_WAIT_S
-            wait_until = time.monotonic() + wait_s
-            while not node.tick_ready(tick):
-                remaining = wait_until - time.monotonic()
-                if remaining <= 0:
-                    break
-                spin_once(timeout_sec=min(remaining, 0.05))
-            ok = node.tick_ready(tick)
-            if ok and lost_at_s is not None:
-                twin.record_controller_resumed(twin.time_s - lost_at_s)
-                node.publish_new_events()
-                lost_at_s = None
-            if not ok and controller_alive:
-                node.counters.lockstep_timeouts += 1
-                twin.record_fault(
-                    "controller_timeout", f"no acknowledgement of tick {tick} within {wait_s} s"
-                )
-                node.publish_new_events()
-                lost_at_s = twin.time_s
-            if not ok:
-                # every command received so far has been applied; a restarted controller's
-                # acks count only its own commands
-                acks_at_loss = node.last_ack_tick
-                node.counters.pending_commands = 0
-                next_wall = time.perf_counter()
-            controller_alive = ok
-            node.consume_tick(tick)
-        else:
-            next_wall += twin.dt_s
-            _serve_until(spin_once, next_wall)
-            spin_once(timeout_sec=0.0)
-        twin.advance()
+
+    def __init__(
+        self,
+        node: TwinNode,
+        spin_once: Callable[..., None],
+        ack_timeout_s: float,
+        start_timeout_s: float,
+    ) -> None:
+        self.node = node
+        self.twin = node.twin
+        self.spin_once = spin_once
+        self.ack_timeout_s = ack_timeout_s
+        self.start_timeout_s = start_timeout_s
+        self.next_wall = 0.0
+
+    def run(self, duration: float) -> None:
+        """Match the controllers, then step until ``duration``."""
+        node, twin = self.node, self.twin
+        deadline = time.monotonic() + self.start_timeout_s
+        while not node.peers_matched() and time.monotonic() < deadline:
+            self.spin_once(timeout_sec=0.05)
+        for link in node.links:
+            link.alive = node.link_matched(link)
+            if not link.alive:
+                link.lost_at_s = 0.0
+                self._fault(link, "no controller subscribed before the start")
         node.publish_step()
+        self.next_wall = time.perf_counter()
+        while twin.time_s < duration - 1e-9:
+            tick = twin.step_count
+            waits = self._waits(tick)
+            if waits:
+                self._wait_for(tick, waits)
+                for link, wait_s in waits:
+                    self._settle(link, tick, wait_s)
+            else:
+                self.next_wall += twin.dt_s
+                _serve_until(self.spin_once, self.next_wall)
+                self.spin_once(timeout_sec=0.0)
+            twin.advance()
+            node.publish_step()
+
+    def _waits(self, tick: int) -> list[tuple[StationLink, float]]:
+        """The stations whose acks tick ``tick`` waits for, each with its patience (s): a live
+        controller, or a lost one acknowledging again (resync)."""
+        waits = []
+        for link in self.node.links:
+            resync = not link.alive and link.last_ack_tick > link.acks_at_loss
+            if link.alive or resync:
+                wait_s = self.ack_timeout_s
+                if tick == 0 or resync:
+                    wait_s = self.start_timeout_s if tick == 0 else RESYNC_WAIT_S
+                waits.append((link, wait_s))
+        return waits
+
+    def _wait_for(self, tick: int, waits: list[tuple[StationLink, float]]) -> None:
+        """Serve callbacks until every waited-for station is ready or past its patience."""
+        now = time.monotonic()
+        until = [(link, now + wait_s) for link, wait_s in waits]
+        while True:
+            remaining = max(
+                (t - time.monotonic() for link, t in until if not link.tick_ready(tick)),
+                default=0.0,
+            )
+            if remaining <= 0:
+                return
+            self.spin_once(timeout_sec=min(remaining, 0.05))
+
+    def _settle(self, link: StationLink, tick: int, wait_s: float) -> None:
+        """After the wait: a station's controller resumed, lost, or still in step."""
+        twin, node = self.twin, self.node
+        ok = link.tick_ready(tick)
+        if ok and link.lost_at_s is not None:
+            twin.record_controller_resumed(twin.time_s - link.lost_at_s, link.name)
+            node.publish_new_events()
+            link.lost_at_s = None
+        if not ok and link.alive:
+            node.counters.lockstep_timeouts += 1
+            self._fault(link, f"no acknowledgement of tick {tick} within {wait_s} s")
+            link.lost_at_s = twin.time_s
+        if not ok:
+            # every command received so far has been applied; a restarted controller's
+            # acks count only its own commands
+            link.acks_at_loss = link.last_ack_tick
+            link.pending = 0
+            self.next_wall = time.perf_counter()
+        link.alive = ok
+        link.consume_tick(tick)
+
+    def _fault(self, link: StationLink, detail: str) -> None:
+        self.twin.record_fault("controller_timeout", detail, link.name)
+        self.node.publish_new_events()
 
 
 def make_executor() -> Any:
-    """The EventsExecutor (3-6x lower latency here than the default one)."""
+    """The EventsExecutor: it serves a callback with less latency than the default executor
+    (``docs/benchmarks.md``), and the step loop serves callbacks between physics steps."""
     return EventsExecutor()
 
 
-__all__ = ["TwinNode", "make_executor", "run_loop", "to_time"]
+__all__ = ["Lockstep", "StationLink", "TwinNode", "make_executor", "run_loop"]

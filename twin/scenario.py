@@ -14,6 +14,7 @@ Example ``experiments/scenarios/default.yaml``::
 
     name: default
     dataset: builtin
+    cell: default
     duration_s: 60.0
     system:
       belt_speed_mps: 0.4
@@ -25,20 +26,19 @@ Example ``experiments/scenarios/default.yaml``::
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal, NamedTuple
 
 import numpy as np
 import yaml
 
+from interfaces.cell import Cell, load_cell, resolve_cell_path
 from interfaces.dataclass_io import from_data, to_data
 from interfaces.fileio import write_atomic
 from interfaces.yamlio import load_yaml_strict
 from twin.errors import ConfigError
 from twin.perception import PerceptionConfig
-
-CLASS_NAMES: tuple[str, ...] = ("concrete", "brick", "wood", "rubber")
 
 
 def _check(condition: bool, key: str, value: object, what: str) -> None:
@@ -54,14 +54,18 @@ def _check_range(key: str, lo_hi: tuple[float, float], lo: float, hi: float) -> 
 
 @dataclass(frozen=True)
 class ObjectLevel:
-    """Which objects enter the belt and how they vary from their source annotation."""
+    """Which objects enter the belt and how they vary from their source annotation.
+
+    ``classes``: only objects of these classes enter; empty (the default) lets every class of
+    the dataset in.
+    """
 
     images: tuple[str, ...] = ()
     max_objects: int | None = None
     resample_heights: bool = False
     height_ranges_m: dict[str, tuple[float, float]] = field(default_factory=dict)
     orientation_jitter_rad: float = 0.0
-    classes: tuple[str, ...] = CLASS_NAMES
+    classes: tuple[str, ...] = ()
     max_width_m: float | None = None
     """Only objects whose footprint's narrow side is at most this enter (e.g. what fits a
     gripper); None lets every object in."""
@@ -89,7 +93,12 @@ class ObjectLevel:
         )
         for name, rng in self.height_ranges_m.items():
             _check_range(f"objects.height_ranges_m.{name}", rng, 0.001, 1.0)
-        _check(len(self.classes) > 0, "objects.classes", self.classes, "must not be empty")
+        _check(
+            len(set(self.classes)) == len(self.classes),
+            "objects.classes",
+            list(self.classes),
+            "names a class twice",
+        )
 
 
 @dataclass(frozen=True)
@@ -238,6 +247,7 @@ class Scenario:
     ``name`` names the run folder (``runs/<name>-<stamp>``), so it is one plain path part: not
     empty or only dots, without ``/``, ``\\`` or NUL (hence never absolute, never ``..``).
 
+    ``cell`` names the cell file (:func:`scenario_cell`): a shipped cell's name or a path.
     ``controller`` names the controller's ROS 2 parameter file (checked by ``cdw-twin run``
     before anything starts): a file name without ``.yaml`` in ``control/config/``, or a path.
     """
@@ -246,7 +256,7 @@ class Scenario:
     dataset: str = "builtin"
     seed: int = 0
     duration_s: float = 60.0
-    robot: str = "panda"
+    cell: str = "default"
     controller: str = "default"
     objects: ObjectLevel = field(default_factory=ObjectLevel)
     system: SystemLevel = field(default_factory=SystemLevel)
@@ -263,6 +273,7 @@ class Scenario:
             "runs go to runs/<name>-<stamp>",
         )
         _check(bool(self.controller), "controller", self.controller, "must not be empty")
+        _check(bool(self.cell), "cell", self.cell, "must not be empty")
         _check(self.seed >= 0, "seed", self.seed, "must be >= 0")
         _check(
             0.0 < self.duration_s <= 86400.0,
@@ -293,17 +304,43 @@ class Scenario:
 
     @classmethod
     def load(cls, path: Path) -> Scenario:
-        """Read a scenario file."""
+        """Read a scenario file; a relative ``cell`` path is made absolute from the file's
+        folder (so the scenario names the same cell wherever it is used from)."""
         try:
             text = path.read_text(encoding="utf-8")
         except OSError as exc:
             msg = f"{path}: cannot read scenario: {exc.strerror}"
             raise ConfigError(msg) from None
-        return cls.from_yaml(text, where=str(path))
+        scenario = cls.from_yaml(text, where=str(path))
+        cell = scenario.cell
+        if _is_cell_path(cell) and not Path(cell).expanduser().is_absolute():
+            scenario = replace(scenario, cell=str((path.parent / cell).resolve()))
+        return scenario
 
     def save(self, path: Path) -> None:
         """Write the scenario atomically."""
         write_atomic(path, self.to_yaml())
+
+
+def scenario_cell(scenario: Scenario, base_dir: Path | None = None, where: str = "") -> Cell:
+    """The cell ``scenario.cell`` names: a shipped cell (``default``, ``two_pandas``) or a path,
+    relative to ``base_dir`` (the scenario file's folder) when given. Errors name ``where``
+    (the scenario) and the cell file."""
+    prefix = f"{where}: " if where else ""
+    try:
+        path = resolve_cell_path(scenario.cell, base_dir)
+    except ConfigError as exc:
+        raise ConfigError(f"{prefix}{exc}") from None
+    try:
+        return load_cell(path)
+    except ConfigError as exc:
+        msg = f"{prefix}cell = {scenario.cell!r}: {exc}"
+        raise ConfigError(msg) from None
+
+
+def _is_cell_path(value: str) -> bool:
+    """Whether a scenario's ``cell`` is a path (else the name of a shipped cell)."""
+    return "/" in value or value.endswith((".yaml", ".yml"))
 
 
 class SeedTree(NamedTuple):

@@ -7,16 +7,19 @@ episode that runs without objects. Checked:
 
 - ``dataset``: an existing meshgen output folder (``index.csv`` and the ``.cdw-meshgen`` marker,
   or, for outputs written before the marker existed, an ``index.csv`` with meshgen's header);
-- ``robot``: a known robot (:data:`twin.config.ROBOTS`);
 - ``objects.classes``, ``objects.height_ranges_m``, ``physics.friction`` and
   ``physics.restitution``: every class they name is a class the dataset has. Values left at
-  their defaults are exempt: the defaults name the built-in sample's four classes, which a
-  dataset need not all have;
+  their defaults are exempt: the default tables name the built-in sample's four classes, which
+  a dataset need not all have;
 - ``objects.images``: every name is an image of the dataset that has objects;
 - the object filters (``objects.images``, ``classes``, ``max_width_m``, ``min_height_m``, in the
   order :class:`twin.stream.Stream` applies them) leave at least one object; the error names the
   filter that emptied the selection. An object whose height is re-sampled counts as kept when its
   class's range reaches ``min_height_m``. ``max_objects`` (at least 1) only caps the stream;
+- the cell (the scenario's ``cell``, or the one passed): every class that can enter the belt
+  (the classes of the objects the filters keep) has a bin at some station (the error names
+  the class and the cell file); a scenario that enables the belt perturbation needs a drive
+  with a perturbation mapping; a third-party drive's FMU file exists;
 - ``system.prefill_m``: at most the belt's run from the infeed to its end, the farthest the
   stream can have been carried while still on the belt;
 - fault and schedule times: every ``faults.detection_dropout`` and ``faults.belt_stall`` window,
@@ -28,8 +31,7 @@ only checked to exist, never loaded), with the class table meshgen recorded in `
 
 Example::
 
-    scenario, dataset = build_scenario(args)
-    check_scenario(scenario, dataset, where=str(args.scenario or "scenario"))
+    scenario, dataset, cell = build_scenario(args)  # checks them with check_scenario
 """
 
 from __future__ import annotations
@@ -38,13 +40,11 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from interfaces.cell import Cell
 from meshgen.outdir import MARKER_NAME, is_meshgen_output
-from twin.config import ROBOTS, CellConfig
 from twin.errors import ConfigError, SceneError
 from twin.objects import ImageLayout, ObjectSpec, load_dataset
-from twin.scenario import CLASS_NAMES, PhysicsLevel, Scenario
-
-"""File meshgen writes into every output folder it completes (``meshgen.outdir.MARKER_NAME``)."""
+from twin.scenario import PhysicsLevel, Scenario, scenario_cell
 
 _SHOWN = 8
 """How many names an error message lists before it abbreviates."""
@@ -56,12 +56,14 @@ class Selection:
 
     ``classes``: the classes the dataset's objects have (sorted). ``images``: the images with at
     least one kept object, in dataset order. ``objects``: how many objects one pass keeps (before
-    ``objects.max_objects`` caps the stream).
+    ``objects.max_objects`` caps the stream). ``entering``: the classes of the kept objects
+    (sorted): those that can enter the belt.
     """
 
     classes: tuple[str, ...]
     images: tuple[str, ...]
     objects: int
+    entering: tuple[str, ...] = ()
 
 
 def check_scenario(
@@ -69,23 +71,27 @@ def check_scenario(
     dataset_dir: Path,
     *,
     where: str,
-    cell: CellConfig | None = None,
+    cell: Cell | None = None,
+    base_dir: Path | None = None,
 ) -> Selection:
     """Check ``scenario`` against the meshgen output ``dataset_dir`` and ``cell``.
 
-    ``where`` names the scenario (its file) in the messages; ``cell`` defaults to
-    ``CellConfig()``. Raises :class:`ConfigError` (one line: ``where``, the key, the value and
-    what is wrong) at the first problem; returns what the object filters keep.
+    ``where`` names the scenario (its file) in the messages; ``cell`` defaults to the one the
+    scenario names (relative to ``base_dir``, the scenario file's folder). Raises
+    :class:`ConfigError` (one line: ``where``, the key, the value and what is wrong) at the
+    first problem; returns what the object filters keep.
     """
-    cell = cell if cell is not None else CellConfig()
-    _check_robot(scenario, where)
+    cell = cell if cell is not None else scenario_cell(scenario, base_dir, where)
     _check_times(scenario, where)
     _check_prefill(scenario, cell, where)
+    _check_drive(scenario, cell, where)
     layouts = _read_dataset(dataset_dir, where)
     classes = tuple(sorted({spec.class_name for lay in layouts for spec in lay.objects}))
     _check_class_names(scenario, classes, where)
     _check_images(scenario, layouts, where)
-    return _select(scenario, layouts, classes, where)
+    selection = _select(scenario, layouts, classes, where)
+    _check_bins(selection, cell, where)
+    return selection
 
 
 def _fail(where: str, key: str, value: object, what: str) -> ConfigError:
@@ -99,9 +105,33 @@ def _names(names: Iterable[str]) -> str:
     return shown + (f", ... ({len(items)} in all)" if len(items) > _SHOWN else "")
 
 
-def _check_robot(scenario: Scenario, where: str) -> None:
-    if scenario.robot not in ROBOTS:
-        raise _fail(where, "robot", scenario.robot, f"unknown robot (known: {sorted(ROBOTS)})")
+def _cell_file(cell: Cell) -> str:
+    return cell.source or f"cell {cell.name!r}"
+
+
+def _check_bins(selection: Selection, cell: Cell, where: str) -> None:
+    sorted_by_cell = set(cell.classes)
+    for name in selection.entering:
+        if name not in sorted_by_cell:
+            msg = (
+                f"{where}: class {name!r} can enter the belt but no station of the cell "
+                f"{_cell_file(cell)} has a bin for it (its bins sort: {_names(cell.classes)}); "
+                "add a bin for it, or leave it out with objects.classes"
+            )
+            raise ConfigError(msg)
+
+
+def _check_drive(scenario: Scenario, cell: Cell, where: str) -> None:
+    drive = cell.drive
+    if scenario.system.perturbation.enabled and drive.perturbation is None:
+        what = (
+            f"the belt drive of the cell {_cell_file(cell)} ({drive.fmu}) has no perturbation "
+            "mapping (drive.perturbation)"
+        )
+        raise _fail(where, "system.perturbation.enabled", True, what)
+    if not drive.builtin and not Path(drive.fmu).is_file():
+        msg = f"{where}: the cell {_cell_file(cell)}: drive.fmu = {drive.fmu!r}: no such file"
+        raise ConfigError(msg)
 
 
 def _check_times(scenario: Scenario, where: str) -> None:
@@ -123,7 +153,7 @@ def _check_times(scenario: Scenario, where: str) -> None:
             raise _fail(where, f"system.speed_schedule[{i}]", [t_s, speed], within)
 
 
-def _check_prefill(scenario: Scenario, cell: CellConfig, where: str) -> None:
+def _check_prefill(scenario: Scenario, cell: Cell, where: str) -> None:
     belt = cell.belt
     run_m = round(belt.end_x_m - belt.infeed_x_m, 9)
     if scenario.system.prefill_m > run_m:
@@ -175,10 +205,9 @@ def _check_class_names(scenario: Scenario, classes: tuple[str, ...], where: str)
     known = set(classes)
     lacks = f"names a class the dataset lacks (its classes: {_names(classes)})"
     objects = scenario.objects
-    if objects.classes != CLASS_NAMES:
-        for i, name in enumerate(objects.classes):
-            if name not in known:
-                raise _fail(where, f"objects.classes[{i}]", name, lacks)
+    for i, name in enumerate(objects.classes):
+        if name not in known:
+            raise _fail(where, f"objects.classes[{i}]", name, lacks)
     for name in objects.height_ranges_m:
         if name not in known:
             raise _fail(where, "objects.height_ranges_m", name, f"key {lacks}")
@@ -229,7 +258,11 @@ def _select(
         for spec in lay.objects
     ]
     before = kept
-    kept = [(image, spec) for image, spec in before if spec.class_name in objects.classes]
+    kept = [
+        (image, spec)
+        for image, spec in before
+        if not objects.classes or spec.class_name in objects.classes
+    ]
     if not kept:
         present = sorted({spec.class_name for _, spec in before})
         what = f"leaves no object: the {len(before)} objects it filters have classes {present}"
@@ -257,4 +290,5 @@ def _select(
             )
             raise _fail(where, "objects.min_height_m", floor_m, what)
     images = tuple(dict.fromkeys(image for image, _ in kept))
-    return Selection(classes=classes, images=images, objects=len(kept))
+    entering = tuple(sorted({spec.class_name for _, spec in kept}))
+    return Selection(classes=classes, images=images, objects=len(kept), entering=entering)

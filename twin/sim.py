@@ -9,11 +9,15 @@
             if terminated or truncated:
                 break
 
-``action`` is an :class:`ArmCommand` (joint targets, optional feed-forward velocities, gripper
-opening) or ``None`` to keep the last one: the scripted-arm hook for tests and users. The
-co-simulation master runs a fixed physics step (240 Hz default); every ``fmu_every_n_steps`` it
-sets the FMU's inputs (setpoint, mass on the belt), calls ``doStep`` and reads the belt speed that
-drives the kinematic belt. Time is ``step * dt``, never accumulated.
+The cell (:class:`interfaces.cell.Cell`: belt, camera, belt drive, physics, stations) is the
+scenario's ``cell`` unless one is passed. Each station's robot is loaded at its base pose with
+its tool (:attr:`Twin.stations`, in the cell's order). ``action`` is an :class:`ArmCommand`
+(a station's joint targets, optional feed-forward velocities, its tool's command), a sequence
+of them (one per station at most) or ``None`` to keep the last ones: the scripted-arm hook for
+tests and users. The co-simulation master runs a fixed physics step (240 Hz default); every
+``drive.step_s`` (default: every step) it sets the belt-drive FMU's inputs (setpoint, mass on
+the belt), calls ``doStep`` and reads the belt speed that drives the kinematic belt. Time is
+``step * dt``, never accumulated.
 
 The camera model is the scenario's ``perception`` unless a :class:`PerceptionConfig` is passed.
 Injected faults (the scenario's ``faults``): inside a ``belt_stall`` window the FMU receives a
@@ -32,35 +36,29 @@ import math
 import os
 import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
 
-import numpy as np
 import pybullet as pb
 
+from interfaces.cell import Cell, DriveSpec
 from interfaces.events import Event, EventType
+from interfaces.metrics import Counts, count_events, event_scores, exit_station
 from twin.belt_drive import BeltDrive, BeltState
 from twin.builtin import cache_root
-from twin.config import ROBOTS, CellConfig
 from twin.errors import ConfigError
 from twin.monitor import GroundTruth, Monitor
 from twin.objects import ImageLayout, load_dataset
 from twin.perception import DetectionFrame, Perception, PerceptionConfig
-from twin.robot import Robot
-from twin.scenario import Scenario, seed_tree
-from twin.scores import Scores, compute_scores
+from twin.scenario import PerturbationLevel, Scenario, scenario_cell, seed_tree
+from twin.station import ArmCommand, Station
 from twin.stream import ImageBatch, Stream
-from twin.target_metric import TargetTracker
+from twin.target_metric import TrackingResult
 from twin.world import World
 
-# Names of the belt-drive FMU's perturbation parameters (see fmus/belt_drive/readme.md).
-PERTURBATION_PARAMETERS = (
-    "perturbation_std_N",
-    "perturbation_correlation_time_s",
-    "perturbation_seed",
-)
+__all__ = ["ArmCommand", "ArmState", "EventSink", "Observation", "Twin", "collision_cache_dir"]
 
 
 def collision_cache_dir() -> tuple[Path, tempfile.TemporaryDirectory[str] | None]:
@@ -82,18 +80,60 @@ def collision_cache_dir() -> tuple[Path, tempfile.TemporaryDirectory[str] | None
     return folder, None
 
 
+def drive_parameters(
+    drive: DriveSpec, perturbation: PerturbationLevel, fmu_seed: int
+) -> dict[str, float]:
+    """The belt-drive FMU's parameters for an episode: the cell's ``drive.parameters``, and
+    the scenario's perturbation (off: force 0) through the drive's perturbation mapping.
+
+    A drive without a perturbation mapping takes none; a scenario that enables one is refused.
+    """
+    params = dict(drive.parameters)
+    names = drive.perturbation
+    if names is None:
+        if perturbation.enabled:
+            msg = (
+                f"system.perturbation.enabled: the belt drive {drive.fmu!r} has no perturbation "
+                "mapping (drive.perturbation in the cell file)"
+            )
+            raise ConfigError(msg)
+        return params
+    params.setdefault(names.force_std, perturbation.force_std_N if perturbation.enabled else 0.0)
+    params.setdefault(names.correlation_time, perturbation.correlation_time_s)
+    params.setdefault(names.seed, fmu_seed % 2**31)
+    return params
+
+
+def entering_classes(
+    layouts: tuple[ImageLayout, ...], scenario: Scenario, cell: Cell
+) -> tuple[str, ...]:
+    """The classes objects of the dataset can enter the belt with (``objects.classes``, empty:
+    all), in the cell's order (its bins'), then any the cell has no bin for."""
+    present = {spec.class_name for layout in layouts for spec in layout.objects}
+    wanted = scenario.objects.classes
+    kept = {name for name in present if not wanted or name in wanted}
+    ordered = [name for name in cell.classes if name in kept]
+    return (*ordered, *sorted(kept - set(ordered)))
+
+
 @dataclass(frozen=True)
-class ArmCommand:
-    """A command for the arm: joint targets ``(n,)``, optional velocities ``(n,)``, gripper."""
+class ArmState:
+    """One station's arm and tool at one instant (ground truth)."""
 
     joint_positions: tuple[float, ...]
-    joint_velocities: tuple[float, ...] | None = None
-    gripper_width_m: float | None = None
+    joint_velocities: tuple[float, ...]
+    tcp_position_m: tuple[float, float, float]
+    tcp_orientation_xyzw: tuple[float, float, float, float]
+    gripper_width_m: float
 
 
 @dataclass(frozen=True)
 class Observation:
-    """What the twin knows at one instant (ground truth)."""
+    """What the twin knows at one instant (ground truth); ``arms`` has one entry per station.
+
+    ``joint_positions`` ... ``gripper_width_m`` are the first station's (the only one of a
+    one-station cell).
+    """
 
     time_s: float
     step: int
@@ -101,12 +141,33 @@ class Observation:
     setpoint_mps: float
     load_mass_kg: float
     objects: tuple[GroundTruth, ...]
-    joint_positions: tuple[float, ...]
-    joint_velocities: tuple[float, ...]
-    tcp_position_m: tuple[float, float, float]
-    tcp_orientation_xyzw: tuple[float, float, float, float]
-    gripper_width_m: float
+    arms: tuple[ArmState, ...]
     events: tuple[Event, ...] = field(default=())
+
+    @property
+    def joint_positions(self) -> tuple[float, ...]:
+        """The first station's arm joint positions."""
+        return self.arms[0].joint_positions
+
+    @property
+    def joint_velocities(self) -> tuple[float, ...]:
+        """The first station's arm joint velocities."""
+        return self.arms[0].joint_velocities
+
+    @property
+    def tcp_position_m(self) -> tuple[float, float, float]:
+        """The first station's TCP position."""
+        return self.arms[0].tcp_position_m
+
+    @property
+    def tcp_orientation_xyzw(self) -> tuple[float, float, float, float]:
+        """The first station's TCP orientation."""
+        return self.arms[0].tcp_orientation_xyzw
+
+    @property
+    def gripper_width_m(self) -> float:
+        """The first station's measured gripper opening."""
+        return self.arms[0].gripper_width_m
 
 
 EventSink = Callable[[Event], None]
@@ -116,6 +177,9 @@ EventSink = Callable[[Event], None]
 class Twin:
     """The conveyor twin. One PyBullet client and one FMU instance per ``Twin``.
 
+    ``cell`` defaults to the scenario's (a relative path taken from the working directory;
+    :func:`twin.cmd_node.build_scenario` resolves it against the scenario file). ``classes``
+    are the classes that can enter the belt (:func:`entering_classes`): the camera's labels.
     ``event_sink`` (also settable as the attribute of that name) receives every event as it
     is appended to :attr:`events`; it sees the events of every episode (every :meth:`reset`).
     """
@@ -125,38 +189,33 @@ class Twin:
         scenario: Scenario,
         *,
         dataset_dir: Path,
-        cell: CellConfig | None = None,
-        fmu_path: Path | None = None,
-        fmu_parameters: dict[str, float] | None = None,
+        cell: Cell | None = None,
         perception: PerceptionConfig | None = None,
         perception_enabled: bool = True,
         realtime: bool = False,
         gui: bool = False,
         event_sink: EventSink | None = None,
     ) -> None:
-        if cell is None:
-            if scenario.robot not in ROBOTS:
-                msg = f"robot = {scenario.robot!r}: unknown robot (known: {sorted(ROBOTS)})"
-                raise ConfigError(msg)
-            cell = CellConfig(robot=ROBOTS[scenario.robot])
         self.scenario = scenario
-        self.cell = cell
-        self.dt_s = cell.physics.dt_s
-        self._fmu_every = cell.physics.fmu_every_n_steps
-        self._fmu_path = fmu_path
-        self._fmu_parameters = dict(fmu_parameters or {})
+        self.cell = cell if cell is not None else scenario_cell(scenario)
+        self.dt_s = self.cell.physics.dt_s
+        step_s = self.cell.drive.step_s
+        self._fmu_every = (
+            1 if step_s is None else max(1, round(step_s * self.cell.physics.physics_hz))
+        )
         self.realtime = realtime
         self.perception_config = perception or scenario.perception
         self.perception_enabled = perception_enabled
         self.perception: Perception | None = None
-        self.targets = TargetTracker()
         self._released: list[DetectionFrame] = []
         self.layouts: tuple[ImageLayout, ...] = load_dataset(dataset_dir)
+        self.classes = entering_classes(self.layouts, scenario, self.cell)
+        drive_parameters(self.cell.drive, scenario.system.perturbation, 0)  # refused early
         self._cache_dir, self._cache = collision_cache_dir()
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
         self._drive: BeltDrive | None = None
         self._world: World | None = None
-        self.robot: Robot | None = None
+        self.stations: tuple[Station, ...] = ()
         self._monitor: Monitor | None = None
         self._batches: Iterator[ImageBatch] = iter(())
         self._next_batch: ImageBatch | None = None
@@ -197,11 +256,12 @@ class Twin:
             self.scenario = replace(self.scenario, seed=seed)
         seeds = seed_tree(self.scenario.seed)
         c = self.client
+        physics = self.cell.physics
         pb.resetSimulation(physicsClientId=c)
-        pb.setGravity(0.0, 0.0, -self.cell.physics.gravity_mps2, physicsClientId=c)
+        pb.setGravity(0.0, 0.0, -physics.gravity_mps2, physicsClientId=c)
         pb.setPhysicsEngineParameter(
             fixedTimeStep=self.dt_s,
-            numSolverIterations=self.cell.physics.solver_iterations,
+            numSolverIterations=physics.solver_iterations,
             numSubSteps=0,
             deterministicOverlappingPairs=1,
             enableConeFriction=0,
@@ -209,39 +269,41 @@ class Twin:
         )
         self._world = World(c, self.cell, self._cache_dir)
         self._world.prepare([spec for layout in self.layouts for spec in layout.objects])
-        self.robot = Robot(c, self.cell.robot)
-        self._monitor = Monitor(c, self.cell, self._world, self.robot)
+        self.stations = tuple(Station.load(c, i, spec) for i, spec in enumerate(self.cell.stations))
+        self._monitor = Monitor(c, self.cell, self._world, self.stations)
         stream = Stream(self.layouts, self.scenario, self.cell.belt, seeds)
         self._batches = iter(stream)
         self._next_batch = next(self._batches, None)
-        if self._drive is not None:
-            self._drive.__exit__(None, None, None)
-        params = dict(self._fmu_parameters)
-        perturbation = self.scenario.system.perturbation
-        if self._fmu_path is None:
-            amplitude, tau_s, fmu_seed = PERTURBATION_PARAMETERS
-            params.setdefault(amplitude, perturbation.force_std_N if perturbation.enabled else 0.0)
-            params.setdefault(tau_s, perturbation.correlation_time_s)
-            params.setdefault(fmu_seed, seeds.fmu_seed % 2**31)
-        self._drive = BeltDrive(self._fmu_path, parameters=params)
-        self._drive.__enter__()
+        self._open_drive(seeds.fmu_seed)
         self.step_count = 0
         self.setpoint_mps = self.scenario.system.belt_speed_mps
         self._belt_state = BeltState(0.0, 0.0, 0.0, 0.0, 0.0)
         self._events = []
         self.perception = Perception(
             self.perception_config,
-            self.scenario.objects.classes,
+            self.classes,
             self.cell.belt.surface_z_m,
             self.dt_s,
             seeds.perception,
+            camera=self.cell.camera,
             dropout_windows_s=self.scenario.faults.detection_dropout,
         )
-        self.targets = TargetTracker()
         self._released = []
         self._spawn_due()
         self._wall_start = time.perf_counter()
         return self.observe(), {"seed": self.scenario.seed}
+
+    def _open_drive(self, fmu_seed: int) -> None:
+        if self._drive is not None:
+            self._drive.__exit__(None, None, None)
+            self._drive = None
+        drive = self.cell.drive
+        params = drive_parameters(drive, self.scenario.system.perturbation, fmu_seed)
+        if drive.builtin:
+            self._drive = BeltDrive(parameters=params)
+        else:
+            self._drive = BeltDrive(Path(drive.fmu), mapping=drive.mapping, parameters=params)
+        self._drive.__enter__()
 
     # -- stepping ---------------------------------------------------------------------------
     @property
@@ -263,7 +325,7 @@ class Twin:
         self._wall_start = time.perf_counter() - self.time_s / realtime_factor
 
     def step(
-        self, action: ArmCommand | None = None
+        self, action: ArmCommand | Sequence[ArmCommand] | None = None
     ) -> tuple[Observation, float, bool, bool, dict[str, object]]:
         """Advance one physics step; returns Gymnasium's ``(obs, reward, terminated, truncated,
         info)``, the reward being the number of objects picked in this step."""
@@ -273,24 +335,23 @@ class Twin:
         truncated = self.time_s >= self.scenario.duration_s
         return obs, float(picks), False, truncated, {}
 
-    def _started(self) -> tuple[World, Robot, Monitor, BeltDrive]:
-        if (
-            self._world is None
-            or self.robot is None
-            or self._monitor is None
-            or self._drive is None
-        ):
+    def _started(self) -> tuple[World, Monitor, BeltDrive]:
+        if self._world is None or self._monitor is None or self._drive is None:
             msg = "the twin has no episode: call reset() before step(), advance() or observe()"
             raise ConfigError(msg)
-        return self._world, self.robot, self._monitor, self._drive
+        return self._world, self._monitor, self._drive
 
-    def advance(self, action: ArmCommand | None = None) -> list[Event]:
+    def _station(self, index: int) -> Station:
+        if not 0 <= index < len(self.stations):
+            self._started()
+            msg = f"station {index}: the cell has {len(self.stations)} station(s)"
+            raise ConfigError(msg)
+        return self.stations[index]
+
+    def advance(self, action: ArmCommand | Sequence[ArmCommand] | None = None) -> list[Event]:
         """Advance one physics step without building an observation; returns the new events."""
-        world, robot, monitor, drive = self._started()
-        if action is not None:
-            self.command(action)
-        else:
-            robot.extrapolate(self.dt_s)
+        world, monitor, drive = self._started()
+        self._command_or_hold(action)
         self._apply_schedule()
         if self.step_count % self._fmu_every == 0:
             self._belt_state = drive.step(
@@ -306,11 +367,9 @@ class Twin:
             if self.event_sink is not None:
                 for event in new:
                     self.event_sink(event)
-        if self.targets.active:
-            for event in new:
-                if event.type is EventType.PICK_SUCCESS:
-                    self.targets.finish(self.time_s)
-            self.targets.update(self.time_s, monitor.tcp_pose[0], monitor.pose_of)
+        for station in self.stations:
+            if station.targets.active:
+                self._track(station, monitor, new)
         if self.perception is not None and self.perception_enabled:
             if self.perception.capture_due(self.step_count):
                 self.perception.capture(self.time_s, monitor.ground_truth())
@@ -322,31 +381,50 @@ class Twin:
                 time.sleep(delay)
         return new
 
-    def command(self, action: ArmCommand) -> None:
-        """Set the arm (and gripper) targets; they hold until the next command."""
-        _, robot, _, _ = self._started()
-        n = len(robot.arm_joints)
-        if len(action.joint_positions) != n:
-            msg = f"arm command has {len(action.joint_positions)} joint positions, robot has {n}"
-            raise ConfigError(msg)
-        qd = None if action.joint_velocities is None else np.asarray(action.joint_velocities)
-        robot.command(np.asarray(action.joint_positions, dtype=float), qd)
-        if action.gripper_width_m is not None:
-            robot.command_gripper(action.gripper_width_m)
-        robot.apply_commands()
+    def _command_or_hold(self, action: ArmCommand | Sequence[ArmCommand] | None) -> None:
+        """Apply this step's commands; a station without one follows its last command."""
+        if action is None:
+            commanded: tuple[int, ...] = ()
+        elif isinstance(action, ArmCommand):
+            self.command(action)
+            commanded = (action.station,)
+        else:
+            for command in action:
+                self.command(command)
+            commanded = tuple(command.station for command in action)
+        for station in self.stations:
+            if station.index not in commanded:
+                station.robot.extrapolate(self.dt_s)
 
-    def command_gripper(self, width_m: float) -> None:
-        """Set the gripper opening target (m); it holds until the next command."""
-        _, robot, _, _ = self._started()
-        robot.command_gripper(width_m)
-        robot.apply_commands()
+    def _track(self, station: Station, monitor: Monitor, new: list[Event]) -> None:
+        """The station's tracking-time measurement for this step."""
+        for event in new:
+            if event.type is EventType.PICK_SUCCESS and event.data.get("station") == station.name:
+                station.targets.finish(self.time_s)
+        station.targets.update(self.time_s, monitor.tcp_pose(station.index)[0], monitor.pose_of)
+
+    def command(self, action: ArmCommand, station: int | None = None) -> None:
+        """Set a station's arm (and tool) targets (``station`` overrides ``action.station``);
+        they hold until the next command."""
+        index = action.station if station is None else station
+        self._station(index).command(action)
+
+    def command_gripper(self, width_m: float, station: int = 0) -> None:
+        """Set a station's gripper opening target (m); it holds until the next command."""
+        self._station(station).command_tool(width_m)
 
     def announce_target(
-        self, track_id: int, grasp_point: tuple[float, float, float], phase: str
+        self,
+        track_id: int,
+        grasp_point: tuple[float, float, float],
+        phase: str,
+        station: int = 0,
     ) -> None:
-        """The controller says which object it pursues (for the tracking-time metric)."""
-        _, _, monitor, _ = self._started()
-        self.targets.announce(self.time_s, track_id, grasp_point, phase, monitor.poses())
+        """A station's controller says which object it pursues (for the tracking time)."""
+        _, monitor, _ = self._started()
+        self._station(station).targets.announce(
+            self.time_s, track_id, grasp_point, phase, monitor.poses()
+        )
 
     def take_detections(self) -> list[DetectionFrame]:
         """Detection frames released since the last call (after their latency)."""
@@ -373,7 +451,7 @@ class Twin:
                         self.record_fault(kind, f"{edge} of window [{start_s}, {end_s}] s")
 
     def _spawn_due(self) -> None:
-        world, _, monitor, _ = self._started()
+        world, monitor, _ = self._started()
         while (
             self._next_batch is not None
             and self._belt_state.belt_position_m >= self._next_batch.trigger_m
@@ -394,9 +472,7 @@ class Twin:
     # -- reading ----------------------------------------------------------------------------
     def observe(self, events: list[Event] | tuple[Event, ...] = ()) -> Observation:
         """Ground truth now."""
-        _, robot, monitor, _ = self._started()
-        q, qd = robot.joint_state()
-        pos, orn = robot.tcp_pose()
+        _, monitor, _ = self._started()
         return Observation(
             time_s=self.time_s,
             step=self.step_count,
@@ -404,12 +480,20 @@ class Twin:
             setpoint_mps=self.setpoint_mps,
             load_mass_kg=monitor.load_mass_kg,
             objects=monitor.ground_truth(),
+            arms=tuple(self._arm_state(station) for station in self.stations),
+            events=tuple(events),
+        )
+
+    @staticmethod
+    def _arm_state(station: Station) -> ArmState:
+        q, qd = station.robot.joint_state()
+        pos, orn = station.tool.tcp_pose()
+        return ArmState(
             joint_positions=tuple(float(v) for v in q),
             joint_velocities=tuple(float(v) for v in qd),
             tcp_position_m=(float(pos[0]), float(pos[1]), float(pos[2])),
             tcp_orientation_xyzw=(float(orn[0]), float(orn[1]), float(orn[2]), float(orn[3])),
-            gripper_width_m=robot.gripper_width_m(),
-            events=tuple(events),
+            gripper_width_m=station.tool.measured(),
         )
 
     def observe_belt(self) -> BeltState:
@@ -418,19 +502,20 @@ class Twin:
 
     def observe_objects(self) -> tuple[GroundTruth, ...]:
         """Ground truth of every object on the belt, held or in a bin."""
-        _, _, monitor, _ = self._started()
+        _, monitor, _ = self._started()
         return monitor.ground_truth()
 
     def landing_in_bins(self) -> list[int]:
         """Ids of released objects over a bin, still above its top (see :class:`Monitor`)."""
-        _, _, monitor, _ = self._started()
+        _, monitor, _ = self._started()
         return monitor.landing_in_bins()
 
-    @property
-    def tcp_pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
-        """TCP position and xyzw orientation after the last step (no new FK)."""
-        _, _, monitor, _ = self._started()
-        return monitor.tcp_pose
+    def tcp_pose(
+        self, station: int = 0
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+        """A station's TCP position and xyzw orientation after the last step (no new FK)."""
+        _, monitor, _ = self._started()
+        return monitor.tcp_pose(station)
 
     @property
     def load_mass_kg(self) -> float:
@@ -442,26 +527,58 @@ class Twin:
         """Every event of the episode so far."""
         return tuple(self._events)
 
-    def record_fault(self, kind: str, detail: str) -> Event:
-        """Log a fault (bad command, controller crash) as an event; scores stay honest."""
-        return self._record(EventType.FAULT, {"kind": kind, "detail": detail})
+    def record_fault(self, kind: str, detail: str, station: str | None = None) -> Event:
+        """Log a fault (bad command, controller crash) as an event, naming the ``station`` it
+        concerns if one; scores stay honest."""
+        return self._record(EventType.FAULT, {"kind": kind, "detail": detail}, station=station)
 
-    def record_controller_resumed(self, outage_s: float) -> Event:
-        """Log that a controller acknowledges ticks again after ``outage_s`` of sim time without
-        one (lockstep)."""
-        return self._record(EventType.CONTROLLER_RESUMED, {"outage_s": outage_s})
+    def record_controller_resumed(self, outage_s: float, station: str | None = None) -> Event:
+        """Log that a station's controller acknowledges ticks again after ``outage_s`` of sim
+        time without one (lockstep)."""
+        return self._record(EventType.CONTROLLER_RESUMED, {"outage_s": outage_s}, station=station)
 
-    def _record(self, kind: EventType, data: dict[str, object]) -> Event:
-        """Log an event about no object, now."""
+    def _record(
+        self, kind: EventType, data: dict[str, object], *, station: str | None = None
+    ) -> Event:
+        """Log an event about no object, now (with the ``station`` it concerns, if one)."""
+        if station is not None:
+            data = {**data, "station": station}
         event = Event(time_s=self.time_s, step=self.step_count, type=kind, object_id=0, data=data)
         self._events.append(event)
         if self.event_sink is not None:
             self.event_sink(event)
         return event
 
-    def scores(self) -> Scores:
-        """Scores from the events so far."""
-        return compute_scores(self._events, self.time_s)
+    def counts(self, station: str | None = None) -> Counts:
+        """What the events so far add up to, for the line or one station (by name).
+
+        The line's misses are those of its most downstream station: an object an upstream
+        station missed may still be picked further down.
+        """
+        return count_events(
+            self._events,
+            self.time_s,
+            station=station,
+            line_exit=exit_station(self.cell.stations),
+        )
+
+    def scores(self, station: str | None = None) -> dict[str, object]:
+        """The event scores (:func:`interfaces.metrics.event_scores`) of the line or a station."""
+        return event_scores(self.counts(station))
+
+    def finish_pursuits(self) -> None:
+        """End every station's open pursuit now (the episode ends)."""
+        for station in self.stations:
+            station.targets.finish(self.time_s)
+
+    def tracking_results(self, station: str | None = None) -> list[TrackingResult]:
+        """Every finished pursuit, of every station (in station order) or of one."""
+        return [
+            result
+            for s in self.stations
+            if station is None or s.name == station
+            for result in s.targets.results
+        ]
 
     def wall_elapsed_s(self) -> float:
         """Wall-clock seconds since the last reset."""

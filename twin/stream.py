@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from twin.config import BeltConfig
+from interfaces.cell import BeltSpec
 from twin.objects import ImageLayout, ObjectSpec
 from twin.scenario import Scenario, SeedTree
 
@@ -78,7 +78,7 @@ class Stream:
         self,
         layouts: tuple[ImageLayout, ...],
         scenario: Scenario,
-        belt: BeltConfig,
+        belt: BeltSpec,
         seeds: SeedTree,
     ) -> None:
         wanted = set(scenario.objects.images)
@@ -138,7 +138,7 @@ class Stream:
                 and self._spawned_objects >= objects_cfg.max_objects
             ):
                 break
-            if spec.class_name not in objects_cfg.classes:
+            if objects_cfg.classes and spec.class_name not in objects_cfg.classes:
                 continue
             if (
                 objects_cfg.max_width_m is not None

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from interfaces.metrics import TRACKING_THRESHOLD_M, SettleTimer
+
 PURSUIT_PHASES = frozenset({"approach", "descend", "dwell", "track"})
 
 Pose = tuple[tuple[float, float, float], tuple[float, float, float, float]]
@@ -44,17 +46,19 @@ class TrackingResult:
 
 
 class TargetTracker:
-    """Follows the controller's announced targets and measures how fast the TCP settles."""
+    """Follows one controller's announced targets and measures how fast its TCP settles (the
+    settling rule is :class:`interfaces.metrics.SettleTimer`'s, shared with the controller)."""
 
-    def __init__(self, threshold_m: float = 0.004, match_radius_m: float = 0.1) -> None:
+    def __init__(
+        self, threshold_m: float = TRACKING_THRESHOLD_M, match_radius_m: float = 0.1
+    ) -> None:
         self.threshold_m = threshold_m
         self.match_radius_m = match_radius_m
         self.results: list[TrackingResult] = []
         self._track_id: int | None = None
         self._object_id = 0
         self._offset = np.zeros(3)
-        self._start_s = 0.0
-        self._below_since: float | None = None
+        self._timer = SettleTimer(0.0, threshold_m)
 
     @property
     def active(self) -> bool:
@@ -86,8 +90,7 @@ class TargetTracker:
                 height = np.array([0.0, 0.0, grasp_point[2] - pos[2]])
                 self._offset = _rotate(inv, height)
                 self._track_id, self._object_id = track_id, best
-                self._start_s = time_s
-                self._below_since = None
+                self._timer = SettleTimer(time_s, self.threshold_m)
 
     def update(
         self,
@@ -104,19 +107,16 @@ class TargetTracker:
             return
         pos, orn = pose
         point = np.asarray(pos) + _rotate(orn, self._offset)
-        distance = float(np.linalg.norm(np.asarray(tcp_m) - point))
-        if distance < self.threshold_m:
-            if self._below_since is None:
-                self._below_since = time_s
-        else:
-            self._below_since = None
+        self._timer.update(time_s, float(np.linalg.norm(np.asarray(tcp_m) - point)))
 
     def finish(self, time_s: float) -> None:
         """End the current pursuit (e.g. the object was picked)."""
         if self._track_id is None:
             return
-        settled = None if self._below_since is None else self._below_since - self._start_s
+        timer = self._timer
         self.results.append(
-            TrackingResult(self._track_id, self._object_id, self._start_s, time_s, settled)
+            TrackingResult(
+                self._track_id, self._object_id, timer.start_s, time_s, timer.settled_after_s
+            )
         )
         self._track_id = None

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pybullet as pb
 
+from interfaces.cell import BinSpec, Cell
 from twin.collision import merged_collision_file
-from twin.config import BinConfig, CellConfig
 from twin.errors import SceneError
 from twin.objects import ObjectSpec, inertia_of
 
@@ -40,9 +40,10 @@ class SpawnedBody:
 
 
 class World:
-    """Belt, floor and bins in one PyBullet client; objects are added and removed over time."""
+    """Belt, floor and every station's bins in one PyBullet client; objects are added and
+    removed over time."""
 
-    def __init__(self, client: int, cell: CellConfig, cache_dir: Path) -> None:
+    def __init__(self, client: int, cell: Cell, cache_dir: Path) -> None:
         self.client = client
         self.cache_dir = cache_dir
         self.cell = cell
@@ -73,12 +74,12 @@ class World:
         self.floor = pb.createMultiBody(
             0.0, floor, basePosition=[0.0, 0.0, cell.physics.floor_z_m], physicsClientId=client
         )
-        self.bins = {b.class_name: self._make_bin(b) for b in cell.bins}
+        self.bins = [self._make_bin(b) for b in cell.bins]
         self._shapes: dict[tuple[str, float], int] = {}
         self.belt_speed_mps = 0.0
         self._drift_m = 0.0
 
-    def _make_bin(self, config: BinConfig) -> int:
+    def _make_bin(self, config: BinSpec) -> int:
         c = self.client
         half = 0.5 * config.size_m
         wall_h = 0.5 * (config.top_z_m - config.floor_z_m)

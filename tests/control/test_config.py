@@ -1,15 +1,21 @@
-"""Controller configuration: the YAML file, defaults and validation errors naming the key."""
+"""Controller configuration: the tuning file, the cell's station, and errors naming the key."""
 
 from __future__ import annotations
 
+import math
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
-from control.config import ControllerConfig, load_config, resolve_urdf_path
+from control.config import ControllerConfig, load_config
 from control.errors import ControlConfigError
+from interfaces.cell import load_cell
 
-DEFAULT_YAML = Path(__file__).parents[2] / "control" / "config" / "default.yaml"
+CONFIG_DIR = Path(__file__).parents[2] / "control" / "config"
+DEFAULT_YAML = CONFIG_DIR / "default.yaml"
 
 
 def _write(tmp_path: Path, body: str) -> Path:
@@ -21,9 +27,24 @@ def _write(tmp_path: Path, body: str) -> Path:
 def test_default_yaml_matches_dataclass_defaults() -> None:
     config = load_config(DEFAULT_YAML)
     assert config == ControllerConfig()
-    assert config.robot.gripper_max_opening_m == 0.08
+    assert config.tool.open_command_m == 0.08
     assert config.bins["rubber"] == (0.60, 0.07, 0.15)
-    assert resolve_urdf_path(config.robot.urdf_path).is_file()
+    assert config.classes == ("concrete", "brick", "wood", "rubber")
+    assert config.steps_per_update == 2
+
+
+def test_the_default_station_is_the_reference_cells_exactly() -> None:
+    """The reference station at the origin: the cell's numbers unchanged, bit for bit."""
+    config = ControllerConfig()
+    robot = config.robot
+    assert config.station.name == "panda"
+    assert config.ready_tcp_position_m == (-0.3, 0.5, 0.2)
+    assert config.ready_yaw_rad == math.pi / 2
+    assert robot.ready_joint_positions_rad == (math.pi / 2, -0.3, 0.0, -2.2, 0.0, 1.9, math.pi / 4)
+    assert robot.joint_max_acceleration_rps2 == (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)
+    assert config.physics_dt_s == 1.0 / 240.0
+    assert config.pick_window_x_m == (-0.35, 0.35)
+    assert config.class_priorities == dict.fromkeys(config.classes, 1.0)
 
 
 def test_partial_file_keeps_other_defaults(tmp_path: Path) -> None:
@@ -33,21 +54,64 @@ def test_partial_file_keeps_other_defaults(tmp_path: Path) -> None:
     assert config.motion == ControllerConfig().motion
 
 
+def test_a_station_of_another_cell_is_chosen_by_name() -> None:
+    cell = load_cell("two_pandas")
+    config = load_config(DEFAULT_YAML, cell=cell, station="upstream")
+    assert config.station.namespace == "s1"
+    assert config.base_position_m == (-1.5, 0.0, 0.0)
+    assert config.pick_window_x_m == (-1.85, -1.15)
+    assert config.bins["concrete"] == (-2.10, 0.07, 0.15)
+    assert load_config(DEFAULT_YAML, cell=cell).station.name == "upstream"  # the first
+    with pytest.raises(ControlConfigError, match=r"no station named 'middle'.*upstream, down"):
+        load_config(DEFAULT_YAML, cell=cell, station="middle")
+
+
+@pytest.mark.parametrize(
+    ("body", "key", "where"),
+    [
+        ("    robot:\n      urdf_path: franka_panda/panda.urdf\n", "robot", "robot, tool"),
+        ("    belt:\n      width_m: 0.6\n", "belt", "pick_window_x_m"),
+        ("    bins:\n      concrete: [-0.6, 0.07, 0.15]\n", "bins", "station's bins"),
+        ("    tracking:\n      class_names: [brick]\n", "tracking.class_names", "bins"),
+        ("    node:\n      physics_dt_s: 0.004\n", "node.physics_dt_s", "physics_hz"),
+        ("    scheduler:\n      hand_width_m: 0.2\n", "scheduler.hand_width_m", "tool's"),
+        ("    scheduler:\n      min_height_m: 0.02\n", "scheduler.min_height_m", "pad_height_m"),
+        (
+            "    motion:\n      joint_max_jerk_rps3: [1.0]\n",
+            "motion.joint_max_jerk_rps3",
+            "robot's",
+        ),
+    ],
+)
+def test_an_old_file_with_what_the_cell_now_says_is_refused_clearly(
+    tmp_path: Path, body: str, key: str, where: str
+) -> None:
+    """Robot, belt, bins (and the tool, class and physics keys) moved to the cell file: a
+    parameter file still carrying one is refused with the file, the key and where it lives now
+    (the old loader took them as the cell's description)."""
+    path = _write(tmp_path, "    pick:\n      dwell_s: 0.5\n" + body)
+    with pytest.raises(ControlConfigError) as info:
+        load_config(path)
+    text = str(info.value)
+    assert text.startswith(f"{path}: {key}: this now comes from the cell file (--cell")
+    assert where in text
+    assert text.endswith("remove it")
+
+
 @pytest.mark.parametrize(
     ("body", "match"),
     [
-        ("    pick:\n      dwell_s: fast\n", r"pick\.dwell_s: expected a number"),
-        ("    pick:\n      dwel_s: 0.4\n", r"unknown key\(s\) \['dwel_s'\]"),
-        ("    belt:\n      pick_window_x_m: [0.3, -0.3]\n", r"belt\.pick_window_x_m"),
-        ("    motion:\n      max_jerk: [1, 2, 3]\n", r"motion\.max_jerk: expected 4 numbers"),
-        ("    tracking:\n      confirm_hits: 0\n", r"tracking\.confirm_hits"),
-        ("    bins:\n      concrete: [0, 0, .nan]\n", r"bins\.concrete\[2\]"),
-        ("    robot:\n      urdf_path: 3\n", r"robot\.urdf_path: expected a string"),
-        ("    scheduler:\n      class_priorities: {concrete: 1.0}\n", r"no priority for class"),
-        ("    pick:\n      approach_space: diagonal\n", r"pick\.approach_space: 'diagonal'"),
+        ("    pick:\n      dwell_s: fast\n", r"pick\.dwell_s = 'fast': expected a number"),
+        ("    pick:\n      dwel_s: 0.4\n", r"pick: unknown key 'dwel_s'"),
+        ("    picking:\n      dwell_s: 0.4\n", r"picking: unknown section"),
+        ("    motion:\n      max_jerk: [1, 2, 3]\n", r"motion\.max_jerk = \[1, 2, 3\]: expected 4"),
+        ("    tracking:\n      confirm_hits: 0\n", r"tracking\.confirm_hits = 0"),
+        ("    scheduler:\n      class_priorities: {gypsum: 2.0}\n", r"not a class of the cell"),
+        ("    pick:\n      approach_space: diagonal\n", r"pick\.approach_space = 'diagonal'"),
+        ("    motion:\n      control_period_s: 0.005\n", r"whole multiple of the cell's physics"),
         (
             "    pick:\n      close_overlap_s: 0.3\n",
-            r"pick\.close_overlap_s: 0\.3 is invalid, must not exceed dwell_s",
+            r"pick\.close_overlap_s = 0\.3: must not exceed dwell_s",
         ),
     ],
 )
@@ -61,7 +125,7 @@ def test_bad_values_name_file_and_key(tmp_path: Path, body: str, match: str) -> 
 def test_invalid_yaml_names_line(tmp_path: Path) -> None:
     path = tmp_path / "broken.yaml"
     path.write_text("controller:\n  ros__parameters:\n    pick: [1, 2\n", encoding="utf-8")
-    with pytest.raises(ControlConfigError, match=r"broken\.yaml: line \d+"):
+    with pytest.raises(ControlConfigError, match=r"broken\.yaml:\d+:\d+: not valid YAML"):
         load_config(path)
 
 
@@ -74,6 +138,35 @@ def test_missing_file_and_missing_node(tmp_path: Path) -> None:
         load_config(other)
 
 
-def test_unknown_urdf_is_reported() -> None:
-    with pytest.raises(ControlConfigError, match=r"robot\.urdf_path: 'no/such\.urdf'"):
-        resolve_urdf_path("no/such.urdf")
+def test_shipped_throughput_file_changes_only_tuning() -> None:
+    throughput = load_config(CONFIG_DIR / "throughput.yaml")
+    default = ControllerConfig()
+    assert throughput.pick.approach_space == "joint"
+    assert throughput.station == default.station
+    assert throughput.tracking == default.tracking
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (
+            ["--cell", "two_pandas", "--station", "nope"],
+            r"two_pandas\.yaml: no station named 'nope'",
+        ),
+        (["--cell", "no_such_cell"], r"cell = 'no_such_cell': no shipped cell of that name"),
+        (["--params-file", "OLD"], r"old\.yaml: robot: this now comes from the cell file"),
+    ],
+)
+def test_the_controller_command_refuses_a_bad_cell_station_or_file_in_one_line(
+    tmp_path: Path, args: list[str], message: str
+) -> None:
+    old = tmp_path / "old.yaml"
+    old.write_text("controller:\n  ros__parameters:\n    robot: {urdf_path: x}\n", encoding="utf-8")
+    args = [str(old) if a == "OLD" else a for a in args]
+    done = subprocess.run(
+        [sys.executable, "-m", "control", *args], capture_output=True, text=True, check=False
+    )
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1
+    assert re.search(message, lines[0]), lines

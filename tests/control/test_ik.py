@@ -2,27 +2,55 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pybullet
 import pytest
 
-from control.config import IkConfig, RobotConfig, resolve_urdf_path
+from control.config import IkConfig
 from control.errors import RobotModelError
 from control.ik import Kinematics, tool_pose
+from interfaces.robots import RobotSpec, resolve_urdf, robot_from_data
 
-IIWA = RobotConfig(
-    urdf_path="kuka_iiwa/model.urdf",
-    tcp_link="lbr_iiwa_link_7",
+
+@dataclass(frozen=True)
+class Arm:
+    """A robot with its TCP and base pose, as a station places it."""
+
+    robot: RobotSpec
+    tcp_link: str
+    tcp_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    base_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    base_yaw_rad: float = 0.0
+
+    def kinematics(self, ik: IkConfig | None = None) -> Kinematics:
+        return Kinematics(
+            self.robot,
+            tcp_link=self.tcp_link,
+            tcp_offset_m=self.tcp_offset_m,
+            base_position_m=self.base_position_m,
+            base_yaw_rad=self.base_yaw_rad,
+            ik=ik,
+        )
+
+
+PANDA_SPEC = robot_from_data("panda", "robot")
+PANDA = Arm(PANDA_SPEC, "panda_grasptarget")
+IIWA = Arm(
+    replace(
+        PANDA_SPEC,
+        name="iiwa",
+        urdf="kuka_iiwa/model.urdf",
+        arm_joints=tuple(f"lbr_iiwa_joint_{i}" for i in range(1, 8)),
+        ready_joint_positions_rad=(0.0, 0.5, 0.0, -1.2, 0.0, 1.0, 0.0),
+    ),
+    "lbr_iiwa_link_7",
     tcp_offset_m=(0.0, 0.0, 0.1),
-    arm_joint_names=tuple(f"lbr_iiwa_joint_{i}" for i in range(1, 8)),
-    finger_joint_names=(),
-    ready_joint_positions_rad=(0.0, 0.5, 0.0, -1.2, 0.0, 1.0, 0.0),
 )
-PANDA_ON_PEDESTAL = RobotConfig(
-    base_position_m=(0.1, -0.05, 0.2), base_orientation_xyzw=(0.0, 0.0, 0.38268343, 0.92387953)
-)
+PANDA_ON_PEDESTAL = replace(PANDA, base_position_m=(0.1, -0.05, 0.2), base_yaw_rad=math.pi / 4)
 
 
 @pytest.fixture
@@ -32,12 +60,12 @@ def client() -> Iterator[int]:
     pybullet.disconnect(physicsClientId=cid)
 
 
-def _pybullet_tcp(client: int, robot: RobotConfig, q: np.ndarray) -> np.ndarray:
+def _pybullet_tcp(client: int, arm: Arm, q: np.ndarray) -> np.ndarray:
     """World TCP position from PyBullet's FK for arm configuration ``q``."""
     body = pybullet.loadURDF(
-        str(resolve_urdf_path(robot.urdf_path)),
-        basePosition=robot.base_position_m,
-        baseOrientation=robot.base_orientation_xyzw,
+        str(resolve_urdf(arm.robot.urdf)),
+        basePosition=arm.base_position_m,
+        baseOrientation=pybullet.getQuaternionFromEuler((0.0, 0.0, arm.base_yaw_rad)),
         useFixedBase=True,
         physicsClientId=client,
     )
@@ -47,27 +75,25 @@ def _pybullet_tcp(client: int, robot: RobotConfig, q: np.ndarray) -> np.ndarray:
         info = pybullet.getJointInfo(body, j, physicsClientId=client)
         joints[info[1].decode()] = j
         links[info[12].decode()] = j
-    for name, value in zip(robot.arm_joint_names, q, strict=True):
+    for name, value in zip(arm.robot.arm_joints, q, strict=True):
         pybullet.resetJointState(body, joints[name], float(value), physicsClientId=client)
     state = pybullet.getLinkState(
-        body, links[robot.tcp_link], computeForwardKinematics=True, physicsClientId=client
+        body, links[arm.tcp_link], computeForwardKinematics=True, physicsClientId=client
     )
     position = np.asarray(state[4])
     rotation = np.asarray(pybullet.getMatrixFromQuaternion(state[5])).reshape(3, 3)
     pybullet.removeBody(body, physicsClientId=client)
-    return np.asarray(position + rotation @ np.asarray(robot.tcp_offset_m))
+    return np.asarray(position + rotation @ np.asarray(arm.tcp_offset_m))
 
 
-@pytest.mark.parametrize(
-    "robot", [RobotConfig(), PANDA_ON_PEDESTAL, IIWA], ids=["panda", "pedestal", "iiwa"]
-)
-def test_fk_and_ik_match_pybullet(client: int, robot: RobotConfig) -> None:
-    kin = Kinematics(robot, IkConfig())
+@pytest.mark.parametrize("arm", [PANDA, PANDA_ON_PEDESTAL, IIWA], ids=["panda", "pedestal", "iiwa"])
+def test_fk_and_ik_match_pybullet(client: int, arm: Arm) -> None:
+    kin = arm.kinematics(IkConfig())
     rng = np.random.default_rng(11)
     solved = 0
     for _ in range(20):
         q_true = rng.uniform(kin.lower_rad * 0.9, kin.upper_rad * 0.9)
-        reference = _pybullet_tcp(client, robot, q_true)
+        reference = _pybullet_tcp(client, arm, q_true)
         assert np.allclose(kin.fk(q_true).translation, reference, atol=1e-9)
         # Warm start near the true configuration, as in the control loop.
         q_init = np.clip(q_true + rng.normal(0.0, 0.1, kin.nq), kin.lower_rad, kin.upper_rad)
@@ -75,15 +101,15 @@ def test_fk_and_ik_match_pybullet(client: int, robot: RobotConfig) -> None:
         assert kin.within_limits(result.q)
         if result.success:
             solved += 1
-            reached = _pybullet_tcp(client, robot, np.asarray(result.q))
+            reached = _pybullet_tcp(client, arm, np.asarray(result.q))
             assert np.linalg.norm(reached - reference) < 1e-6
             assert result.error_norm < 1e-6
     assert solved >= 18
 
 
 def test_ik_failure_is_flagged_and_stays_in_limits() -> None:
-    kin = Kinematics(RobotConfig(), IkConfig(max_iterations=50))
-    q0 = np.asarray(RobotConfig().ready_joint_positions_rad)
+    kin = PANDA.kinematics(IkConfig(max_iterations=50))
+    q0 = np.asarray(PANDA_SPEC.ready_joint_positions_rad)
     result = kin.solve(tool_pose((2.0, 0.0, 0.3), 0.0), q0)
     assert not result.success
     assert result.iterations == 50
@@ -95,9 +121,9 @@ def test_ik_failure_is_flagged_and_stays_in_limits() -> None:
 
 
 def test_warm_start_converges_in_few_iterations() -> None:
-    robot = RobotConfig()
-    kin = Kinematics(robot)
-    q = kin.solve(tool_pose((0.0, 0.45, 0.30), 1.5), np.asarray(robot.ready_joint_positions_rad)).q
+    kin = PANDA.kinematics()
+    q0 = np.asarray(PANDA_SPEC.ready_joint_positions_rad)
+    q = kin.solve(tool_pose((0.0, 0.45, 0.30), 1.5), q0).q
     for k in range(50):
         result = kin.solve(tool_pose((0.002 * k, 0.45, 0.30 - 0.002 * k), 1.5), q)
         assert result.success
@@ -106,11 +132,10 @@ def test_warm_start_converges_in_few_iterations() -> None:
 
 
 def test_bad_robot_description_is_reported() -> None:
+    shifted = replace(PANDA_SPEC, arm_joints=tuple(f"panda_joint{i}" for i in range(3, 10)))
     with pytest.raises(RobotModelError, match="no joint 'panda_joint8'"):
-        Kinematics(
-            RobotConfig(
-                arm_joint_names=tuple(f"panda_joint{i}" for i in range(3, 10)),
-            )
-        )
-    with pytest.raises(RobotModelError, match=r"robot\.tcp_link: no link or frame 'gripper'"):
-        Kinematics(RobotConfig(tcp_link="gripper"))
+        Kinematics(shifted, tcp_link="panda_grasptarget")
+    with pytest.raises(RobotModelError, match=r"tool\.tcp_link: no link or frame 'gripper'"):
+        Kinematics(PANDA_SPEC, tcp_link="gripper")
+    with pytest.raises(RobotModelError, match=r"robot\.urdf = 'no/such\.urdf'"):
+        Kinematics(replace(PANDA_SPEC, urdf="no/such.urdf"), tcp_link="panda_grasptarget")

@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ pytest.importorskip("cdw_interfaces")
 
 from control.config import ControllerConfig
 from control.ik import Kinematics
+from interfaces.cell import load_cell
 from twin.ros_isolation import ros_domain
 
 N_TICKS = 720
@@ -45,6 +47,10 @@ from std_msgs.msg import Float64
 from trajectory_msgs.msg import JointTrajectory
 
 out, n_ticks, speed, x0, y0, height = sys.argv[1], int(sys.argv[2]), *map(float, sys.argv[3:7])
+ns = sys.argv[7] if len(sys.argv) > 7 else ""
+
+def st(name):  # a station topic under the station's namespace
+    return f"/{ns}{name}" if ns else name
 arm = [f"panda_joint{i}" for i in range(1, 8)]
 q = [math.pi / 2, -0.3, 0.0, -2.2, 0.0, 1.9, math.pi / 4]
 dt = 1.0 / 240.0
@@ -89,12 +95,12 @@ def on_ack(msg):
     state["n_cmd"] += msg.n_commands
     rec["acks"].append([msg.tick, msg.n_commands])
 
-node.create_subscription(JointTrajectory, "/arm_controller/joint_trajectory", on_traj, qos(10))
-node.create_subscription(Float64, "/gripper/command", on_gripper, qos(10))
-node.create_subscription(PickTarget, "/controller/target", on_target, qos(10))
-ack_sub = node.create_subscription(StepAck, "/lockstep/ack", on_ack, qos(100))
+node.create_subscription(JointTrajectory, st("/arm_controller/joint_trajectory"), on_traj, qos(10))
+node.create_subscription(Float64, st("/gripper/command"), on_gripper, qos(10))
+node.create_subscription(PickTarget, st("/controller/target"), on_target, qos(10))
+ack_sub = node.create_subscription(StepAck, st("/lockstep/ack"), on_ack, qos(100))
 pubs = {
-    "/joint_states": node.create_publisher(JointState, "/joint_states", qos(10)),
+    "/joint_states": node.create_publisher(JointState, st("/joint_states"), qos(10)),
     "/conveyor/state": node.create_publisher(BeltState, "/conveyor/state", qos(10)),
     "/objects/detections": node.create_publisher(DetectionArray, "/objects/detections", qos(10)),
     "/lockstep/tick": node.create_publisher(LockstepTick, "/lockstep/tick", qos(100)),
@@ -211,6 +217,18 @@ def _against_controller(
     return peer
 
 
+def _commands_are_safe(record: dict[str, Any], config: ControllerConfig, kin: Kinematics) -> None:
+    """Every joint command names the arm joints, is inside the limits and no faster than the
+    velocity limits; every gripper command is inside the opening range."""
+    assert record["traj"]
+    for point in record["traj"]:
+        assert point["names"] == list(config.robot.arm_joints)
+        assert kin.within_limits(np.array(point["q"]))
+        assert np.all(np.abs(point["dq"]) <= kin.velocity_limit_rps + 1e-9)
+    assert record["gripper"]
+    assert all(0.0 <= w <= config.station.tool.max_opening_m for w in record["gripper"])
+
+
 def test_lockstep_node_against_fake_cell(tmp_path: Path) -> None:
     """Acks every tick with exact counts, commands stay in limits, bad detections are counted."""
     cell_py = tmp_path / "fake_cell.py"
@@ -236,13 +254,8 @@ def test_lockstep_node_against_fake_cell(tmp_path: Path) -> None:
     assert stats["ticks_acked"] == len(record["acks"])
 
     config = ControllerConfig()
-    kin = Kinematics(config.robot, config.ik)
-    assert record["traj"]
-    for point in record["traj"]:
-        assert point["names"] == list(config.robot.arm_joint_names)
-        assert kin.within_limits(np.array(point["q"]))
-        assert np.all(np.abs(point["dq"]) <= kin.velocity_limit_rps + 1e-9)
-    assert all(0.0 <= w <= config.robot.gripper_max_opening_m for w in record["gripper"])
+    kin = Kinematics.of_station(config.station, config.ik)
+    _commands_are_safe(record, config, kin)
 
     frames = record["published"]["/objects/detections"]
     assert stats["received"]["/objects/detections"] == frames
@@ -318,6 +331,52 @@ def test_ack_publisher_waits_for_the_readers_to_match(tmp_path: Path) -> None:
     }
 
 
+def test_a_controller_on_a_namespaced_station_speaks_under_its_namespace(tmp_path: Path) -> None:
+    """The upstream station of the two-Panda cell (namespace ``s1``, base at x = -1.5): its
+    joint states, commands and acks are ``/s1/...``, the belt, detections and the lockstep tick
+    the cell's; it acks every tick and goes for an object in its own window, in world
+    coordinates (the bare-name topics of a one-station cell carry nothing here)."""
+    cell_py = tmp_path / "fake_cell.py"
+    cell_py.write_text(FAKE_CELL, encoding="utf-8")
+    record_path = tmp_path / "cell.json"
+    stats_path = tmp_path / "stats.json"
+    n_ticks, x0 = 360, -2.1
+    cell = _against_controller(
+        ["--cell", "two_pandas", "--station", "upstream", "--stats-out", str(stats_path)],
+        [
+            str(cell_py),
+            str(record_path),
+            *map(str, (n_ticks, SPEED_MPS, x0, OBJECT_Y_M, HEIGHT_M, "s1")),
+        ],
+        timeout_s=60,
+    )
+    record = json.loads(record_path.read_text(encoding="utf-8"))
+    stats = json.loads(stats_path.read_text(encoding="utf-8"))
+    assert record["timeouts"] == 0, cell.stderr
+    assert {tick for tick, _ in record["acks"]} >= set(range(n_ticks))
+    assert sum(n for _, n in record["acks"]) == record["received_commands"] == stats["n_commands"]
+    assert stats["station"] == "upstream"
+    assert set(stats["published"]) == {
+        "/s1/arm_controller/joint_trajectory",
+        "/s1/gripper/command",
+        "/s1/controller/target",
+    }
+    assert stats["received"]["/s1/joint_states"] == n_ticks
+
+    config = ControllerConfig(cell=load_cell("two_pandas"), station_name="upstream")
+    _commands_are_safe(record, config, Kinematics.of_station(config.station, config.ik))
+    approach = [t for t in record["target"] if t["phase"] == "approach"]
+    assert approach, [t["phase"] for t in record["target"]]
+    x_min, x_max = config.pick_window_x_m
+    for target in approach:
+        x, y, _ = target["p"]  # the object's grasp point, where it is (world frame)
+        assert abs(x - (x0 + SPEED_MPS * target["t"])) < 0.01
+        assert abs(y - OBJECT_Y_M) < 0.01
+    last = record["traj"][-1]
+    tcp = Kinematics.of_station(config.station, config.ik).fk(np.array(last["q"])).translation
+    assert x_min - 0.05 <= float(tcp[0]) <= x_max  # the arm works in its own window
+
+
 def test_joint_sample_reads_the_gripper_opening_from_the_finger_joints() -> None:
     """Each finger joint reports half the opening; a missing or NaN finger leaves it unmeasured
     (NaN), and the arm joints are read in the configured order whatever the message's order."""
@@ -325,23 +384,24 @@ def test_joint_sample_reads_the_gripper_opening_from_the_finger_joints() -> None
 
     from control.node import joint_sample
 
+    tool = ControllerConfig().tool
     arm = [f"panda_joint{i}" for i in range(1, 8)]
     fingers = ["panda_finger_joint1", "panda_finger_joint2"]
     msg = JointState()
     msg.name = fingers[::-1] + arm[::-1]
     msg.position = [0.021, 0.019] + [0.1 * i for i in range(7, 0, -1)]
-    sample = joint_sample(msg, arm, fingers)
+    sample = joint_sample(msg, arm, tool)
     assert sample is not None
     assert sample.positions_rad.tolist() == pytest.approx([0.1 * i for i in range(1, 8)])
-    assert sample.opening_m == pytest.approx(0.04)
-    no_fingers = joint_sample(msg, arm)
-    assert no_fingers is not None
-    assert math.isnan(no_fingers.opening_m)
+    assert sample.tool_measured_m == pytest.approx(0.04)
+    no_tool = joint_sample(msg, arm)
+    assert no_tool is not None
+    assert math.isnan(no_tool.tool_measured_m)
     msg.position = [math.nan, 0.019] + [0.1 * i for i in range(7, 0, -1)]
-    nan_finger = joint_sample(msg, arm, fingers)
+    nan_finger = joint_sample(msg, arm, tool)
     assert nan_finger is not None
-    assert math.isnan(nan_finger.opening_m)
+    assert math.isnan(nan_finger.tool_measured_m)
     msg.name, msg.position = arm, [0.1 * i for i in range(1, 8)]
-    missing = joint_sample(msg, arm, fingers)
+    missing = joint_sample(msg, arm, tool)
     assert missing is not None
-    assert math.isnan(missing.opening_m)
+    assert math.isnan(missing.tool_measured_m)

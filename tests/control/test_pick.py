@@ -13,8 +13,10 @@ from control.config import ControllerConfig
 from control.ik import yaw_of
 from control.kinematic_sim import GripperSpec, ObjectSpec, run_episode
 from control.pick import Command, Phase, PickController, TcpMeasurement
-from control.scheduler import nearest_half_turn
+from control.poses import drop_point
+from control.scheduler import nearest_grasp_yaw
 from control.tracking import Track
+from interfaces.cell import load_cell
 
 FOLLOW_SEQUENCE = [Phase.IDLE, Phase.APPROACH, Phase.DESCEND, Phase.DWELL, Phase.CLOSE, Phase.LIFT]
 
@@ -110,20 +112,19 @@ def test_the_drop_point_is_the_nearest_to_the_tcp_inside_the_bin_less_for_long_o
     drop point along x and y, less half the object's length: the base turns least, and no part of
     a long object lands on the bin's wall."""
     config = ControllerConfig()
-    controller = PickController(config)
     bx, by, bz = config.bins["brick"]
     tolerance = config.pick.drop_tolerance_m
     over_the_belt = (bx + 1.0, by + 0.5, bz - 0.05)  # beyond the bin in x and y, lower
     inside = (bx + 0.01, by - 0.02, bz + 0.1)  # within reach of every length below
     for length_m in (0.0, 0.06, 2 * tolerance, 0.3):
         half = max(0.0, tolerance - 0.5 * length_m)
-        assert controller._drop_point("brick", over_the_belt, length_m) == pytest.approx(
+        assert drop_point(config, "brick", over_the_belt, length_m) == pytest.approx(
             (bx + half, by + half, bz), abs=1e-12
         )
-        x, y, z = controller._drop_point("brick", inside, length_m)
+        x, y, z = drop_point(config, "brick", inside, length_m)
         assert (x, y) == pytest.approx((bx + min(0.01, half), by - min(0.02, half)), abs=1e-12)
         assert z == inside[2]  # never lower than the TCP: the arm does not dip to release
-    assert controller._drop_point("gypsum", inside, 0.0) == config.robot.ready_tcp_position_m
+    assert drop_point(config, "gypsum", inside, 0.0) == config.ready_tcp_position_m
 
 
 def _track(x0: float, t_s: float = 0.0, *, vx: float = 0.4, y: float = 0.5) -> Track:
@@ -225,10 +226,12 @@ def test_lost_target_aborts_the_approach() -> None:
 
 
 def test_grasp_yaw_is_across_the_narrow_side() -> None:
-    assert nearest_half_turn(0.2, math.pi / 2) == pytest.approx(0.2)
-    assert nearest_half_turn(-1.4, math.pi / 2) == pytest.approx(-1.4 + math.pi)
+    period = ControllerConfig().tool.grasp_yaw_period_rad
+    assert period == math.pi  # a parallel gripper grasps alike at yaw and yaw + pi
+    assert nearest_grasp_yaw(0.2, math.pi / 2, period) == pytest.approx(0.2)
+    assert nearest_grasp_yaw(-1.4, math.pi / 2, period) == pytest.approx(-1.4 + math.pi)
     # The tool's finger axis (sin yaw, -cos yaw) is perpendicular to the object's long side.
-    yaw = nearest_half_turn(0.7, 1.5)
+    yaw = nearest_grasp_yaw(0.7, 1.5, period)
     finger_axis = (math.sin(yaw), -math.cos(yaw))
     long_side = (math.cos(0.7), math.sin(0.7))
     assert abs(finger_axis[0] * long_side[0] + finger_axis[1] * long_side[1]) < 1e-12
@@ -243,7 +246,7 @@ def test_fast_object_from_upstream_is_met_inside_the_window() -> None:
     commands = _drive(
         controller, lambda t: (_track(x0, t, vx=vx),), ticks=360, belt=(vx, 0.0), dt_s=dt_s
     )
-    x_min = config.belt.pick_window_x_m[0]
+    x_min = config.pick_window_x_m[0]
     following = [c for c in commands if c.phase in (Phase.APPROACH, Phase.DESCEND, Phase.DWELL)]
     assert any(c.phase == Phase.DWELL for c in following)
     for c in following:
@@ -252,3 +255,33 @@ def test_fast_object_from_upstream_is_met_inside_the_window() -> None:
     object_x = x0 + vx * first_descend.t_s
     assert object_x >= x_min
     assert abs(first_descend.setpoint.position_m[0] - object_x) < 0.02
+
+
+@pytest.mark.parametrize("approach_space", ["cartesian", "joint"])
+def test_a_controller_on_another_station_picks_in_its_window_and_drops_in_its_bin(
+    approach_space: str,
+) -> None:
+    """The upstream station of the two-Panda cell stands at x = -1.5: its ready pose, pick
+    window and bins are the cell file's, in world coordinates, and the kinematic closed loop
+    picks an object inside that window and releases it over that station's bin."""
+    base = ControllerConfig(cell=load_cell("two_pandas"), station_name="upstream")
+    config = replace(base, pick=replace(base.pick, approach_space=approach_space))
+    assert config.ready_tcp_position_m == pytest.approx((-1.8, 0.5, 0.2), abs=1e-12)
+    assert config.pick_window_x_m == (-1.85, -1.15)
+    assert config.bins["brick"] == (-1.83, 0.07, 0.15)
+    x0, speed = -2.3, 0.4
+    result = run_episode(
+        speed, seed=2, duration_s=7.0, config=config, obj=ObjectSpec(x0_m=x0), gripper=GripperSpec()
+    )
+    assert result.stats.completed_by_class == {"brick": 1}
+    assert result.stats.aborted == {}
+    assert result.max_follow_error_m < 0.004
+    starts = {phase: t for t, phase in reversed(result.phases)}
+    x_min, x_max = config.pick_window_x_m
+    assert x_min <= x0 + speed * starts[Phase.DWELL] < x0 + speed * starts[Phase.LIFT] <= x_max
+    assert result.release_tcp_m is not None
+    bx, by, _ = config.bins["brick"]
+    x, y, _ = result.release_tcp_m
+    assert abs(x - bx) <= config.pick.drop_tolerance_m + 1e-3
+    assert abs(y - by) <= config.pick.drop_tolerance_m + 1e-3
+    assert result.max_joint_limit_violation_rad == 0.0

@@ -9,7 +9,7 @@ import pytest
 from ruckig import Synchronization
 
 from control.config import ControllerConfig, MotionConfig
-from control.errors import ControlConfigError, IkError, PlanningError
+from control.errors import IkError, PlanningError
 from control.ik import Kinematics, tool_pose
 from control.planner import (
     CartesianPlanner,
@@ -19,7 +19,6 @@ from control.planner import (
     JointCommander,
     JointPlanner,
     calculate_synchronised,
-    per_joint,
 )
 
 TOL = 1e-6
@@ -121,10 +120,10 @@ def test_feedback_removes_steady_lag_and_is_clipped() -> None:
 
 def test_joint_commander_refuses_bad_commands() -> None:
     config = ControllerConfig()
-    kin = Kinematics(config.robot, config.ik)
+    kin = Kinematics.of_station(config.station, config.ik)
     q0 = np.asarray(config.robot.ready_joint_positions_rad)
     commander = JointCommander(kin, config.motion, q0)
-    commander.command(config.robot.ready_tcp_position_m, config.robot.ready_yaw_rad, ticks=100)
+    commander.command(config.ready_tcp_position_m, config.ready_yaw_rad, ticks=100)
     q_ok = commander.q
     with pytest.raises(IkError, match="did not converge"):
         commander.command((1.5, 0.0, 0.3), 0.0)
@@ -136,11 +135,11 @@ def test_joint_commander_refuses_bad_commands() -> None:
 
 def test_joint_commander_approaches_far_solutions_at_the_velocity_limit() -> None:
     config = ControllerConfig()
-    kin = Kinematics(config.robot, config.ik)
+    kin = Kinematics.of_station(config.station, config.ik)
     commander = JointCommander(
         kin, config.motion, np.asarray(config.robot.ready_joint_positions_rad)
     )
-    commander.command(config.robot.ready_tcp_position_m, config.robot.ready_yaw_rad, ticks=100)
+    commander.command(config.ready_tcp_position_m, config.ready_yaw_rad, ticks=100)
     limit = (
         kin.velocity_limit_rps
         * config.motion.control_period_s
@@ -161,7 +160,7 @@ def test_joint_commander_approaches_far_solutions_at_the_velocity_limit() -> Non
 def _joint_planner_at_ready() -> tuple[ControllerConfig, Kinematics, JointPlanner, np.ndarray]:
     """A joint planner at rest in the ready posture, with its config and kinematics."""
     config = ControllerConfig()
-    kin = Kinematics(config.robot, config.ik)
+    kin = Kinematics.of_station(config.station, config.ik)
     planner = JointPlanner(kin, config.motion)
     q = np.asarray(config.robot.ready_joint_positions_rad)
     planner.reset(q)
@@ -183,7 +182,7 @@ def test_joint_planner_respects_limits() -> None:
 
 def test_joint_planner_keeps_each_joints_acceleration_limit() -> None:
     config, kin, planner, q = _joint_planner_at_ready()
-    amax = np.asarray(config.motion.joint_max_acceleration_rps2)
+    amax = np.asarray(config.robot.joint_max_acceleration_rps2)
     assert len(amax) == kin.nq
     assert len(set(amax.tolist())) > 1  # one limit per joint (Panda datasheet)
     goal = np.clip(
@@ -201,16 +200,6 @@ def test_joint_planner_keeps_each_joints_acceleration_limit() -> None:
     assert np.any(peak >= 0.9 * amax), "the slowest joints use their own limit"
 
 
-@pytest.mark.parametrize("values", [(10.0,), (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)])
-def test_joint_limits_are_one_for_all_or_one_per_joint(values: tuple[float, ...]) -> None:
-    assert per_joint(values, 7, "motion.joint_max_jerk_rps3") == list(values) * (7 // len(values))
-
-
-def test_a_joint_limit_list_of_the_wrong_length_is_an_error_naming_the_key() -> None:
-    with pytest.raises(ControlConfigError, match=r"motion\.joint_max_jerk_rps3: .* 3 values; .* 7"):
-        per_joint((1.0, 2.0, 3.0), 7, "motion.joint_max_jerk_rps3")
-
-
 def test_a_planned_move_arrives_on_time_with_the_target_velocity() -> None:
     config, kin, planner, q = _joint_planner_at_ready()
     goal = kin.solve(tool_pose((0.0, 0.6, 0.08), math.pi / 2), q)
@@ -221,7 +210,7 @@ def test_a_planned_move_arrives_on_time_with_the_target_velocity() -> None:
     assert duration_s == pytest.approx(fastest_s + 0.2)
     dt = config.motion.control_period_s
     vmax = kin.velocity_limit_rps * config.motion.transfer_speed_scale
-    amax = np.asarray(config.motion.joint_max_acceleration_rps2)
+    amax = np.asarray(config.robot.joint_max_acceleration_rps2)
     previous, elapsed_s = np.zeros(kin.nq), 0.0
     while True:
         step = planner.follow()

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -29,17 +31,16 @@ def _track(
     *,
     y: float = 0.5,
     width: float = 0.05,
-    class_name: str = "brick",
     vx: float = 0.2,
-    confidence: float = 1.0,
     height: float = 0.04,
-    base_z: float = math.nan,
+    **fields: Any,
 ) -> Track:
-    return Track(
+    """A confirmed brick at ``(x, y)``; ``fields`` replace other fields of the track."""
+    track = Track(
         track_id=track_id,
         stamp_s=0.0,
-        class_name=class_name,
-        class_confidence=confidence,
+        class_name="brick",
+        class_confidence=1.0,
         position_m=(x, y),
         velocity_mps=(vx, 0.0),
         position_std_m=0.001,
@@ -50,8 +51,8 @@ def _track(
         hits=10,
         confirmed=True,
         last_update_s=0.0,
-        base_z_m=base_z,
     )
+    return replace(track, **fields)
 
 
 def _reasons(result_untargeted: tuple[object, ...]) -> dict[int, str]:
@@ -66,7 +67,7 @@ def test_every_untargeted_object_has_its_reason() -> None:
         _track(3, -0.1, y=0.95),
         _track(4, 0.3),
         _track(5, -1.5),
-        _track(6, -0.1, confidence=0.1),
+        _track(6, -0.1, class_confidence=0.1),
         _track(7, 0.0),
         _track(8, -0.05, y=0.3),
     ]
@@ -100,7 +101,8 @@ def test_class_priority_beats_urgency() -> None:
 
 def test_narrow_side_decides_graspability() -> None:
     config = ControllerConfig()
-    limit = config.robot.gripper_max_opening_m - config.scheduler.grasp_width_margin_m
+    tool = config.station.tool
+    limit = tool.max_opening_m - config.scheduler.grasp_width_margin_m
     long_thin = _track(1, -0.1, width=limit - 0.001)
     result = schedule([long_thin], now_s=0.0, tcp_position_m=TCP, config=config)
     assert result.target is not None
@@ -112,15 +114,16 @@ def test_narrow_side_decides_graspability() -> None:
 
 def test_a_neighbour_where_the_fingers_come_down_blocks_the_pick() -> None:
     config = ControllerConfig()
+    tool = config.station.tool
     sched = config.scheduler
-    reach = config.robot.gripper_max_opening_m / 2 + sched.finger_depth_m + sched.clearance_m
+    reach = tool.max_opening_m / 2 + tool.finger_depth_m + sched.clearance_m
     target = _track(1, -0.1)
     # neighbours across the narrow side (y), footprints 5 cm wide: one reaches into the
     # keep-out rectangle by 1 mm, the other stays 1 mm clear of it
     inside = _track(2, -0.1, y=0.5 + reach + 0.025 - 0.001)
     outside = _track(3, -0.1, y=0.5 + reach + 0.025 + 0.001)
     # along the long side (x) the fingers need only their own width plus the clearance
-    ahead = _track(4, -0.1 + 0.06 + sched.finger_width_m / 2 + sched.clearance_m + 0.001)
+    ahead = _track(4, -0.1 + 0.06 + tool.finger_width_m / 2 + sched.clearance_m + 0.001)
     result = schedule([target, inside], now_s=0.0, tcp_position_m=TCP, config=config)
     assert result.target is None  # same widths: each is in the other's keep-out rectangle
     assert _reasons(result.untargeted) == {1: "blocked", 2: "blocked"}
@@ -131,14 +134,15 @@ def test_a_neighbour_where_the_fingers_come_down_blocks_the_pick() -> None:
 
 def test_a_tall_neighbour_under_the_hand_blocks_the_pick() -> None:
     config = ControllerConfig()
+    tool = config.station.tool
     sched = config.scheduler
-    fingers = config.robot.gripper_max_opening_m / 2 + sched.finger_depth_m + sched.clearance_m
-    hand = sched.hand_width_m / 2 + sched.clearance_m
+    fingers = tool.max_opening_m / 2 + tool.finger_depth_m + sched.clearance_m
+    hand = tool.hand_width_m / 2 + sched.clearance_m
     target = _track(1, -0.1)
     # across the jaw, clear of the fingers but under the hand (footprints 5 cm wide)
     y = 0.5 + fingers + 0.025 + 0.005
     assert y - 0.025 < 0.5 + hand
-    palm_z = grasp_z_m(target.height_m, config) + sched.palm_above_tcp_m - sched.clearance_m
+    palm_z = grasp_z_m(target.height_m, config) + tool.palm_above_tcp_m - sched.clearance_m
     low = _track(2, -0.1, y=y, height=palm_z - config.belt.surface_z_m - 0.002)
     tall = _track(3, -0.1, y=y, height=palm_z - config.belt.surface_z_m + 0.002)
     beyond = _track(4, -0.1, y=0.5 + hand + 0.025 + 0.002, height=0.2)
@@ -170,7 +174,7 @@ def test_intercept_is_the_earliest_feasible_meeting() -> None:
     config = ControllerConfig()
     motion = config.motion
     v, a, j = motion.max_velocity[0], motion.max_acceleration[0], motion.max_jerk[0]
-    ready = config.robot.ready_tcp_position_m
+    ready = config.ready_tcp_position_m
     z = grasp_height_m(_track(1, 0.0), config) + config.pick.approach_height_m
 
     def move_s(track: Track, t_s: float) -> float:
@@ -188,7 +192,7 @@ def test_intercept_is_the_earliest_feasible_meeting() -> None:
 
 def test_fast_object_far_upstream_is_not_targeted_before_it_can_be_met_in_the_window() -> None:
     config = ControllerConfig()
-    ready = config.robot.ready_tcp_position_m
+    ready = config.ready_tcp_position_m
     track = _track(1, -1.2, vx=0.6)
     result = schedule([track], now_s=0.0, tcp_position_m=ready, config=config)
     assert result.target is None
@@ -202,25 +206,26 @@ def test_fast_object_far_upstream_is_not_targeted_before_it_can_be_met_in_the_wi
     assert result.target is not None
     meet_s = approach_time_s(result.target, 0.0, ready, config)
     x_meet, _ = result.target.position_at(meet_s)
-    x_min, x_max = config.belt.pick_window_x_m
+    x_min, x_max = config.pick_window_x_m
     assert x_min <= x_meet <= x_max
     assert x_meet - x_min < 0.6 * 0.02, "targeted as soon as the meeting point enters the window"
 
 
 def test_an_object_lying_on_another_is_grasped_at_its_own_height() -> None:
     config = ControllerConfig()
+    tool = config.station.tool
     on_belt = _track(1, -0.1)
-    stacked = _track(2, -0.1, base_z=config.belt.surface_z_m + 0.05)
-    below_surface = _track(3, -0.1, base_z=config.belt.surface_z_m - 0.001)
+    stacked = _track(2, -0.1, base_z_m=config.belt.surface_z_m + 0.05)
+    below_surface = _track(3, -0.1, base_z_m=config.belt.surface_z_m - 0.001)
     assert grasp_height_m(on_belt, config) == grasp_z_m(0.04, config)
     assert grasp_height_m(stacked, config) == pytest.approx(grasp_z_m(0.04, config) + 0.05)
     assert grasp_height_m(below_surface, config) == grasp_z_m(0.04, config)
     # a low object lying on another reaches the palm of a hand grasping a neighbour
     sched = config.scheduler
-    fingers = config.robot.gripper_max_opening_m / 2 + sched.finger_depth_m + sched.clearance_m
+    fingers = tool.max_opening_m / 2 + tool.finger_depth_m + sched.clearance_m
     y = 0.5 + fingers + 0.025 + 0.005
     low = _track(4, -0.1, y=y, height=0.03)
-    raised = _track(5, -0.1, y=y, height=0.03, base_z=config.belt.surface_z_m + 0.05)
+    raised = _track(5, -0.1, y=y, height=0.03, base_z_m=config.belt.surface_z_m + 0.05)
     assert blocked_by(on_belt, [on_belt, low], config) is None
     assert blocked_by(on_belt, [on_belt, raised], config) == 5
 
@@ -228,7 +233,7 @@ def test_an_object_lying_on_another_is_grasped_at_its_own_height() -> None:
 def test_the_tool_turn_to_the_grasp_yaw_delays_the_meeting() -> None:
     config = ControllerConfig()
     pick, motion = config.pick, config.motion
-    ready = config.robot.ready_tcp_position_m
+    ready = config.ready_tcp_position_m
     track = _track(1, -0.2, vx=0.3)  # grasp yaws 0 and pi
     aligned = approach_time_s(track, 0.0, ready, config, tcp_yaw_rad=0.0)
     assert aligned == approach_time_s(track, 0.0, ready, config)

@@ -11,6 +11,7 @@ from control.config import TrackingConfig
 from control.tracking import Detection, Tracker, wrap_half_turn
 
 RATE_HZ = 30.0
+CLASSES = ("concrete", "brick", "wood", "rubber")
 
 
 def _detection(t_s: float, x: float, y: float, rng: np.random.Generator, **kw: object) -> Detection:
@@ -32,7 +33,7 @@ def _detection(t_s: float, x: float, y: float, rng: np.random.Generator, **kw: o
 @pytest.mark.parametrize("speed_mps", [0.2, 0.4, 0.6])
 def test_converges_on_noisy_constant_velocity(speed_mps: float) -> None:
     rng = np.random.default_rng(7)
-    tracker = Tracker(TrackingConfig())
+    tracker = Tracker(TrackingConfig(), classes=CLASSES)
     # Belt velocity prior 10 % off: the filter must still converge to the true velocity.
     for k in range(60):
         t_s = k / RATE_HZ
@@ -55,7 +56,7 @@ def test_converges_on_noisy_constant_velocity(speed_mps: float) -> None:
 
 def test_identities_kept_through_crossing() -> None:
     rng = np.random.default_rng(3)
-    tracker = Tracker(TrackingConfig())
+    tracker = Tracker(TrackingConfig(), classes=CLASSES)
     ids_before: dict[str, int] = {}
     ids_after: dict[str, int] = {}
     for k in range(90):
@@ -80,7 +81,7 @@ def test_identities_kept_through_crossing() -> None:
 def test_birth_and_death() -> None:
     rng = np.random.default_rng(0)
     config = TrackingConfig(confirm_hits=3, max_coast_s=0.2)
-    tracker = Tracker(config)
+    tracker = Tracker(config, classes=CLASSES)
     for k in range(2):
         tracker.update(k / RATE_HZ, [_detection(k / RATE_HZ, 0.0, 0.5, rng)], (0.0, 0.0))
     assert tracker.predict_to(0.1) == ()
@@ -93,7 +94,7 @@ def test_birth_and_death() -> None:
 
 def test_bad_detections_are_counted_and_good_ones_kept() -> None:
     rng = np.random.default_rng(1)
-    tracker = Tracker(TrackingConfig(confirm_hits=1))
+    tracker = Tracker(TrackingConfig(confirm_hits=1), classes=CLASSES)
     good = _detection(0.1, 0.0, 0.5, rng)
     bad = [
         _detection(0.1, math.nan, 0.5, rng),

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import yaml
 
 from experiments.offline import (
     episode_clock,
@@ -135,9 +136,38 @@ def test_written_messages_round_trip_through_mcap_ros2_and_rosbags(tmp_path: Pat
             for conn, _, raw in reader.messages()
             if conn.topic == "/events"
         ]
-        assert {c.topic for c in reader.connections} == {t.name for t in TOPICS}
+        assert {c.topic for c in reader.connections} == {name for name, _ in TOPICS}
     assert got[0].class_name == "wood"
     assert got[0].header.stamp.sec == 3
+
+
+def test_a_recording_of_two_stations_has_each_station_topic_under_its_namespace(
+    tmp_path: Path,
+) -> None:
+    from mcap.reader import make_reader
+
+    from interfaces.contract import EVENTS_TOPIC, JOINT_STATES, resolved_topics
+    from interfaces.contract import TOPICS as CONTRACT
+    from twin.recording import McapRecording as TwinRecording
+
+    out = tmp_path / "two.mcap"
+    recording = TwinRecording(out, resolved_topics(("s1", "s2")))
+    with pytest.raises(RecordingError, match=r"two\.mcap: topic '/joint_states' is not one"):
+        recording.write("/joint_states", b"", 1)
+    recording.close()
+    with out.open("rb") as handle:
+        channels = {c.topic: c for c in make_reader(handle).get_summary().channels.values()}
+    station = [t for t in CONTRACT if t.scope == "station"]
+    cell = [t for t in CONTRACT if t.scope == "cell"]
+    assert set(channels) == {t.name for t in cell} | {
+        f"/{ns}/{t.name}" for t in station for ns in ("s1", "s2")
+    }
+    assert "/s2/cell/bins" in channels
+    assert "/s1/lockstep/ack" in channels
+    for name, topic in (("/s1/joint_states", JOINT_STATES), ("/events", EVENTS_TOPIC)):
+        qos = yaml.safe_load(channels[name].metadata["offered_qos_profiles"])[0]
+        assert qos["depth"] == topic.qos.depth
+        assert qos["durability"] == ("transient_local" if topic.qos.latched else "volatile")
 
 
 def test_episode_clock_rebuilds_the_twins_duration() -> None:
@@ -149,6 +179,23 @@ def test_episode_clock_rebuilds_the_twins_duration() -> None:
     assert clock.duration_s == 1440 * dt_s
     with pytest.raises(RecordingError, match="fewer than two /joint_states stamps"):
         episode_clock([5, 5], Path("x.mcap"))
+
+
+@needs_ros
+def test_the_recorder_subscribes_to_the_station_topics_of_the_cell_it_is_given(
+    tmp_path: Path,
+) -> None:
+    from twin.ros_isolation import ros_domain
+
+    out = tmp_path / "cell.mcap"
+    with ros_domain() as domain:
+        recorder = _Recorder(domain.env, out, cell="two_pandas")
+        stats = recorder.stop()
+    assert stats["out"] == str(out)
+    counts = stats["counts"]
+    assert {"/s1/joint_states", "/s2/joint_states", "/s1/gripper/command", "/clock"} <= set(counts)
+    assert "/joint_states" not in counts
+    assert is_complete(out)
 
 
 # -- a real episode: twin node, controller, one recorder stopped cleanly, one killed -------------
@@ -175,9 +222,9 @@ def _wait(proc: subprocess.Popen[Any], timeout_s: float) -> int:
 class _Recorder:
     """A recorder subprocess whose stdout lines a thread collects (so reads can time out)."""
 
-    def __init__(self, env: dict[str, str], out: Path) -> None:
+    def __init__(self, env: dict[str, str], out: Path, cell: str | None = None) -> None:
         self.proc = subprocess.Popen(
-            recorder_command(out), env=env, stdout=subprocess.PIPE, text=True
+            recorder_command(out, cell=cell), env=env, stdout=subprocess.PIPE, text=True
         )
         self.lines: queue.Queue[str] = queue.Queue()
         self._thread = threading.Thread(target=self._pump, daemon=True)

@@ -173,3 +173,59 @@ def test_an_episode_that_did_not_finish_is_left_out_with_a_note(
     data = load_runs([copy])
     assert [ep.folder.name for ep in data.episodes] == ["ep000"]
     assert any("ep001" in note and "did not finish" in note for note in data.notes)
+
+
+def _event(kind: str, oid: int, **data: object) -> str:
+    raw = {"time_s": 1.0, "step": 240, "type": kind, "object_id": oid, "class_name": "brick"}
+    return json.dumps({**raw, "data": data})
+
+
+def _two_station_run(folder: Path) -> Path:
+    """A run folder of the two-Panda cell, written by hand: object 4 was released downstream
+    and is still falling into its bin at the end; the upstream controller was restarted."""
+    from interfaces.cell import load_cell
+
+    up, down = {"station": "upstream"}, {"station": "downstream"}
+    events = [_event("spawned", i) for i in range(1, 6)]
+    for oid in (1, 2, 3):
+        events += [
+            _event("pick_success", oid, **up),
+            _event("placed_in_bin", oid, correct=True, **up),
+        ]
+    events += [_event("missed", 4, **up), _event("missed", 5, **up), _event("missed", 5, **down)]
+    events.append(_event("pick_success", 4, **down))
+    folder.mkdir(parents=True)
+    load_cell("two_pandas").save(folder / "cell.yaml")
+    (folder / "run.json").write_text(json.dumps({"dataset": str(folder / "none")}))
+    episode = folder / "ep000"
+    (episode / "twin").mkdir(parents=True)
+    summary = {"belt_speed_mps": 0.3, "seed": 1, "sim_seconds": 60.0, "complete": True}
+    summary |= {"real_time_factor": 1.0, "landing_in_bins": [4]}
+    (episode / "twin" / "summary.json").write_text(json.dumps(summary))
+    (episode / "twin" / "events.jsonl").write_text("\n".join(events) + "\n")
+    for name, completed in (("upstream", 2), ("upstream_1", 1), ("downstream", 1)):
+        pick = {"completed": completed, "aborted": {}, "untargeted": {}}
+        (episode / f"controller-{name}.json").write_text(json.dumps({"pick": pick}))
+    return folder
+
+
+def test_the_report_counts_as_the_run_does_and_adds_a_table_per_station(tmp_path: Path) -> None:
+    """Targeted objects come from every controller of every station, less the objects still
+    landing (``interfaces.metrics.targeted_objects``), exactly as in ``episodes.json``."""
+    from experiments.report import episode_rows, station_rows
+    from experiments.run import episode_metrics
+
+    run = _two_station_run(tmp_path / "run")
+    data = load_runs([run])
+    (row,) = episode_rows(data)
+    expected = episode_metrics(run / "ep000", "lockstep")
+    assert (row["targeted"], row["picked"], row["missed"]) == (3, 4, 1)
+    for key in ("targeted", "picked", "missed", "processed", "placed_correct", "success_rate"):
+        assert row[key] == expected[key], key
+    by_station = {r["station"]: r for r in station_rows(data)}
+    assert (by_station["upstream"]["targeted"], by_station["downstream"]["targeted"]) == (3, 0)
+    assert by_station["upstream"]["success_rate"] == 1.0
+    assert by_station["downstream"]["miss_rate"] == 0.5
+    page = write_report([run], tmp_path / "report").read_text(encoding="utf-8")
+    assert 'id="per-station"' in page
+    assert "<td>downstream</td>" in page

@@ -34,6 +34,12 @@ def _json(path: Path) -> Any:
     return json.loads(path.read_text(encoding="utf-8"))
 
 
+def _yaml(path: Path) -> Any:
+    import yaml
+
+    return yaml.safe_load(path.read_text(encoding="utf-8"))
+
+
 def test_two_episodes_end_to_end(builtin_meshes: Path, tmp_path: Path) -> None:
     _needs_ros()
     scenario = tmp_path / "e2e.yaml"
@@ -69,30 +75,65 @@ def test_two_episodes_end_to_end(builtin_meshes: Path, tmp_path: Path) -> None:
     assert all(r["processed"] >= r["missed"] >= 0 for r in rows)
     with (out / "episodes.csv").open(encoding="utf-8") as handle:
         assert [row["seed"] for row in csv.DictReader(handle)] == ["5", "6"]
-    written = Scenario.load(out / "scenario.yaml")
-    assert written.duration_s == 3.0
-    # the run folder reruns as it ran: its own copy of the parameter file, the absolute dataset
+    _check_the_copies_a_rerun_needs(out, builtin_meshes)
+    _check_one_station(out, run, rows)
+    _check_recordings(out, rows)
+
+
+def _check_one_station(out: Path, run: dict[str, Any], rows: list[dict[str, Any]]) -> None:
+    """A cell of one station: its station block agrees with the line's."""
+    from interfaces.cell import default_cell
+
+    (station,) = (s.name for s in default_cell().stations)
+    assert (run["cell"], run["stations"]) == (default_cell().name, [station])
+    for row in rows:
+        # one station: the station's block is the line's, but for what it alone can see
+        block = row["stations"][station]
+        for key in ("picked", "missed", "processed", "targeted", "placed_correct", "faults"):
+            assert block[key] == row[key], key
+        assert block["spawned"] <= row["spawned"]
+        assert row["picks"] == row["picked"]
+        assert sum(c["spawned"] for c in row["classes"].values()) == row["spawned"]
+    assert set(run["mean_by_station"]) == {station}
+
+
+def _check_the_copies_a_rerun_needs(out: Path, dataset: Path) -> None:
+    """The run folder reruns as it ran: its own copies of the cell and of the parameter file,
+    the absolute dataset."""
     from control.cmd_controller import DEFAULT_PARAMS
     from experiments.run import controller_params
+    from interfaces.cell import default_cell, load_cell
 
+    written = Scenario.load(out / "scenario.yaml")
+    assert written.duration_s == 3.0
+    assert _yaml(out / "scenario.yaml")["cell"] == "cell.yaml"  # beside it, wherever it goes
+    assert load_cell(out / "cell.yaml").stations == default_cell().stations
     assert written.controller == "controller.yaml"
-    assert written.dataset == str(builtin_meshes.resolve())
+    assert written.dataset == str(dataset.resolve())
     copy = controller_params(written.controller, out)
     assert copy == (out / "controller.yaml").resolve()
     assert copy.read_bytes() == DEFAULT_PARAMS.read_bytes()
-    from experiments.offline import offline_metrics
 
+
+def _check_recordings(out: Path, rows: list[dict[str, Any]]) -> None:
+    """The twin recorded every message it sent and received, from its first tick to its
+    last, and the scores recomputed from each recording are the twin's and the run's."""
+    from experiments.offline import offline_metrics
+    from interfaces.cell import default_cell
+
+    (station,) = (s.name for s in default_cell().stations)
     for i in range(2):
         summary = _json(out / f"ep00{i}" / "twin" / "summary.json")
         assert summary["sim_seconds"] == pytest.approx(3.0)
         assert summary["lockstep_timeouts"] == 0
         assert (out / f"ep00{i}" / "controller.json").is_file()
-        # the twin recorded every message it sent and received, from its first tick to its last
         recording = out / f"ep00{i}" / "recording.mcap"
         assert not recording.with_name("recording.mcap.partial").exists()
-        offline = offline_metrics(recording)
+        offline = offline_metrics(recording, out / "cell.yaml")
         assert offline["complete"] is True
         assert offline["scores"] == summary["scores"]
+        assert offline["stations"] == {station: summary["stations"][station]["scores"]}
+        assert offline["scores"]["picked"] == rows[i]["picked"]
         counts = offline["message_counts"]
         for topic, n in summary["published"].items():
             assert counts[topic] == n, topic
@@ -249,6 +290,35 @@ def test_a_controller_restarted_twice_mid_episode_recovers(
     assert picks_after, [e["type"] for e in events if e["time_s"] > back[1]["time_s"]]
 
 
+def _event(kind: str, oid: int, **data: Any) -> str:
+    raw = {"time_s": 1.0, "step": 240, "type": kind, "object_id": oid, "class_name": "brick"}
+    return json.dumps({**raw, "data": data})
+
+
+def _episode_folder(run: Path, cell: str, events: list[str], landing: list[int]) -> Path:
+    from interfaces.cell import load_cell
+
+    load_cell(cell).save(run / "cell.yaml")
+    folder = run / "ep000"
+    (folder / "twin").mkdir(parents=True)
+    summary = {
+        "belt_speed_mps": 0.3,
+        "seed": 1,
+        "sim_seconds": 60.0,
+        "real_time_factor": 1.0,
+        "complete": True,
+        "tracking": {"tracking_time_4mm_mean_s": 0.7, "pursuits": 4, "unsettled": 0},
+        "landing_in_bins": landing,
+    }
+    (folder / "twin" / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
+    (folder / "twin" / "events.jsonl").write_text("\n".join(events) + "\n", encoding="utf-8")
+    return folder
+
+
+def _stats(completed: int, **untargeted: int) -> str:
+    return json.dumps({"pick": {"completed": completed, "aborted": {}, "untargeted": untargeted}})
+
+
 def test_an_object_still_falling_into_its_bin_at_the_end_is_not_counted_targeted(
     tmp_path: Path,
 ) -> None:
@@ -256,38 +326,215 @@ def test_an_object_still_falling_into_its_bin_at_the_end_is_not_counted_targeted
     drops below the bin's top. One released just before the end is in neither tally yet."""
     from experiments.run import episode_metrics
 
-    def summary(landing: list[int]) -> dict[str, Any]:
-        return {
-            "belt_speed_mps": 0.3,
-            "seed": 1,
-            "sim_seconds": 60.0,
-            "real_time_factor": 1.0,
-            "complete": True,
-            "scores": {
-                "picked": 4,
-                "placed_correct": 3,
-                "processed": 5,
-                "missed": 1,
-                "miss_rate": 0.2,
-            },
-            "tracking": {
-                "tracking_time_4mm_mean_s": 0.7,
-                "tracking_time_4mm_p95_s": 0.9,
-                "pursuits": 4,
-                "unsettled": 0,
-            },
-            "landing_in_bins": landing,
-        }
-
+    events = [_event("spawned", i) for i in range(1, 6)]
+    events += [_event("pick_success", oid, station="panda") for oid in range(1, 5)]
+    events += [_event("placed_in_bin", i, station="panda", correct=True) for i in (1, 2, 3)]
+    events.append(_event("missed", 5, station="panda"))
     rows = []
-    for landing in ([], [17]):
-        folder = tmp_path / f"ep{len(landing)}"
-        (folder / "twin").mkdir(parents=True)
-        (folder / "twin" / "summary.json").write_text(json.dumps(summary(landing)))
-        (folder / "twin" / "events.jsonl").write_text("")
-        pick = {"completed": 4, "aborted": {}, "untargeted": {"too_wide": 2}}
-        (folder / "controller.json").write_text(json.dumps({"pick": pick}))
+    for landing in ([], [4]):
+        run = tmp_path / f"run{len(landing)}"
+        folder = _episode_folder(run, "default", events, landing)
+        (folder / "controller.json").write_text(_stats(4, too_wide=2), encoding="utf-8")
         rows.append(episode_metrics(folder, "lockstep"))
     assert (rows[0]["targeted"], rows[0]["success_rate"]) == (4, 0.75)
     assert (rows[1]["targeted"], rows[1]["success_rate"]) == (3, 1.0)
     assert rows[1]["untargeted"] == {"too_wide": 2}
+    assert rows[1]["stations"]["panda"]["targeted"] == 3
+    assert (rows[1]["picked"], rows[1]["missed"], rows[1]["processed"]) == (4, 1, 5)
+
+
+def test_each_station_is_credited_its_own_targets_less_its_own_landing_objects(
+    tmp_path: Path,
+) -> None:
+    from experiments.run import episode_metrics
+
+    up, down = {"station": "upstream"}, {"station": "downstream"}
+    events = [_event("spawned", i) for i in range(1, 6)]
+    for oid in (1, 2, 3):
+        events.append(_event("pick_success", oid, **up))
+        events.append(_event("placed_in_bin", oid, correct=True, **up))
+    events.append(_event("missed", 4, **up))
+    events.append(_event("missed", 5, **up))  # still on its way downstream at the end
+    events.append(_event("pick_success", 4, **down))  # released, still falling at the end
+    folder = _episode_folder(tmp_path / "run", "two_pandas", events, landing=[4])
+    (folder / "controller-upstream.json").write_text(_stats(3, too_wide=1), encoding="utf-8")
+    (folder / "controller-upstream_1.json").write_text(_stats(0), encoding="utf-8")
+    (folder / "controller-downstream.json").write_text(_stats(1, flat=2), encoding="utf-8")
+    row = episode_metrics(folder, "lockstep")
+    up_row, down_row = row["stations"]["upstream"], row["stations"]["downstream"]
+    assert (up_row["targeted"], up_row["success_rate"]) == (3, 1.0)
+    assert (down_row["targeted"], down_row["success_rate"]) == (0, 0.0)
+    assert (row["targeted"], row["success_rate"]) == (3, 1.0)
+    assert row["untargeted"] == {"too_wide": 1, "flat": 2}
+    assert (up_row["controller_restarts"], down_row["controller_restarts"]) == (1, 0)
+    assert row["controller_restarts"] == 1
+    # object 5, missed upstream only, is undecided for the line
+    assert (row["missed"], row["processed"], row["picked"]) == (0, 4, 4)
+    assert (up_row["missed"], up_row["processed"]) == (2, 5)
+    assert down_row["picked"] == 1
+
+
+TWO_STATIONS = """\
+name: two
+cell: two_pandas
+duration_s: 10.0
+objects: {max_width_m: 0.065, min_height_m: 0.02}
+system: {belt_speed_mps: 0.3, object_order: shuffled, image_gap_m: 0.0, prefill_m: 2.5}
+faults: {controller_restart_at_s: [3.0]}
+"""
+
+
+@pytest.mark.slow
+def test_a_cell_of_two_stations_runs_a_controller_per_station_and_scores_each(
+    builtin_meshes: Path, tmp_path: Path
+) -> None:
+    """The shipped two-Panda cell in lockstep: one controller process per station (each
+    restarted at 3 s), picks by both, scores per station and for the line that agree with the
+    twin's summary and with the recording."""
+    _needs_ros()
+    from experiments.offline import offline_metrics
+    from interfaces.metrics import in_scope
+
+    scenario = tmp_path / "two.yaml"
+    scenario.write_text(TWO_STATIONS, encoding="utf-8")
+    out = tmp_path / "run"
+    done = subprocess.run(
+        _cli(scenario, "--dataset", builtin_meshes, "--out", out, "--json"),
+        capture_output=True,
+        text=True,
+        timeout=240,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    episode = out / "ep000"
+    names = {p.name for p in episode.iterdir()}
+    for station in ("upstream", "downstream"):
+        assert {f"controller-{station}.json", f"controller-{station}_1.json"} <= names
+        log = (episode / f"controller-{station}.log").read_text(encoding="utf-8")
+        assert log.count(f"station {station} of {(out / 'cell.yaml').resolve()}") == 2
+    assert "controller.json" not in names
+    summary = _json(episode / "twin" / "summary.json")
+    assert summary["complete"] is True
+    (row,) = _json(out / "episodes.json")
+    stations = row["stations"]
+    assert list(stations) == ["upstream", "downstream"]
+    for name, block in stations.items():
+        assert set(in_scope("station")) <= set(block)
+        assert block["picked"] > 0, name  # both stations picked
+        assert block["controller_restarts"] == 1
+        twin_scores = summary["stations"][name]["scores"]
+        for key in ("spawned", "picked", "missed", "processed", "placed_correct"):
+            assert block[key] == twin_scores[key], (name, key)
+        stats = [_json(episode / f"controller-{name}{s}.json") for s in ("", "_1")]
+        assert all(s["ticks_acked"] > 0 for s in stats)
+    assert row["controller_restarts"] == 1
+    assert row["targeted"] == sum(b["targeted"] for b in stations.values())
+    assert row["untargeted_total"] == sum(b["untargeted_total"] for b in stations.values())
+    assert row["faults"] == sum(b["faults"] for b in stations.values()) == 2
+    assert row["picked"] <= sum(b["picked"] for b in stations.values())
+    # the line: what the twin, the run and the recording say agree
+    offline = offline_metrics(episode / "recording.mcap", out / "cell.yaml")
+    for key in ("spawned", "picked", "missed", "processed", "lost", "placed_correct"):
+        assert row[key] == offline["scores"][key] == summary["scores"][key], key
+    assert offline["stations"] == {n: summary["stations"][n]["scores"] for n in stations}
+    run = _json(out / "run.json")
+    assert run["stations"] == ["upstream", "downstream"]
+    assert run["mean_by_station"]["downstream"]["picked"] == stations["downstream"]["picked"]
+    printed = json.loads(done.stdout)
+    assert printed["mean_by_station"] == run["mean_by_station"]
+
+
+TWO_STATIONS_REALTIME = """\
+name: two_realtime
+cell: two_pandas
+duration_s: 12.0
+objects: {max_width_m: 0.065, min_height_m: 0.02}
+system: {belt_speed_mps: 0.3, object_order: shuffled, image_gap_m: 0.0, prefill_m: 2.5}
+"""
+
+
+@pytest.mark.slow
+def test_a_cell_of_two_stations_runs_in_realtime_and_both_pick(
+    builtin_meshes: Path, tmp_path: Path
+) -> None:
+    """The shipped two-Panda cell paced to the wall clock: two controller processes, each in
+    its namespace, both pick, the line's and each station's scores agree with the twin."""
+    _needs_ros()
+    scenario = tmp_path / "two.yaml"
+    scenario.write_text(TWO_STATIONS_REALTIME, encoding="utf-8")
+    out = tmp_path / "run"
+    done = subprocess.run(
+        _cli(scenario, "--mode", "realtime", "--dataset", builtin_meshes, "--out", out, "--json"),
+        capture_output=True,
+        text=True,
+        timeout=240,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    (row,) = _json(out / "episodes.json")
+    assert row["mode"] == "realtime"
+    summary = _json(out / "ep000" / "twin" / "summary.json")
+    assert summary["mode"] == "realtime"
+    assert summary["complete"] is True
+    for name in ("upstream", "downstream"):
+        block = row["stations"][name]
+        assert block["picked"] > 0, name
+        assert block["picked"] == summary["stations"][name]["scores"]["picked"]
+        stats = _json(out / "ep000" / f"controller-{name}.json")
+        assert stats["mode"] == "realtime"
+        assert stats["control_updates"] > 0
+    assert row["picked"] == summary["scores"]["picked"] > 0
+
+
+def test_a_run_folder_reruns_as_it_ran_with_its_own_cell(
+    builtin_meshes: Path, tmp_path: Path
+) -> None:
+    """The scenario names a cell file beside it; the run folder keeps the resolved copy, so
+    ``cdw-twin run RUN/scenario.yaml`` reruns the episode exactly after the original is gone."""
+    _needs_ros()
+    from interfaces.cell import DEFAULT_CELL, load_cell
+
+    cell_text = DEFAULT_CELL.read_text(encoding="utf-8")
+    assert "name: panda\n" in cell_text
+    (tmp_path / "cells").mkdir()
+    (tmp_path / "cells" / "left.yaml").write_text(
+        cell_text.replace("name: panda\n", "name: left\n"), encoding="utf-8"
+    )
+    scenario = tmp_path / "e2e.yaml"
+    scenario.write_text(SCENARIO + "cell: cells/left.yaml\n", encoding="utf-8")
+    first = tmp_path / "first"
+    done = subprocess.run(
+        _cli(scenario, "--seed", 3, "--dataset", builtin_meshes, "--out", first),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert _yaml(first / "scenario.yaml")["cell"] == "cell.yaml"
+    assert [s.name for s in load_cell(first / "cell.yaml").stations] == ["left"]
+    (tmp_path / "cells" / "left.yaml").unlink()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    second = tmp_path / "second"
+    done = subprocess.run(
+        [*_cli(first / "scenario.yaml", "--out", second)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        cwd=elsewhere,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert (second / "cell.yaml").read_text() == (first / "cell.yaml").read_text()
+    events = [
+        (run / "ep000" / "twin" / "events.jsonl").read_text(encoding="utf-8")
+        for run in (first, second)
+    ]
+    assert events[0] == events[1]
+    assert '"station": "left"' in events[0]
+    rows = [_json(run / "episodes.json")[0] for run in (first, second)]
+    assert list(rows[0]["stations"]) == ["left"]
+    assert rows[0]["seed"] == rows[1]["seed"] == 3
+    for key in ("spawned", "picked", "missed", "processed", "targeted", "stations"):
+        assert rows[0][key] == rows[1][key], key

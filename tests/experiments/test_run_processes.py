@@ -50,9 +50,14 @@ def _processes(text: str) -> dict[int, list[str]]:
     return found
 
 
-def _pid_of(text: str, subcommand: str) -> int:
-    """The one live ``cdw-twin <subcommand>`` process mentioning ``text``."""
-    pids = [pid for pid, argv in _processes(text).items() if subcommand in argv]
+def _pid_of(text: str, subcommand: str, station: str | None = None) -> int:
+    """The one live ``cdw-twin <subcommand>`` process mentioning ``text`` (and, given a
+    ``station``, started with ``--station station``)."""
+    pids = [
+        pid
+        for pid, argv in _processes(text).items()
+        if subcommand in argv and (station is None or station in argv)
+    ]
     assert len(pids) == 1, _processes(text)
     return pids[0]
 
@@ -83,11 +88,12 @@ def _wait(proc: subprocess.Popen[str], done: Callable[[], bool], what: str) -> N
         time.sleep(0.2)
 
 
-def _stepping_with_controller(episode: Path) -> Callable[[], bool]:
-    """The controller is up and the lockstep twin has stepped past 1 s of sim time."""
+def _stepping_with_controller(episode: Path, log_name: str = "controller") -> Callable[[], bool]:
+    """The controller (``log_name``.log) is up and the lockstep twin has stepped past 1 s of
+    sim time."""
 
     def check() -> bool:
-        log = episode / "controller.log"
+        log = episode / f"{log_name}.log"
         return (
             log.is_file()
             and "controller up" in log.read_text(errors="replace")
@@ -152,32 +158,43 @@ def test_kill_9_of_the_runner_leaves_no_process_behind(
 
 
 @pytest.mark.parametrize(
-    ("victim", "reason"),
+    ("victim", "station", "reason"),
     [
         pytest.param(
             "controller",
+            None,
             r"controller exited with signal SIGKILL at sim (\d+\.\d) s",
             id="controller",
         ),
-        pytest.param("twin-node", r"twin exited with signal SIGKILL, no summary\.json", id="twin"),
+        pytest.param(
+            "twin-node", None, r"twin exited with signal SIGKILL, no summary\.json", id="twin"
+        ),
+        pytest.param(
+            "controller",
+            "downstream",
+            r"controller 'downstream' exited with signal SIGKILL at sim (\d+\.\d) s",
+            id="one-of-two-controllers",
+        ),
     ],
 )
 def test_a_process_killed_mid_episode_fails_the_episode(
-    builtin_meshes: Path, tmp_path: Path, victim: str, reason: str
+    builtin_meshes: Path, tmp_path: Path, victim: str, station: str | None, reason: str
 ) -> None:
-    """The failed episode is listed with its reason, averaged nowhere, and the run stops."""
+    """The failed episode is listed with its reason, averaged nowhere, and the run stops; in
+    a cell of two stations, losing either station's controller fails it too."""
     import re
 
     _needs_ros()
     scenario = tmp_path / "long.yaml"
-    scenario.write_text(LONG, encoding="utf-8")
+    scenario.write_text(LONG + ("cell: two_pandas\n" if station else ""), encoding="utf-8")
     out = tmp_path / "run"
     runner = _run(
         "run", scenario, "--episodes", 2, "--dataset", builtin_meshes, "--out", out, "--json"
     )
+    log_name = f"controller-{station}" if station else "controller"
     try:
-        _wait(runner, _stepping_with_controller(out / "ep000"), "lockstep stepping")
-        os.kill(_pid_of(str(out / "ep000"), victim), signal.SIGKILL)
+        _wait(runner, _stepping_with_controller(out / "ep000", log_name), "lockstep stepping")
+        os.kill(_pid_of(str(out / "ep000"), victim, station), signal.SIGKILL)
         stdout, stderr = runner.communicate(timeout=60)
     finally:
         if runner.poll() is None:
@@ -204,6 +221,9 @@ def test_a_process_killed_mid_episode_fails_the_episode(
     assert [(r["seed"], r["failed"], r["picks"]) for r in table] == [("0", "True", "")]
     assert table[0]["reason"] == rows[0]["reason"]
     assert not (out / "ep001").exists()
+    if station is not None:
+        # the other station's controller was stopped, not killed: it saved its counters
+        assert (out / "ep000" / "controller-upstream.json").is_file()
     if victim == "controller":
         # the runner stopped the twin at once: its summary says so, and where it was
         twin = _json(out / "ep000" / "twin" / "summary.json")
@@ -250,8 +270,8 @@ def test_a_sweep_leaves_a_failed_episode_out_of_its_intervals(
     # only the seed-1 episode: its own values, no interval from one sample
     rows = _json(out / "short" / "episodes.json")
     assert [(r["seed"], r["failed"]) for r in rows] == [(0, True), (1, False)]
-    assert agg["metrics"]["picks"] == {
-        "mean": float(rows[1]["picks"]),
+    assert agg["metrics"]["picked"] == {
+        "mean": float(rows[1]["picked"]),
         "ci95_low": None,
         "ci95_high": None,
         "n": 1,

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from control.config import load_config
-from twin.config import CellConfig
+from interfaces.cell import CELLS_DIR, load_cell
 from twin.scenario import FaultLevel, Scenario
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "scenarios"
@@ -28,21 +28,30 @@ EXPECTED = {
 }
 
 
+@pytest.mark.parametrize("cell_name", sorted(p.stem for p in CELLS_DIR.glob("*.yaml")))
 @pytest.mark.parametrize("params", ["default", "throughput"])
-def test_controller_drops_over_the_twin_bins_and_the_bins_clear_the_belt(params: str) -> None:
-    """The controller's drop points (its own file, no import from the twin) must land in the
-    twin's default bins with the controller's drop tolerance to spare."""
-    cell = CellConfig()
-    config = load_config(SCENARIOS.parents[1] / "control" / "config" / f"{params}.yaml")
-    tolerance = config.pick.drop_tolerance_m
+def test_controller_drops_over_the_cells_bins_and_the_bins_clear_the_belt(
+    params: str, cell_name: str
+) -> None:
+    """Every station's controller (its own process, reading the cell file) must release over
+    its bins with its drop tolerance to spare, and no bin may stand on the belt or on another."""
+    cell = load_cell(cell_name)
     belt_near_edge = cell.belt.centre_y_m - 0.5 * cell.belt.width_m
-    for bin_config in cell.bins:
-        x, y, z = config.bins[bin_config.class_name]
-        inner_half = bin_config.inner_half_m
-        assert abs(x - bin_config.centre_x_m) + tolerance <= inner_half, bin_config
-        assert abs(y - bin_config.centre_y_m) + tolerance <= inner_half, bin_config
-        assert z > bin_config.top_z_m
-        assert bin_config.centre_y_m + 0.5 * bin_config.size_m < belt_near_edge
+    for station in cell.stations:
+        config = load_config(
+            SCENARIOS.parents[1] / "control" / "config" / f"{params}.yaml",
+            cell=cell,
+            station=station.name,
+        )
+        tolerance = config.pick.drop_tolerance_m
+        assert set(config.bins) == {b.class_name for b in station.bins}
+        for bin_spec in station.bins:
+            x, y, z = config.bins[bin_spec.class_name]
+            inner_half = bin_spec.inner_half_m
+            assert abs(x - bin_spec.centre_x_m) + tolerance <= inner_half, bin_spec
+            assert abs(y - bin_spec.centre_y_m) + tolerance <= inner_half, bin_spec
+            assert z > bin_spec.top_z_m
+            assert bin_spec.centre_y_m + 0.5 * bin_spec.size_m < belt_near_edge
     edges = sorted(
         (b.centre_x_m - 0.5 * b.size_m, b.centre_x_m + 0.5 * b.size_m) for b in cell.bins
     )

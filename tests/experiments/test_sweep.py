@@ -8,24 +8,29 @@ import math
 from pathlib import Path
 
 import pytest
+import yaml
 
 from experiments.sweep import (
     CI_METRICS,
+    WILSON_RATES,
     Grid,
     aggregate_cell,
+    aggregate_stations,
     expand,
+    prepare_sweep,
     student_t_interval,
     sweep_csv,
     wilson_interval,
 )
-from twin.errors import ConfigError
+from interfaces.errors import ConfigError
+from interfaces.metrics import METRICS
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "scenarios"
 
 
 def _row(placed: int, targeted: int, missed: int, processed: int, **extra: float) -> dict:
     return {
-        "picks": placed,
+        "picked": placed,
         "placed_correct": placed,
         "targeted": targeted,
         "missed": missed,
@@ -96,9 +101,80 @@ def test_aggregate_cell_pools_counts_and_skips_missing_values() -> None:
     assert float(table[0]["success_rate_wilson_low"]) == pytest.approx(wilson["ci95_low"])
 
 
+def test_the_sweep_aggregates_every_line_metric_of_the_table_and_pools_every_rate() -> None:
+    assert set(CI_METRICS) == {m.name for m in METRICS if "line" in m.scopes}
+    assert {
+        m.name: m.ratio_of for m in METRICS if m.kind == "rate" and "line" in m.scopes
+    } == WILSON_RATES
+    assert WILSON_RATES["success_rate"] == ("placed_correct", "targeted")
+    assert WILSON_RATES["pick_success_rate"] == ("picked", "processed")
+
+
+def _station_row(up: tuple[int, int], down: tuple[int, int]) -> dict:
+    return {
+        "picked": up[0] + down[0],
+        "stations": {
+            "upstream": {"picked": up[0], "processed": up[1], "real_time_factor": 9.0},
+            "downstream": {"picked": down[0], "processed": down[1]},
+        },
+    }
+
+
+def test_a_cell_of_two_stations_gets_intervals_and_csv_rows_per_station() -> None:
+    rows = [_station_row((2, 4), (1, 2)), _station_row((3, 4), (0, 2)), {"failed": True}]
+    stations = aggregate_stations(rows)
+    assert list(stations) == ["upstream", "downstream"]
+    up = stations["upstream"]
+    assert up["episodes"] == 2
+    assert up["metrics"]["picked"]["mean"] == pytest.approx(2.5)
+    assert "real_time_factor" not in up["metrics"]  # a line metric only
+    pooled = up["wilson"]["pick_success_rate"]
+    assert (pooled["successes"], pooled["trials"], pooled["pooled"]) == (5, 8, 5 / 8)
+    assert stations["downstream"]["wilson"]["pick_success_rate"]["pooled"] == pytest.approx(0.25)
+    agg = aggregate_cell(rows)
+    agg["stations"] = stations
+    cell = {"cell": "c", "scenario": "s", "mode": "lockstep", "speed_mps": 0.4, "duration_s": 5.0}
+    table = list(csv.DictReader(io.StringIO(sweep_csv([{**cell, "aggregate": agg}]))))
+    assert [r["station"] for r in table] == ["", "upstream", "downstream"]
+    assert float(table[0]["picked_mean"]) == pytest.approx(3.0)
+    assert float(table[1]["picked_mean"]) == pytest.approx(2.5)
+    assert table[1]["real_time_factor_mean"] == ""
+    assert float(table[2]["pick_success_rate_pooled"]) == pytest.approx(0.25)
+    # a cell of one station has its line row only
+    agg["stations"] = {"upstream": up}
+    assert len(list(csv.DictReader(io.StringIO(sweep_csv([{**cell, "aggregate": agg}]))))) == 1
+
+
+def test_every_grid_cell_folder_keeps_its_resolved_cell_before_anything_runs(
+    tmp_path: Path, builtin_meshes: Path
+) -> None:
+    from interfaces.cell import load_cell
+    from twin.scenario import Scenario
+
+    (tmp_path / "one.yaml").write_text("name: one\nduration_s: 2.0\n", encoding="utf-8")
+    (tmp_path / "two.yaml").write_text(
+        "name: two\ncell: two_pandas\nduration_s: 2.0\n", encoding="utf-8"
+    )
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(
+        f"scenarios: [one.yaml, two.yaml]\nseeds: [3]\ndataset: {builtin_meshes}\n",
+        encoding="utf-8",
+    )
+    runs = prepare_sweep(grid, tmp_path / "sweep")
+    assert [r.options.stations for r in runs] == [("panda",), ("upstream", "downstream")]
+    for run, shipped in zip(runs, ("default", "two_pandas"), strict=True):
+        written = yaml.safe_load((run.folder / "scenario.yaml").read_text(encoding="utf-8"))
+        assert (written["cell"], written["controller"]) == ("cell.yaml", "controller.yaml")
+        assert Scenario.load(run.folder / "scenario.yaml").cell == str(run.folder / "cell.yaml")
+        assert run.options.cell_path == (run.folder / "cell.yaml").resolve()
+        copy = load_cell(run.folder / "cell.yaml")
+        assert copy.stations == load_cell(shipped).stations
+        assert [e.seed for e in run.episodes()] == [3]
+
+
 def test_aggregate_of_no_episodes_has_no_numbers() -> None:
     agg = aggregate_cell([])
-    assert agg["metrics"]["picks"] == {"mean": None, "ci95_low": None, "ci95_high": None, "n": 0}
+    assert agg["metrics"]["picked"] == {"mean": None, "ci95_low": None, "ci95_high": None, "n": 0}
     assert agg["wilson"]["success_rate"]["pooled"] is None
 
 

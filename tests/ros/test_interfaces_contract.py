@@ -1,9 +1,11 @@
-"""``docs/interfaces.md``'s topic tables against the real nodes, and what the twin node latches.
+"""The real nodes against :mod:`interfaces.contract` (which ``docs/interfaces.md`` is checked
+against, ``tests/twin/test_interfaces_doc.py``), and what the twin node latches.
 
-A real :class:`twin.ros_node.TwinNode` (around a real twin) and a real
-:class:`control.node.ControllerNode` are created in this process on an isolated domain; their
-publishers and subscriptions, with types and QoS, are compared with the page, so the page
-cannot drift from the code.
+A real :class:`twin.ros_node.TwinNode` (around a real twin, for the reference cell and for the
+two-station ``two_pandas`` cell) and a real :class:`control.node.ControllerNode` are created in
+this process on an isolated domain; their publishers and subscriptions, with types and QoS, are
+compared with the contract resolved for the cell's station namespaces, so neither the code nor
+the page can drift from the contract.
 """
 
 # rclpy's annotations are partial.
@@ -12,7 +14,6 @@ cannot drift from the code.
 from __future__ import annotations
 
 import os
-import re
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -21,19 +22,19 @@ from typing import Any, NamedTuple
 import pytest
 from twin_helpers import box_px
 
-from twin.config import CellConfig
+from interfaces import contract
+from interfaces.cell import Cell, default_cell, load_cell
 from twin.scenario import FaultLevel, Scenario, SystemLevel
 from twin.sim import Twin
 
 pytestmark = pytest.mark.usefixtures("require_interfaces")
 
-PAGE = Path(__file__).resolve().parents[2] / "docs" / "interfaces.md"
 ONE_BOX = {"img": [(1, box_px(500, 500, 100, 50))]}
 ROS_OWN_TOPICS = {"/rosout", "/parameter_events"}
 
 
 class Qos(NamedTuple):
-    """What the page states of a topic: type and QoS."""
+    """Type and QoS of a topic, as the contract states them."""
 
     msg_type: str
     reliability: str
@@ -41,36 +42,23 @@ class Qos(NamedTuple):
     depth: int
 
 
-def _table(title: str) -> dict[str, Qos]:
-    """Topic -> type and QoS, from the page's table under the heading ``title``."""
-    text = PAGE.read_text(encoding="utf-8")
-    match = re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## |\Z)", text, re.M | re.S)
-    assert match, f"docs/interfaces.md has no section {title!r}"
-    lines = match.group(1).splitlines()
-    first = next(i for i, line in enumerate(lines) if line.startswith("|"))
-    rows = []  # the section's first table
-    for line in lines[first:]:
-        if not line.startswith("|"):
-            break
-        rows.append(line)
-    header = [c.strip() for c in rows[0].strip("|").split("|")]
-    col = {name: header.index(name) for name in ("topic", "type", "QoS")}
-    table = {}
-    for row in rows[2:]:
-        cells = [c.strip() for c in row.strip().strip("|").split("|")]
-        qos = re.fullmatch(
-            r"(reliable|best effort), (volatile|transient local), keep last (\d+)",
-            cells[col["QoS"]],
+def _expected(topics: tuple[contract.Topic, ...], cell: Cell) -> dict[str, Qos]:
+    """Wire name -> type and QoS of ``topics`` in ``cell`` (station topics once per station)."""
+    namespaces = tuple(s.namespace for s in cell.stations)
+    return {
+        wire: Qos(
+            f"{t.package}/{t.type_name}",
+            "reliable" if t.qos.reliable else "best effort",
+            "transient local" if t.qos.latched else "volatile",
+            t.qos.depth,
         )
-        assert qos, f"unparsable QoS {cells[col['QoS']]!r} in {row!r}"
-        table[cells[col["topic"]].strip("`")] = Qos(
-            cells[col["type"]].strip("`"), qos.group(1), qos.group(2), int(qos.group(3))
-        )
-    return table
+        for wire, t in contract.resolved_topics(namespaces)
+        if t in topics
+    }
 
 
 def _of(endpoint: Any) -> Qos:
-    """Type and QoS of a real publisher or subscription, in the page's words."""
+    """Type and QoS of a real publisher or subscription."""
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 
     qos = endpoint.qos_profile
@@ -115,16 +103,22 @@ def ros(ros_env: dict[str, str]) -> Iterator[Any]:
         os.environ.update(saved)
 
 
-@pytest.fixture
-def twin(mesh_polygons: Callable[..., Path]) -> Iterator[Twin]:
+def _twin(meshes: Path, cell: Cell) -> Twin:
     """A real twin with one object; 0.2 s long, a detection dropout from 0.05 s to 0.1 s."""
     scenario = Scenario(
         duration_s=0.2,
         system=SystemLevel(belt_speed_mps=0.2, prefill_m=1.7, repeat_images=False),
         faults=FaultLevel(detection_dropout=((0.05, 0.1),)),
     )
-    with Twin(scenario, dataset_dir=mesh_polygons(ONE_BOX)) as twin:
-        twin.reset(seed=0)
+    twin = Twin(scenario, dataset_dir=meshes, cell=cell)
+    twin.reset(seed=0)
+    return twin
+
+
+@pytest.fixture
+def twin(mesh_polygons: Callable[..., Path]) -> Iterator[Twin]:
+    """A real twin of the reference cell (see :func:`_twin`)."""
+    with _twin(mesh_polygons(ONE_BOX), default_cell()) as twin:
         yield twin
 
 
@@ -135,20 +129,28 @@ def _spin_until(executor: Any, done: Callable[[], bool], timeout_s: float = 20.0
         executor.spin_once(timeout_sec=0.02)
 
 
-def test_the_twin_nodes_topics_types_and_qos_are_the_pages(ros: Any, twin: Twin) -> None:
+@pytest.mark.parametrize("cell_name", ["default", "two_pandas"])
+def test_the_twin_nodes_topics_types_and_qos_are_the_contracts(
+    ros: Any, mesh_polygons: Callable[..., Path], cell_name: str
+) -> None:
     from twin.ros_node import TwinNode
 
-    node = TwinNode(twin, lockstep=True)
-    try:
-        published = _endpoints(node.publishers)
-        subscribed = _endpoints(node.subscriptions)
-    finally:
-        node.destroy_node()
-    assert published == _table("Published by the cell (the twin)")
-    assert subscribed == _table("Subscribed by the cell")
+    cell = load_cell(cell_name)
+    with _twin(mesh_polygons(ONE_BOX), cell) as twin:
+        node = TwinNode(twin, lockstep=True)
+        try:
+            published = _endpoints(node.publishers)
+            subscribed = _endpoints(node.subscriptions)
+        finally:
+            node.destroy_node()
+    assert published == _expected(contract.PUBLISHED, cell)
+    assert subscribed == _expected(contract.SUBSCRIBED, cell)
+    if cell_name == "default":  # one station, empty namespace: today's bare names
+        assert "/joint_states" in published
+        assert "/arm_controller/joint_trajectory" in subscribed
 
 
-def test_the_controller_uses_the_pages_qos_on_every_topic(ros: Any, twin: Twin) -> None:
+def test_the_controller_uses_the_contracts_qos_on_every_topic(ros: Any, twin: Twin) -> None:
     """The controller's side of each topic it uses (its ack publisher is created once its
     readers have matched the twin's writers, so both nodes run here)."""
     from control.config import ControllerConfig
@@ -166,8 +168,9 @@ def test_the_controller_uses_the_pages_qos_on_every_topic(ros: Any, twin: Twin) 
     finally:
         controller.destroy_node()
         twin_node.destroy_node()
-    cell_in = _table("Subscribed by the cell")
-    cell_out = _table("Published by the cell (the twin)")
+    cell = default_cell()
+    cell_in = _expected(contract.SUBSCRIBED, cell)
+    cell_out = _expected(contract.PUBLISHED, cell)
     assert set(published) == {
         "/arm_controller/joint_trajectory",
         "/gripper/command",
@@ -176,8 +179,8 @@ def test_the_controller_uses_the_pages_qos_on_every_topic(ros: Any, twin: Twin) 
     }
     assert published == {topic: cell_in[topic] for topic in published}
     assert "/sorting/priorities" in subscribed
-    page = {**cell_out, **cell_in}  # /sorting/priorities: the controller reads it too
-    assert subscribed == {topic: page[topic] for topic in subscribed}
+    every = {**cell_out, **cell_in}  # /sorting/priorities: the controller reads it too
+    assert subscribed == {topic: every[topic] for topic in subscribed}
 
 
 def test_a_late_subscriber_gets_the_bins_and_every_logged_event(ros: Any, twin: Twin) -> None:
@@ -186,7 +189,8 @@ def test_a_late_subscriber_gets_the_bins_and_every_logged_event(ros: Any, twin: 
     import rclpy
     from cdw_interfaces.msg import SortingBins, SortingEvent
 
-    from twin.ros_node import EVENT_QOS, LATCHED_QOS, TwinNode, run_loop
+    from interfaces.ros import qos_profile
+    from twin.ros_node import TwinNode, run_loop
 
     twin_node = TwinNode(twin, lockstep=False)
     ros.add_node(twin_node)
@@ -194,8 +198,15 @@ def test_a_late_subscriber_gets_the_bins_and_every_logged_event(ros: Any, twin: 
     listener = rclpy.create_node("late_listener")
     bins: list[Any] = []
     events: list[Any] = []
-    listener.create_subscription(SortingBins, "/cell/bins", bins.append, LATCHED_QOS)
-    listener.create_subscription(SortingEvent, "/events", events.append, EVENT_QOS)
+    listener.create_subscription(
+        SortingBins, contract.BINS.resolve(""), bins.append, qos_profile(contract.BINS.qos)
+    )
+    listener.create_subscription(
+        SortingEvent,
+        contract.EVENTS_TOPIC.name,
+        events.append,
+        qos_profile(contract.EVENTS_TOPIC.qos),
+    )
     ros.add_node(listener)
     try:
         _spin_until(ros, lambda: bool(bins) and len(events) >= len(twin.events))
@@ -208,10 +219,9 @@ def test_a_late_subscriber_gets_the_bins_and_every_logged_event(ros: Any, twin: 
         (b.class_name, b.position.x, b.position.y, b.position.z, b.inner_half_m, b.size_m)
         for b in msg.bins
     ]
-    cell = CellConfig()
     assert got == [
         (b.class_name, b.centre_x_m, b.centre_y_m, b.top_z_m, b.inner_half_m, b.size_m)
-        for b in cell.bins
+        for b in default_cell().bins
     ]
     assert [(e.type, e.object_id) for e in events] == [
         (str(e.type), e.object_id) for e in twin.events

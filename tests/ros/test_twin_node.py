@@ -153,6 +153,63 @@ def test_parallel_runs_on_separate_domains_do_not_cross_talk(
     assert all(s["counts"]["/conveyor/state"] > 20 for s in seen)
 
 
+def _listen(node: Any, got: dict[str, list[Any]]) -> None:
+    """Subscribe ``node`` to every topic the twin publishes (bare names), into ``got``."""
+    from interfaces import contract as c
+    from interfaces.ros import message_class, qos_profile
+
+    for topic in c.PUBLISHED:
+        if topic is c.LOCKSTEP_TICK:
+            continue
+        wire = topic.resolve("")
+        node.create_subscription(
+            message_class(topic),
+            wire,
+            lambda msg, wire=wire: got.setdefault(wire, []).append(msg),
+            qos_profile(topic.qos),
+        )
+
+
+def _publishers(node: Any) -> dict[Any, Any]:
+    """A publisher of ``node`` on every topic the twin takes but the lockstep ack."""
+    from interfaces import contract as c
+    from interfaces.ros import message_class, qos_profile
+
+    return {
+        t: node.create_publisher(message_class(t), t.resolve(""), qos_profile(t.qos))
+        for t in c.SUBSCRIBED
+        if t is not c.LOCKSTEP_ACK
+    }
+
+
+def _send_bad_commands(pubs: dict[Any, Any]) -> None:
+    """Publish one bad command of each kind the cell rejects."""
+    from std_msgs.msg import Float64
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from interfaces import contract as c
+    from interfaces.ros import message_class
+
+    arm = pubs[c.ARM_TRAJECTORY]
+    arm_names = [f"panda_joint{i}" for i in range(1, 8)]
+
+    def trajectory(names: list[str], point: JointTrajectoryPoint) -> JointTrajectory:
+        return JointTrajectory(joint_names=names, points=[point])
+
+    arm.publish(trajectory(arm_names[:6], JointTrajectoryPoint(positions=list(HOME[:6]))))
+    arm.publish(trajectory(arm_names, JointTrajectoryPoint(positions=[math.nan, *HOME[1:]])))
+    arm.publish(trajectory(arm_names, JointTrajectoryPoint(positions=[0.0, 3.5, *HOME[2:]])))
+    duplicate = [*arm_names[:6], arm_names[0]]
+    arm.publish(trajectory(duplicate, JointTrajectoryPoint(positions=HOME)))
+    too_fast = JointTrajectoryPoint(positions=list(HOME), velocities=[0, 0, 0, 3.0, 0, 0, 0])
+    arm.publish(trajectory(arm_names, too_fast))
+    pubs[c.GRIPPER_COMMAND].publish(Float64(data=0.5))
+    pubs[c.BELT_SETPOINT].publish(Float64(data=-0.3))
+    pubs[c.BELT_SETPOINT].publish(Float64(data=50.0))
+    priorities = message_class(c.PRIORITIES)(classes=["wood", "plastic"])
+    pubs[c.PRIORITIES].publish(priorities)
+
+
 @pytest.mark.usefixtures("require_interfaces")
 def test_every_topic_flows_and_bad_commands_are_rejected_and_counted(
     ros_env: dict[str, str],
@@ -160,39 +217,18 @@ def test_every_topic_flows_and_bad_commands_are_rejected_and_counted(
     tmp_path: Path,
 ) -> None:
     import rclpy
-    from cdw_interfaces.msg import (
-        BeltState,
-        DetectionArray,
-        ObjectStateArray,
-        Ping,
-        SortingBins,
-        SortingEvent,
-        SortingPriorities,
-    )
-    from geometry_msgs.msg import PoseStamped
+    from cdw_interfaces.msg import Ping
     from rclpy.experimental.events_executor import EventsExecutor
-    from rosgraph_msgs.msg import Clock
-    from sensor_msgs.msg import JointState
-    from std_msgs.msg import Float64, String
-    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from twin.ros_node import CLOCK_QOS, EVENT_QOS, GT_QOS, LATCHED_QOS, STATE_QOS, STREAM_QOS
+    from interfaces import contract as c
 
     out = tmp_path / "run"
     twin = _twin(
         ros_env,
         builtin_meshes,
         out,
-        "--duration",
-        "8",
-        "--speed",
-        "0.4",
-        "--prefill",
-        "1.5",
-        "--objects",
-        "20",
-        "--perception",
-        "zero",
+        *("--duration", "8", "--speed", "0.4", "--prefill", "1.5", "--objects", "20"),
+        *("--perception", "zero"),
     )
     saved = dict(os.environ)
     os.environ.update(ros_env)
@@ -202,28 +238,9 @@ def test_every_topic_flows_and_bad_commands_are_rejected_and_counted(
         executor = EventsExecutor()
         executor.add_node(node)
         got: dict[str, list[Any]] = {}
-
-        def keep(topic: str) -> Any:
-            return lambda msg: got.setdefault(topic, []).append(msg)
-
-        for topic, kind, qos in (
-            ("/clock", Clock, CLOCK_QOS),
-            ("/joint_states", JointState, STATE_QOS),
-            ("/tcp_pose", PoseStamped, STATE_QOS),
-            ("/conveyor/state", BeltState, STATE_QOS),
-            ("/objects/detections", DetectionArray, STATE_QOS),
-            ("/objects/ground_truth", ObjectStateArray, GT_QOS),
-            ("/events", SortingEvent, EVENT_QOS),
-            ("/ping/echo", Ping, STREAM_QOS),
-            ("/twin/faults", String, STREAM_QOS),
-            ("/cell/bins", SortingBins, LATCHED_QOS),
-        ):
-            node.create_subscription(kind, topic, keep(topic), qos)
-        arm = node.create_publisher(JointTrajectory, "/arm_controller/joint_trajectory", STATE_QOS)
-        gripper = node.create_publisher(Float64, "/gripper/command", STATE_QOS)
-        setpoint = node.create_publisher(Float64, "/conveyor/speed_setpoint", STATE_QOS)
-        priorities = node.create_publisher(SortingPriorities, "/sorting/priorities", LATCHED_QOS)
-        ping = node.create_publisher(Ping, "/ping", STREAM_QOS)
+        _listen(node, got)
+        pubs = _publishers(node)
+        arm, ping = pubs[c.ARM_TRAJECTORY], pubs[c.PING]
 
         def spin(seconds: float) -> None:
             end = time.monotonic() + seconds
@@ -234,32 +251,7 @@ def test_every_topic_flows_and_bad_commands_are_rejected_and_counted(
         while "/clock" not in got or arm.get_subscription_count() == 0:
             spin(0.1)
             assert time.monotonic() < deadline, "the twin node did not come up"
-        arm_names = [f"panda_joint{i}" for i in range(1, 8)]
-
-        def point(q: list[float]) -> JointTrajectory:
-            return JointTrajectory(
-                joint_names=arm_names, points=[JointTrajectoryPoint(positions=q)]
-            )
-
-        arm.publish(
-            JointTrajectory(
-                joint_names=arm_names[:6], points=[JointTrajectoryPoint(positions=list(HOME[:6]))]
-            )
-        )
-        arm.publish(point([math.nan, *HOME[1:]]))
-        arm.publish(point([0.0, 3.5, *HOME[2:]]))
-        duplicate = [*arm_names[:6], arm_names[0]]
-        arm.publish(
-            JointTrajectory(joint_names=duplicate, points=[JointTrajectoryPoint(positions=HOME)])
-        )
-        too_fast = JointTrajectoryPoint(
-            positions=list(HOME), velocities=[0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0]
-        )
-        arm.publish(JointTrajectory(joint_names=arm_names, points=[too_fast]))
-        gripper.publish(Float64(data=0.5))
-        setpoint.publish(Float64(data=-0.3))
-        setpoint.publish(Float64(data=50.0))
-        priorities.publish(SortingPriorities(classes=["wood", "plastic"]))
+        _send_bad_commands(pubs)
         for seq in range(20):
             ping.publish(Ping(seq=seq, client_send_ns=time.monotonic_ns()))
             spin(0.02)

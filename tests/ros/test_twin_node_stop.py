@@ -85,11 +85,14 @@ def _reference_lines(dataset: Path, duration_s: float, steps: int) -> list[str]:
         seed=4,
         objects=8,
         prefill=1.2,
+        cell=None,
     )
-    scenario, _ = build_scenario(args)
+    scenario, _, cell = build_scenario(args)
     lines: list[str] = []
     sink = lines.append
-    with Twin(scenario, dataset_dir=dataset, event_sink=lambda e: sink(e.to_json())) as twin:
+    with Twin(
+        scenario, dataset_dir=dataset, cell=cell, event_sink=lambda e: sink(e.to_json())
+    ) as twin:
         twin.reset()
         for _ in range(steps):
             twin.advance()

@@ -1,20 +1,23 @@
 """Peers for the twin node in the tests, run as separate processes.
 
-python twin_peer.py lockstep OUT.json [--die-after TICKS]
-    a scripted lockstep controller: waits for each tick's messages, sends a deterministic arm
-    command every 24 ticks, acknowledges every tick; optionally dies (exit 3) after a tick
+python twin_peer.py lockstep OUT.json [--die-after TICKS] [--namespace NS]
+    a scripted lockstep controller of the station with namespace NS (default: the empty one):
+    waits for each tick's messages, sends a deterministic arm command every 24 ticks,
+    acknowledges every tick; optionally dies (exit 3) after a tick
 python twin_peer.py listen OUT.json SECONDS  (counted from the first message)
     records what arrives on /conveyor/state (setpoints) and how many messages per topic
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
 import sys
 import time
 from collections import Counter
+from typing import Any
 
 import rclpy
 from cdw_interfaces.msg import BeltState, DetectionArray, LockstepTick, StepAck
@@ -30,7 +33,32 @@ HOME = (0.0, -0.35, 0.0, -2.3, 0.0, 1.95, 0.785)
 ARM = [f"panda_joint{i}" for i in range(1, 8)]
 
 
-def lockstep(out: str, die_after: int | None) -> int:
+def _answer(k: int, arm: Any, ack: Any) -> None:
+    """Tick k: an arm command every 24 ticks, then the ack counting it."""
+    sent = 0
+    if k % 24 == 0:
+        t = k / 240.0
+        q = [h + 0.3 * math.sin(t + i) for i, h in enumerate(HOME)]
+        arm.publish(JointTrajectory(joint_names=ARM, points=[JointTrajectoryPoint(positions=q)]))
+        sent += 1
+    ack.publish(StepAck(tick=k, n_commands=sent))
+
+
+def _stuck(ticks: list[LockstepTick], pending: Counter[str]) -> dict[str, Any] | None:
+    """The first tick still waiting for its messages, if any (for a failing test's message)."""
+    if not ticks:
+        return None
+    t0 = ticks[0]
+    return {
+        "tick": int(t0.tick),
+        "need": [t0.n_joint_states, t0.n_belt_states, t0.n_detections],
+        "pending": dict(pending),
+    }
+
+
+def lockstep(out: str, die_after: int | None, namespace: str = "") -> int:
+    from interfaces.contract import ARM_TRAJECTORY, JOINT_STATES, LOCKSTEP_ACK
+
     rclpy.init()
     node = rclpy.create_node("peer_controller")
     executor = EventsExecutor()
@@ -38,7 +66,10 @@ def lockstep(out: str, die_after: int | None) -> int:
     pending: Counter[str] = Counter()
     ticks: list[LockstepTick] = []
     node.create_subscription(
-        JointState, "/joint_states", lambda _m: pending.update(["joints"]), RELIABLE
+        JointState,
+        JOINT_STATES.resolve(namespace),
+        lambda _m: pending.update(["joints"]),
+        RELIABLE,
     )
     node.create_subscription(
         BeltState, "/conveyor/state", lambda _m: pending.update(["belt"]), RELIABLE
@@ -47,8 +78,8 @@ def lockstep(out: str, die_after: int | None) -> int:
         DetectionArray, "/objects/detections", lambda _m: pending.update(["det"]), RELIABLE
     )
     node.create_subscription(LockstepTick, "/lockstep/tick", ticks.append, RELIABLE)
-    arm = node.create_publisher(JointTrajectory, "/arm_controller/joint_trajectory", RELIABLE)
-    ack = node.create_publisher(StepAck, "/lockstep/ack", RELIABLE)
+    arm = node.create_publisher(JointTrajectory, ARM_TRAJECTORY.resolve(namespace), RELIABLE)
+    ack = node.create_publisher(StepAck, LOCKSTEP_ACK.resolve(namespace), RELIABLE)
     handled = 0
     deadline = time.monotonic() + 60.0
     while arm.get_subscription_count() == 0 or ack.get_subscription_count() == 0:
@@ -70,31 +101,15 @@ def lockstep(out: str, die_after: int | None) -> int:
             ticks.pop(0)
             for k, n in need.items():
                 pending[k] -= n
-            k = int(tick.tick)
-            sent = 0
-            if k % 24 == 0:
-                t = k / 240.0
-                q = [h + 0.3 * math.sin(t + i) for i, h in enumerate(HOME)]
-                msg = JointTrajectory(joint_names=ARM, points=[JointTrajectoryPoint(positions=q)])
-                arm.publish(msg)
-                sent += 1
-            ack.publish(StepAck(tick=k, n_commands=sent))
+            _answer(int(tick.tick), arm, ack)
             handled += 1
             idle_since = time.monotonic()
             if die_after is not None and handled >= die_after:
                 with open(out, "w", encoding="utf-8") as handle:
                     json.dump({"handled": handled, "died": True}, handle)
                 os._exit(3)
-    stuck = None
-    if ticks:
-        t0 = ticks[0]
-        stuck = {
-            "tick": int(t0.tick),
-            "need": [t0.n_joint_states, t0.n_belt_states, t0.n_detections],
-            "pending": dict(pending),
-        }
     with open(out, "w", encoding="utf-8") as handle:
-        json.dump({"handled": handled, "died": False, "stuck": stuck}, handle)
+        json.dump({"handled": handled, "died": False, "stuck": _stuck(ticks, pending)}, handle)
     node.destroy_node()
     rclpy.shutdown()
     return 0
@@ -128,8 +143,12 @@ def listen(out: str, seconds: float) -> int:
 
 
 if __name__ == "__main__":
-    mode, out = sys.argv[1], sys.argv[2]
-    if mode == "lockstep":
-        die = int(sys.argv[4]) if len(sys.argv) > 4 and sys.argv[3] == "--die-after" else None
-        sys.exit(lockstep(out, die))
-    sys.exit(listen(out, float(sys.argv[3])))
+    if sys.argv[1] == "lockstep":
+        parser = argparse.ArgumentParser()
+        parser.add_argument("mode")
+        parser.add_argument("out")
+        parser.add_argument("--die-after", type=int, default=None)
+        parser.add_argument("--namespace", default="")
+        args = parser.parse_args()
+        sys.exit(lockstep(args.out, args.die_after, args.namespace))
+    sys.exit(listen(sys.argv[2], float(sys.argv[3])))

@@ -8,12 +8,13 @@ import numpy as np
 import pybullet as pb
 import pytest
 
+from interfaces.cell import default_cell
 from twin.commands import JointTarget, Rejected, validate_joint_command
-from twin.config import RobotConfig
 from twin.robot import JointLimits, Robot
 
-ARM = RobotConfig().arm_joints
-HOME = RobotConfig().home_joint_positions
+PANDA = default_cell().stations[0].robot
+ARM = PANDA.arm_joints
+HOME = PANDA.home_joint_positions
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +22,7 @@ def limits() -> Iterator[JointLimits]:
     """The Panda's joint limits as the twin loads them from the URDF."""
     client = pb.connect(pb.DIRECT)
     try:
-        yield Robot(client, RobotConfig()).limits
+        yield Robot(client, PANDA).limits
     finally:
         pb.disconnect(physicsClientId=client)
 

@@ -1,9 +1,9 @@
 """``docs/interfaces.md`` against the code: every number and name a controller relies on.
 
 The page's tables are compared with what the twin actually loads and emits (the robot from its
-URDF in PyBullet, the cell configuration, the event types and the keys every emitter passes,
-the rejection reasons). Where a table is generated, the failure message prints the lines the
-page should carry.
+URDF in PyBullet, the shipped cell files, the topic contract :mod:`interfaces.contract`, the
+event types and the keys every emitter passes, the rejection reasons). Where a table is
+generated, the failure message prints the lines the page should carry.
 """
 
 from __future__ import annotations
@@ -18,8 +18,9 @@ import numpy as np
 import pybullet as pb
 import pytest
 
+from interfaces import contract
+from interfaces.cell import CELLS_DIR, DEFAULT_CELL, Cell, StationSpec, default_cell, load_cell
 from interfaces.events import EventType
-from twin.config import BeltConfig, CellConfig, GraspConfig, RobotConfig, WorkspaceConfig
 from twin.perception import PerceptionConfig
 from twin.robot import HOLD_S, Robot
 
@@ -58,12 +59,22 @@ def _num(value: float, digits: int = 4) -> str:
     return "0." + "0" * digits if float(text) == 0.0 else text  # no "-0.0000"
 
 
+def _station() -> StationSpec:
+    return default_cell().stations[0]
+
+
 @pytest.fixture(scope="module")
 def robot() -> Iterator[Robot]:
-    """The twin's Panda as it loads it (PyBullet, from the URDF)."""
+    """The reference cell's Panda as the twin loads it (PyBullet, from the URDF)."""
     client = pb.connect(pb.DIRECT)
     try:
-        yield Robot(client, RobotConfig())
+        station = _station()
+        yield Robot(
+            client,
+            station.robot,
+            base_position_m=station.base_position_m,
+            base_yaw_rad=station.base_yaw_rad,
+        )
     finally:
         pb.disconnect(physicsClientId=client)
 
@@ -71,16 +82,12 @@ def robot() -> Iterator[Robot]:
 def _tcp_from_flange(robot: Robot) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Position (m) and roll-pitch-yaw (rad) of the TCP link in the flange (``panda_link8``)."""
     c = robot.client
-    links = {
-        pb.getJointInfo(robot.body, j, physicsClientId=c)[12].decode(): j
-        for j in range(pb.getNumJoints(robot.body, physicsClientId=c))
-    }
+    flange_link = robot.link_index("panda_link8", "flange")
     flange = pb.getLinkState(
-        robot.body, links["panda_link8"], computeForwardKinematics=True, physicsClientId=c
+        robot.body, flange_link, computeForwardKinematics=True, physicsClientId=c
     )
-    tcp = pb.getLinkState(
-        robot.body, robot.tcp_link, computeForwardKinematics=True, physicsClientId=c
-    )
+    tcp_link = robot.link_index(_station().tool.tcp_link, "TCP link")
+    tcp = pb.getLinkState(robot.body, tcp_link, computeForwardKinematics=True, physicsClientId=c)
     inv_pos, inv_orn = pb.invertTransform(flange[4], flange[5])
     pos, orn = pb.multiplyTransforms(inv_pos, inv_orn, tcp[4], tcp[5])
     return tuple(pos), tuple(pb.getEulerFromQuaternion(orn))
@@ -91,24 +98,27 @@ def _row(*cells: str) -> str:
 
 
 def robot_rows(robot: Robot) -> list[str]:
-    """The page's robot table, from the loaded robot."""
-    cfg = robot.config
+    """The page's robot table, from the loaded robot and the reference cell's station."""
+    station = _station()
+    spec, tool = station.robot, station.tool
     pos, rpy = _tcp_from_flange(robot)
     xyz = ", ".join(_num(v) for v in pos)
     angles = ", ".join(_num(v) for v in rpy)
-    home = ", ".join(f"{q:g}" for q in cfg.home_joint_positions)
-    fingers = [
-        pb.getJointInfo(robot.body, j, physicsClientId=robot.client) for j in robot.finger_joints
-    ]
+    home = ", ".join(f"{q:g}" for q in spec.home_joint_positions)
+    fingers = [robot.infos[robot.joint_index(j, "finger joint")] for j in tool.joints]
     finger_range = f"{min(f[8] for f in fingers):g} to {max(f[9] for f in fingers):g} m each"
-    base = ", ".join(f"{v:g}" for v in cfg.base_position_m)
-    arm = ", ".join(f"`{j}`" for j in cfg.arm_joints)
-    finger_names = ", ".join(f"`{j}`" for j in cfg.finger_joints)
+    base = ", ".join(f"{v:g}" for v in station.base_position_m)
+    arm = ", ".join(f"`{j}`" for j in spec.arm_joints)
+    finger_names = ", ".join(f"`{j}`" for j in tool.joints)
     return [
-        _row("model", f"URDF `{cfg.urdf}` from `pybullet_data` (Franka Emika Panda with its hand)"),
+        _row(
+            "model",
+            f"URDF `{spec.urdf}` from `pybullet_data` (Franka Emika Panda with its hand): "
+            f"robot `{spec.name}`, tool `{tool.name}`",
+        ),
         _row(
             "base",
-            f"link `panda_link0` at ({base}) m, yaw {cfg.base_yaw_rad:g} rad: "
+            f"link `panda_link0` at ({base}) m, yaw {station.base_yaw_rad:g} rad: "
             "the base frame is `world`",
         ),
         _row("arm joints", f"{arm} (revolute)"),
@@ -118,10 +128,10 @@ def robot_rows(robot: Robot) -> list[str]:
         ),
         _row(
             "TCP",
-            f"link `{cfg.tcp_link}`; from the flange `panda_link8`: xyz ({xyz}) m, "
+            f"link `{tool.tcp_link}`; from the flange `panda_link8`: xyz ({xyz}) m, "
             f"rpy ({angles}) rad",
         ),
-        _row("gripper opening", f"0 (closed) to {cfg.max_opening_m:g} m (open)"),
+        _row("gripper opening", f"0 (closed) to {tool.max_opening_m:g} m (open)"),
         _row("start pose", f"arm joints ({home}) rad, gripper open"),
     ]
 
@@ -137,12 +147,12 @@ def limit_rows(robot: Robot) -> list[str]:
             _num(lim.velocity[i]),
             f"{lim.effort[i]:g}",
         )
-        for i, name in enumerate(robot.config.arm_joints)
+        for i, name in enumerate(robot.spec.arm_joints)
     ]
 
 
-def bin_rows(cell: CellConfig) -> list[str]:
-    """The page's bin table, from the cell configuration."""
+def bin_rows(cell: Cell) -> list[str]:
+    """The page's bin table, from the cell."""
     return [
         _row(
             f"`{b.class_name}`",
@@ -155,6 +165,7 @@ def bin_rows(cell: CellConfig) -> list[str]:
                     b.inner_half_m,
                     b.size_m,
                     b.floor_z_m,
+                    b.drop_z_m,
                 )
             ),
         )
@@ -162,8 +173,9 @@ def bin_rows(cell: CellConfig) -> list[str]:
     ]
 
 
-def cell_rows(belt: BeltConfig, ws: WorkspaceConfig) -> list[str]:
-    """The page's belt and pick-window table."""
+def belt_rows(cell: Cell) -> list[str]:
+    """The page's belt table."""
+    belt = cell.belt
     return [
         _row(
             "belt",
@@ -172,16 +184,49 @@ def cell_rows(belt: BeltConfig, ws: WorkspaceConfig) -> list[str]:
             f"objects enter at x = {belt.infeed_x_m:g} m and fall off beyond "
             f"x = {belt.end_x_m:g} m",
         ),
-        _row("pick window", f"x in [{ws.min_x_m:g}, {ws.max_x_m:g}] m over the belt's full width"),
     ]
 
 
-def camera_rows(cfg: PerceptionConfig) -> list[str]:
-    """The page's camera-model table (the defaults; a scenario's ``perception:`` overrides)."""
+def shipped_cells() -> list[Cell]:
+    """Every shipped cell, the reference first."""
+    others = sorted(p for p in CELLS_DIR.glob("*.yaml") if p != DEFAULT_CELL)
+    return [default_cell(), *(load_cell(p) for p in others)]
+
+
+def station_rows() -> list[str]:
+    """The page's table of the shipped cells' stations."""
+    rows = []
+    for path, cell in zip(
+        [DEFAULT_CELL, *sorted(p for p in CELLS_DIR.glob("*.yaml") if p != DEFAULT_CELL)],
+        shipped_cells(),
+        strict=True,
+    ):
+        for s in cell.stations:
+            base = ", ".join(f"{v:g}" for v in s.base_position_m)
+            lo, hi = s.pick_window_x_m
+            rows.append(
+                _row(
+                    f"`{path.stem}`",
+                    f"`{s.name}`",
+                    f"`{s.namespace}`" if s.namespace else "(empty)",
+                    f"`{s.robot.name}` + `{s.tool.name}`",
+                    f"({base}), yaw {s.base_yaw_rad:g}",
+                    f"[{lo:g}, {hi:g}]",
+                    ", ".join(f"`{b.class_name}`" for b in s.bins),
+                )
+            )
+    return rows
+
+
+def camera_rows(cfg: PerceptionConfig, cell: Cell) -> list[str]:
+    """The page's camera-model table (the defaults; a scenario's ``perception:`` overrides the
+    error model, the cell's ``camera`` the field of view)."""
+    camera = cell.camera
     return [
         _row(
             "field of view",
-            f"x in [{cfg.fov_min_x_m:g}, {cfg.fov_max_x_m:g}] m, objects on the belt only",
+            f"x in [{camera.fov_min_x_m:g}, {camera.fov_max_x_m:g}] m (the cell's `camera`), "
+            "objects on the belt only",
         ),
         _row("rate, latency", f"{cfg.rate_hz:g} Hz, {cfg.latency_s:g} s"),
         _row(
@@ -199,6 +244,13 @@ def camera_rows(cfg: PerceptionConfig) -> list[str]:
             f"m = {cfg.confidence_correct_mean:g} when the class is right, "
             f"{cfg.confidence_wrong_mean:g} when it is wrong; 1 from the zero-noise camera",
         ),
+    ]
+
+
+def topic_cells(topics: tuple[contract.Topic, ...]) -> list[tuple[str, str, str, str]]:
+    """Topic, scope, type and QoS of each topic, as the page's topic tables write them."""
+    return [
+        (f"`{t.name}`", t.scope, f"`{t.package}/{t.type_name}`", t.qos.describe()) for t in topics
     ]
 
 
@@ -224,27 +276,45 @@ def test_the_tcp_offset_is_the_urdfs(robot: Robot) -> None:
     assert rpy == pytest.approx((0.0, 0.0, -math.pi / 4), abs=1e-6)
 
 
-def test_the_cell_bins_and_camera_tables_are_the_configuration() -> None:
-    cell = CellConfig()
-    _assert_rows("The belt and the pick window", cell_rows(cell.belt, cell.workspace))
+def test_the_cell_bins_camera_and_station_tables_are_the_shipped_cells() -> None:
+    cell = default_cell()
+    _assert_rows("The belt", belt_rows(cell))
     _assert_rows("Bins", bin_rows(cell))
-    _assert_rows("Perception", camera_rows(PerceptionConfig()))
+    _assert_rows("Perception", camera_rows(PerceptionConfig(), cell))
+    _assert_rows("Stations", station_rows())
 
 
-def test_the_pick_window_is_stated_once() -> None:
-    ws = WorkspaceConfig()
-    window = f"[{ws.min_x_m:g}, {ws.max_x_m:g}]"
-    assert _page().count(window) == 1
+def test_the_cell_file_section_names_the_files() -> None:
+    text = " ".join(_section("The cell file").split())
+    assert "`interfaces/cells/default.yaml`" in text
+    for path in CELLS_DIR.glob("*.yaml"):
+        assert f"`{path.stem}`" in text, path.stem
+    assert "--station NAME" in text
+    assert "`cell/bins`" in text
 
 
-def test_the_grasp_rule_numbers_are_the_configuration() -> None:
+def test_the_topic_tables_are_the_contract() -> None:
+    """Name, scope, type and QoS of every topic, in the contract's order (rate and notes are
+    the page's own)."""
+    for title, topics in (
+        ("Published by the cell (the twin)", contract.PUBLISHED),
+        ("Subscribed by the cell", contract.SUBSCRIBED),
+    ):
+        got = [tuple(_cells(row)[:4]) for row in _table_lines(_section(title))]
+        expected = topic_cells(topics)
+        assert got == expected, f"{title}: the first four columns should read:\n" + "\n".join(
+            " | ".join(cells) for cells in expected
+        )
+
+
+def test_the_grasp_rule_numbers_are_the_tools() -> None:
+    from twin.tools.parallel_jaw import GRIP_TOLERANCE_M, RELEASE_GAP_M
+
     text = _section("Pick success")
-    grasp = GraspConfig()
-    assert f"{grasp.dwell_s:g} s" in text
-    half = ", ".join(f"{v:g}" for v in grasp.tcp_half_extents_m)
+    tool = _station().tool
+    assert f"{tool.dwell_s:g} s" in text
+    half = ", ".join(f"{v:g}" for v in tool.tcp_half_extents_m)
     assert f"half extents ({half}) m" in text
-    from twin.monitor import GRIP_TOLERANCE_M, RELEASE_GAP_M
-
     assert f"{1e3 * GRIP_TOLERANCE_M:g} mm" in text
     assert f"{-1e3 * RELEASE_GAP_M:g} mm" in text
     assert f"{HOLD_S:g} s" in _section("Arm command")
@@ -352,9 +422,10 @@ def test_the_command_stamp_and_latency_rule_is_stated() -> None:
     from twin.telemetry import RING_SIZE
 
     text = " ".join(_section("Arm command").split())
-    assert "`header.stamp`: the stamp of the `/joint_states` message the command was computed" in (
-        text
-    )
+    assert (
+        "`header.stamp`: the stamp of the station's `joint_states` message the command was "
+        "computed from"
+    ) in text
     assert f"over the last {RING_SIZE} stamps" in text
 
 
@@ -377,6 +448,7 @@ def test_the_tracking_time_rule_is_the_metrics() -> None:
 
 def test_every_message_that_names_the_frames_origin_puts_it_at_the_robot_base() -> None:
     assert "origin at the robot base" in _page()
+    assert default_cell().stations[0].base_position_m == (0.0, 0.0, 0.0)
     for msg in sorted(MSG_DIR.glob("*.msg")):
         text = " ".join(msg.read_text(encoding="utf-8").replace("#", " ").split())
         for origin in re.findall(r"origin at [^,;)]*", text):

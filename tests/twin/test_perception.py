@@ -42,12 +42,27 @@ def _object(
 def test_zero_noise_is_exact_and_immediate_and_respects_the_field_of_view() -> None:
     cfg = PerceptionConfig.zero_noise()
     perception = Perception(cfg, CLASSES, 0.0, 1 / 240, np.random.default_rng(0))
-    objects = [_object(1, 0.0), _object(2, cfg.fov_max_x_m + 0.01), _object(3, -0.5, on_belt=False)]
+    fov_max = perception.camera.fov_max_x_m
+    objects = [_object(1, 0.0), _object(2, fov_max + 0.01), _object(3, -0.5, on_belt=False)]
     frame = perception.capture(1.0, objects)
     assert [(d.x_m, d.y_m, d.yaw_rad, d.class_name) for d in frame.detections] == [
         (0.0, 0.5, 0.3, "brick")
     ]
     assert perception.released(1.0) == [frame]
+
+
+def test_the_field_of_view_is_the_cells_camera() -> None:
+    """A cell's camera (here a two-station line's, seeing 1.5 m further upstream) decides what
+    is detected, whatever the error model."""
+    from interfaces.cell import load_cell
+
+    camera = load_cell("two_pandas").camera
+    rng = np.random.default_rng(0)
+    line = Perception(PerceptionConfig.zero_noise(), CLASSES, 0.0, 1 / 240, rng, camera=camera)
+    reference = Perception(PerceptionConfig.zero_noise(), CLASSES, 0.0, 1 / 240, rng)
+    objects = [_object(1, -2.0), _object(2, 0.0)]
+    assert [d.x_m for d in line.capture(1.0, objects).detections] == [-2.0, 0.0]
+    assert [d.x_m for d in reference.capture(1.0, objects).detections] == [0.0]
 
 
 def test_detections_report_the_underside_of_stacked_objects() -> None:

@@ -18,11 +18,10 @@ ONE_BOX = {"img": [(1, box_px(500, 500, 100, 50))]}  # brick, 60 x 30 mm footpri
 
 
 def _ik(twin: Twin, position: tuple[float, float, float]) -> tuple[float, ...]:
-    assert twin.robot is not None
-    robot = twin.robot
+    robot, tool = twin.stations[0].robot, twin.stations[0].tool
     q = pb.calculateInverseKinematics(
         robot.body,
-        robot.tcp_link,
+        tool.tcp_link,
         position,
         pb.getQuaternionFromEuler([np.pi, 0.0, 0.0]),
         maxNumIterations=200,
@@ -62,13 +61,14 @@ def test_a_grasp_is_credited_only_inside_the_pick_window(
         body = twin._monitor.body_of(obj.id)
         assert body is not None
         (_, y, z), orientation = pb.getBasePositionAndOrientation(body, physicsClientId=twin.client)
-        end_m = twin.cell.workspace.max_x_m
+        end_m = twin.cell.stations[0].pick_window_x_m[1]
+        home = twin.cell.stations[0].robot.home_joint_positions
 
         def park(x_m: float) -> None:  # as the belt would carry it there, then stopped
             pb.resetBasePositionAndOrientation(
                 body, (x_m, y, z + 0.001), orientation, physicsClientId=twin.client
             )
-            _hold(twin, ArmCommand(twin.cell.robot.home_joint_positions), 0.5)
+            _hold(twin, ArmCommand(home), 0.5)
 
         park(end_m - 0.024)  # inside: it enters the window
         x = end_m + beyond_end_m
@@ -80,7 +80,7 @@ def test_a_grasp_is_credited_only_inside_the_pick_window(
         _hold(twin, ArmCommand(_ik(twin, (x, y, grasp_z)), gripper_width_m=0.0), 0.5)
         (gt,) = twin.observe_objects()
         events = [e for e in twin.events if e.object_id == obj.id]
-        scores = twin.scores()
+        counts = twin.counts()
     kinds = [e.type for e in events]
     assert EventType.ENTERED_WORKSPACE in kinds
     # the grasp itself happened either way: overlap for the dwell, both fingers on the object
@@ -89,12 +89,12 @@ def test_a_grasp_is_credited_only_inside_the_pick_window(
     assert gt.position_m[0] == pytest.approx(x, abs=0.01)
     if credited:
         (pick,) = [e for e in events if e.type is EventType.PICK_SUCCESS]
-        assert pick.data["position_m"][0] <= twin.cell.workspace.max_x_m
+        assert pick.data["position_m"][0] <= end_m
         assert gt.held
-        assert (scores.picked, scores.missed) == (1, 0)
+        assert (counts.picked, counts.missed) == (1, 0)
     else:
         assert EventType.PICK_SUCCESS not in kinds
         assert not gt.held
         # it left the window downstream unpicked: a miss
         assert EventType.MISSED in kinds
-        assert (scores.picked, scores.missed) == (0, 1)
+        assert (counts.picked, counts.missed) == (0, 1)

@@ -127,8 +127,8 @@ def test_bad_perception_and_fault_values_name_the_key(
 
 
 def test_max_width_lets_only_narrow_objects_onto_the_belt() -> None:
+    from interfaces.cell import default_cell
     from twin.builtin import builtin_dataset
-    from twin.config import CellConfig
     from twin.objects import load_dataset
     from twin.stream import Stream
 
@@ -138,15 +138,15 @@ def test_max_width_lets_only_narrow_objects_onto_the_belt() -> None:
     scenario = Scenario(
         objects=ObjectLevel(max_width_m=0.065), system=SystemLevel(repeat_images=False)
     )
-    stream = Stream(layouts, scenario, CellConfig().belt, seed_tree(0))
+    stream = Stream(layouts, scenario, default_cell().belt, seed_tree(0))
     widths = [min(p.spec.width_m, p.spec.length_m) for b in stream for p in b.placements]
     assert len(widths) == narrow
     assert max(widths) <= 0.065
 
 
 def test_min_height_lets_only_tall_enough_objects_onto_the_belt() -> None:
+    from interfaces.cell import default_cell
     from twin.builtin import builtin_dataset
-    from twin.config import CellConfig
     from twin.objects import load_dataset
     from twin.stream import Stream
 
@@ -156,7 +156,7 @@ def test_min_height_lets_only_tall_enough_objects_onto_the_belt() -> None:
     scenario = Scenario(
         objects=ObjectLevel(min_height_m=0.02), system=SystemLevel(repeat_images=False)
     )
-    stream = Stream(layouts, scenario, CellConfig().belt, seed_tree(0))
+    stream = Stream(layouts, scenario, default_cell().belt, seed_tree(0))
     heights = [p.height_m for b in stream for p in b.placements]
     assert len(heights) == tall
     assert min(heights) >= 0.02

@@ -3,6 +3,7 @@
 The dataset is a real meshgen output of three images: ``a`` (a concrete and a wood box), ``b``
 (a brick box) and ``c`` (no object). It has no rubber, so the default physics tables (which name
 rubber) also show that values left at their defaults are exempt from the class-name rule.
+Cell files written next to the scenario show the cell's rules.
 """
 
 from __future__ import annotations
@@ -10,15 +11,16 @@ from __future__ import annotations
 import argparse
 import re
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 from conftest import write_yolo
 from twin_helpers import M_PER_PX, box_px
 
+from interfaces.cell import default_cell
 from meshgen.outdir import MARKER_NAME as MESHGEN_MARKER
 from meshgen.outdir import marker_text
-from twin.config import BeltConfig, CellConfig
 from twin.errors import ConfigError
 from twin.scenario import Scenario
 from twin.scenario_check import Selection, check_scenario
@@ -28,9 +30,14 @@ SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "scenarios"
 # One case per rule: scenario YAML, and the pattern the ConfigError matches after "<file>: ".
 RULES = [
     pytest.param(
-        "robot: ur5",
-        r"robot = 'ur5': unknown robot \(known: \['panda', 'xarm6'\]\)",
-        id="robot",
+        "cell: two_pandaz",
+        r"cell = 'two_pandaz': no shipped cell of that name \(shipped: default, two_pandas\)",
+        id="cell_name",
+    ),
+    pytest.param(
+        "cell: cells/missing.yaml",
+        r"cell = '.*cells/missing\.yaml': .*cells/missing\.yaml: cannot read cell file",
+        id="cell_file",
     ),
     pytest.param(
         "objects: {classes: [concrete, rubbr]}",
@@ -152,7 +159,10 @@ def test_defaults_pass_and_the_selection_is_summarised(tmp_path: Path, dataset: 
     scenario, where = _scenario(tmp_path, "name: ok")
     selection = check_scenario(scenario, dataset, where=where)
     assert selection == Selection(
-        classes=("brick", "concrete", "wood"), images=("a", "b"), objects=3
+        classes=("brick", "concrete", "wood"),
+        images=("a", "b"),
+        objects=3,
+        entering=("brick", "concrete", "wood"),
     )
 
 
@@ -179,8 +189,73 @@ def test_the_filters_keep_what_the_stream_would(tmp_path: Path, dataset: Path) -
 
 def test_prefill_bound_follows_the_cell(tmp_path: Path, dataset: Path) -> None:
     scenario, where = _scenario(tmp_path, "system: {prefill_m: 3.5}")
-    long_belt = CellConfig(belt=BeltConfig(end_x_m=2.0))
+    cell = default_cell()
+    long_belt = replace(cell, belt=replace(cell.belt, end_x_m=2.0))
     assert check_scenario(scenario, dataset, where=where, cell=long_belt).objects == 3
+
+
+MINI_CELL = """\
+name: mini
+stations:
+  - name: only
+    robot: panda
+    tool: panda_hand
+    bins:
+      - {class_name: concrete, centre_x_m: -0.6, centre_y_m: 0.07}
+      - {class_name: wood, centre_x_m: 0.33, centre_y_m: 0.07}
+"""
+
+# One case per rule of the cell: cell file (next to the scenario), scenario, pattern.
+CELL_RULES = [
+    pytest.param(
+        MINI_CELL,
+        "cell: mini.yaml",
+        r"class 'brick' can enter the belt but no station of the cell .*mini\.yaml has a bin "
+        r"for it \(its bins sort: 'concrete', 'wood'\)",
+        id="class_without_bin",
+    ),
+    pytest.param(
+        MINI_CELL + "drive: {perturbation: null}\n",
+        "cell: mini.yaml\nobjects: {classes: [concrete, wood]}\n"
+        "system: {perturbation: {enabled: true}}",
+        r"system\.perturbation\.enabled = True: the belt drive of the cell .*mini\.yaml "
+        r"\(builtin\) has no perturbation mapping",
+        id="perturbation_without_mapping",
+    ),
+    pytest.param(
+        MINI_CELL + "drive: {fmu: nowhere.fmu, perturbation: null}\n",
+        "cell: mini.yaml\nobjects: {classes: [concrete, wood]}",
+        r"the cell .*mini\.yaml: drive\.fmu = '.*nowhere\.fmu': no such file",
+        id="missing_fmu",
+    ),
+]
+
+
+@pytest.mark.parametrize(("cell_text", "text", "pattern"), CELL_RULES)
+def test_each_cell_rule_refuses_with_the_scenario_and_the_cell_file(
+    tmp_path: Path, dataset: Path, cell_text: str, text: str, pattern: str
+) -> None:
+    (tmp_path / "mini.yaml").write_text(cell_text, encoding="utf-8")
+    message = _refused(tmp_path, dataset, text, pattern)
+    assert str(tmp_path / "mini.yaml") in message or "nowhere" in message
+
+
+def test_classes_the_filters_keep_out_need_no_bin(tmp_path: Path, dataset: Path) -> None:
+    """A class the cell has no bin for passes when ``objects.classes`` keeps it off the belt;
+    the cell path is relative to the scenario file, wherever the check runs from."""
+    (tmp_path / "mini.yaml").write_text(MINI_CELL, encoding="utf-8")
+    scenario, where = _scenario(tmp_path, "cell: mini.yaml\nobjects: {classes: [wood]}")
+    assert scenario.cell == str(tmp_path / "mini.yaml")
+    selection = check_scenario(scenario, dataset, where=where)
+    assert selection.entering == ("wood",)
+
+
+def test_a_scenario_no_longer_chooses_the_robot(tmp_path: Path) -> None:
+    """The cell chooses robots: ``robot:`` in a scenario is an unknown key."""
+    path = tmp_path / "scenario.yaml"
+    path.write_text("robot: xarm6\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"scenario\.yaml: unknown key 'robot' \(allowed: cell,"):
+        Scenario.load(path)
 
 
 @pytest.mark.parametrize("path", ["missing", "file.txt"])

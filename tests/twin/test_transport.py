@@ -93,14 +93,14 @@ def test_workspace_entry_and_exit_match_the_analytic_times(
         for e in events
         if e.type is EventType.SPAWNED and e.data["source_id"].startswith("b_test")
     )
-    from twin.config import WorkspaceConfig
+    from interfaces.cell import default_cell
 
-    ws = WorkspaceConfig()
+    window_lo, window_hi = default_cell().stations[0].pick_window_x_m
     # from a reference instant after landing, the object moves with the belt surface
     k1 = int(np.nonzero(~np.isnan(vx))[0][0]) + 120
     for boundary, kind in (
-        (ws.min_x_m, EventType.ENTERED_WORKSPACE),
-        (ws.max_x_m, EventType.LEFT_WORKSPACE),
+        (window_lo, EventType.ENTERED_WORKSPACE),
+        (window_hi, EventType.LEFT_WORKSPACE),
     ):
         travel = boundary - x[k1]
         k_pred = int(np.searchsorted(belt_x - belt_x[k1], travel))

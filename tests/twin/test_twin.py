@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,8 +14,11 @@ import pytest
 import trimesh
 from twin_helpers import box_px
 
+from interfaces.catalog import entry
+from interfaces.cell import default_cell
 from interfaces.events import EventType
-from twin.config import ROBOTS, CellConfig, RobotConfig
+from interfaces.robots import robot_from_data
+from interfaces.tools import tool_from_data
 from twin.errors import ConfigError, SceneError
 from twin.scenario import ObjectLevel, Scenario, SystemLevel
 from twin.sim import ArmCommand, Twin
@@ -33,12 +37,11 @@ def _still(prefill_m: float = 1.7) -> Scenario:
 
 
 def _ik(twin: Twin, position: tuple[float, float, float], yaw: float = 0.0) -> tuple[float, ...]:
-    assert twin.robot is not None
-    robot = twin.robot
+    robot, tool = twin.stations[0].robot, twin.stations[0].tool
     orn = pb.getQuaternionFromEuler([np.pi, 0.0, yaw])
     q = pb.calculateInverseKinematics(
         robot.body,
-        robot.tcp_link,
+        tool.tcp_link,
         position,
         orn,
         maxNumIterations=200,
@@ -81,7 +84,7 @@ def test_scripted_pick_yields_overlap_contact_pick_and_correct_bin(
         _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=open_w), 1.0)
         _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=closed_w), 0.5)
         _hold(twin, ArmCommand(_ik(twin, (x, y, 0.3)), gripper_width_m=closed_w), 1.0)
-        bin_cfg = twin.cell.bin_for("brick")
+        bin_cfg = twin.cell.stations[0].bin_for("brick")
         assert bin_cfg is not None
         over = (bin_cfg.centre_x_m, bin_cfg.centre_y_m, 0.2)
         waypoint = (bin_cfg.centre_x_m, 0.35, 0.3)
@@ -94,7 +97,8 @@ def test_scripted_pick_yields_overlap_contact_pick_and_correct_bin(
             twin.advance()
             landing.append(twin.landing_in_bins())
         kinds = [e.type for e in twin.events if e.object_id == obj.id]
-        scores = twin.scores()
+        counts = twin.counts()
+        station_counts = twin.counts("panda")
     # undecided only from the release until it drops below the bin's top
     assert held_over_bin == []
     assert [obj.id] in landing
@@ -123,12 +127,12 @@ def test_scripted_pick_yields_overlap_contact_pick_and_correct_bin(
         EventType.PLACED_IN_BIN,
     ], kinds
     placed = next(e for e in twin.events if e.type is EventType.PLACED_IN_BIN)
-    assert placed.data == {"bin": "brick", "correct": True}
+    assert placed.data == {"bin": "brick", "correct": True, "station": "panda"}
     pick = next(e for e in twin.events if e.type is EventType.PICK_SUCCESS)
     assert pick.data["dwell_s"] >= 0.6
-    assert scores.picked == 1
-    assert scores.success_rate == 1.0
-    assert scores.correct_bin_ratio == 1.0
+    assert pick.data["station"] == "panda"
+    assert (counts.picked, counts.processed, counts.placed, counts.placed_correct) == (1, 1, 1, 1)
+    assert station_counts == counts
 
 
 def test_opening_fully_lets_go_of_an_object_that_fills_the_jaw(
@@ -147,8 +151,7 @@ def test_opening_fully_lets_go_of_an_object_that_fills_the_jaw(
         _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.1)), gripper_width_m=0.08), 1.0)
         _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=0.08), 1.0)
         _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=0.07), 0.5)
-        assert twin.robot is not None
-        assert twin.robot.gripper_width_m() > 0.0795  # the object keeps the jaw open
+        assert twin.stations[0].tool.measured() > 0.0795  # the object keeps the jaw open
         _hold(twin, ArmCommand(_ik(twin, (x, y, 0.3)), gripper_width_m=0.07), 1.0)
         held = [g.id for g in twin.observe_objects() if g.held]
         assert held == [obj.id]
@@ -268,8 +271,8 @@ def test_the_arm_follows_a_wrist_flip_at_the_datasheet_limits(
     meshes = mesh_polygons(ONE_BOX)
     with Twin(_still(), dataset_dir=meshes) as twin:
         twin.reset(seed=0)
-        assert twin.robot is not None
-        start = np.array(twin.cell.robot.home_joint_positions)
+        robot = twin.stations[0].robot
+        start = np.array(robot.spec.home_joint_positions)
         joints = [0, 4, 6]  # base, wrist bend, wrist turn
         distance = np.array([1.6, 1.2, -1.6])
         vmax = np.array([2.175, 2.61, 2.61])  # datasheet velocity and acceleration limits
@@ -285,7 +288,7 @@ def test_the_arm_follows_a_wrist_flip_at_the_datasheet_limits(
             twin.command(ArmCommand(tuple(q_cmd), tuple(qd_cmd)))
             for _ in range(steps):
                 twin.advance()
-            q, _ = twin.robot.joint_state()
+            q, _ = robot.joint_state()
             worst = np.maximum(worst, np.abs(q - q_cmd))
         assert worst.max() < 0.05, np.round(worst, 3)
 
@@ -325,7 +328,7 @@ def _run_positions(meshes: Path, seed: int) -> tuple[np.ndarray, list[str]]:
     frames = []
     with Twin(scenario, dataset_dir=meshes) as twin:
         obs, _ = twin.reset(seed=seed)
-        home = np.array(twin.cell.robot.home_joint_positions)
+        home = np.array(twin.cell.stations[0].robot.home_joint_positions)
         while True:
             q = tuple(home + 0.2 * np.sin(twin.time_s + np.arange(home.size)))
             obs, _, _, truncated, _ = twin.step(ArmCommand(q))
@@ -351,16 +354,36 @@ def test_same_seed_gives_identical_trajectories_and_events(builtin_meshes: Path)
     assert a.shape != c.shape or not np.array_equal(a, c, equal_nan=True)
 
 
-def test_second_robot_loads_and_follows_joint_targets(mesh_polygons: Callable[..., Path]) -> None:
+def _xarm_cell(tmp_path: Path) -> Path:
+    """The reference cell with the catalogue's xArm 6 and its gripper at the station, as a
+    cell file."""
+    cell = default_cell()
+    station = replace(
+        cell.stations[0],
+        robot=robot_from_data("xarm6", "robot"),
+        tool=tool_from_data("xarm_gripper", "tool"),
+    )
+    path = tmp_path / "xarm.yaml"
+    replace(cell, stations=(station,)).save(path)
+    return path
+
+
+def test_second_robot_loads_and_follows_joint_targets(
+    mesh_polygons: Callable[..., Path], tmp_path: Path
+) -> None:
     meshes = mesh_polygons(ONE_BOX)
-    scenario = Scenario(robot="xarm6", system=SystemLevel(belt_speed_mps=0.2))
+    scenario = Scenario(cell=str(_xarm_cell(tmp_path)), system=SystemLevel(belt_speed_mps=0.2))
     with Twin(scenario, dataset_dir=meshes) as twin:
         obs, _ = twin.reset(seed=0)
         assert len(obs.joint_positions) == 6
-        target = np.array(ROBOTS["xarm6"].home_joint_positions) + 0.3
+        assert twin.stations[0].tool.joint_names == ("drive_joint", "right_outer_knuckle_joint")
+        home = entry("xarm6", "robots", "robot")
+        assert isinstance(home, dict)
+        target = np.array(home["home_joint_positions"]) + 0.3
         _hold(twin, ArmCommand(tuple(target), gripper_width_m=0.0), 2.0)
         obs = twin.observe()
         assert np.allclose(obs.joint_positions, target, atol=0.02)
+        assert obs.gripper_width_m < 0.01  # the gripper closed on nothing
         assert obs.belt.belt_speed_mps == pytest.approx(0.2, abs=0.01)
 
 
@@ -407,7 +430,10 @@ def test_urdf_without_the_tcp_link_is_rejected_before_running(
     mesh_polygons: Callable[..., Path],
 ) -> None:
     meshes = mesh_polygons(ONE_BOX)
-    cell = CellConfig(robot=RobotConfig(tcp_link="panda_nosuchlink"))
+    cell = default_cell()
+    station = cell.stations[0]
+    tool = replace(station.tool, tcp_link="panda_nosuchlink")
+    cell = replace(cell, stations=(replace(station, tool=tool),))
     with (
         Twin(Scenario(), dataset_dir=meshes, cell=cell) as twin,
         pytest.raises(SceneError, match=r"panda\.urdf: no TCP link named 'panda_nosuchlink'"),
@@ -415,15 +441,20 @@ def test_urdf_without_the_tcp_link_is_rejected_before_running(
         twin.reset(seed=0)
 
 
-def test_unknown_robot_and_bad_setpoint_are_config_errors(
+def test_unknown_cell_bad_setpoint_and_bad_commands_are_config_errors(
     mesh_polygons: Callable[..., Path],
 ) -> None:
     meshes = mesh_polygons(ONE_BOX)
-    with pytest.raises(ConfigError, match=r"robot = 'ur5'"):
-        Twin(Scenario(robot="ur5"), dataset_dir=meshes)
+    with pytest.raises(ConfigError, match=r"cell = 'ur5_cell': no shipped cell of that name"):
+        Twin(Scenario(cell="ur5_cell"), dataset_dir=meshes)
     with Twin(Scenario(), dataset_dir=meshes) as twin:
         twin.reset(seed=0)
         with pytest.raises(ConfigError, match=r"setpoint nan"):
             twin.set_belt_setpoint(float("nan"))
-        with pytest.raises(ConfigError, match="arm command has 3 joint positions, robot has 7"):
+        with pytest.raises(
+            ConfigError,
+            match="arm command has 3 joint positions, the robot of station 'panda' has 7",
+        ):
             twin.command(ArmCommand((0.0, 0.0, 0.0)))
+        with pytest.raises(ConfigError, match=r"station 1: the cell has 1 station\(s\)"):
+            twin.command(ArmCommand(twin.observe().joint_positions, station=1))

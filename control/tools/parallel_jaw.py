@@ -1,0 +1,98 @@
+"""The parallel-jaw gripper as the controller plans with it (the Panda hand, the xArm gripper).
+
+Its command is the opening between the fingers in metres, from 0 to ``max_opening_m``. The
+twin reports each finger joint as half the opening, whatever the gripper's own joint map, so
+the measured opening is twice the mean of the finger joints. A grasp closes to the object's
+width less a squeeze; fingers that close to within a margin of that command met nothing. An
+object fits when its narrow side is narrower than the opening (less a margin) and it stands as
+tall as the finger pads. The open fingers and the hand need room around the grasp point.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from control.tools import Footprint
+from interfaces.tools import ParallelJawSpec
+
+
+@dataclass(frozen=True)
+class ParallelJaw:
+    """Controller side of a :class:`~interfaces.tools.ParallelJawSpec`."""
+
+    spec: ParallelJawSpec
+
+    grasp_yaw_period_rad: ClassVar[float] = math.pi
+    """The fingers grasp the same at ``yaw`` and ``yaw + pi``."""
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The finger joints."""
+        return self.spec.joints
+
+    @property
+    def open_command_m(self) -> float:
+        """Fully open."""
+        return self.spec.max_opening_m
+
+    def measured_m(self, positions_rad: Mapping[str, float]) -> float:
+        """The opening: twice the mean of the finger joints (each reports half the opening).
+
+        NaN when a finger joint is missing or not finite.
+        """
+        names = self.spec.joints
+        fingers = [positions_rad[n] for n in names if n in positions_rad]
+        if not fingers or len(fingers) != len(names):
+            return math.nan
+        opening = 2.0 * sum(fingers) / len(fingers)
+        return opening if math.isfinite(opening) else math.nan
+
+    def grasp_command_m(self, width_m: float, squeeze_m: float) -> float:
+        """The object's width less ``squeeze_m``, within the opening range."""
+        return float(np.clip(width_m - squeeze_m, 0.0, self.spec.max_opening_m))
+
+    def clip_command_m(self, value_m: float) -> float:
+        """``value_m`` within ``[0, max_opening_m]``."""
+        return float(np.clip(value_m, 0.0, self.spec.max_opening_m))
+
+    def holds_nothing(self, measured_m: float, commanded_m: float, margin_m: float) -> bool:
+        """Closed to within ``margin_m`` of the command: no object holds the fingers apart."""
+        if not math.isfinite(measured_m):
+            return False
+        return measured_m - commanded_m < margin_m
+
+    def misfit(
+        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+    ) -> str | None:
+        """``too_wide`` when the narrow side does not fit the opening less ``width_margin_m``;
+        ``too_flat`` when the object is lower than the finger pads; else None."""
+        if min(width_m, length_m) > (self.spec.max_opening_m - width_margin_m):
+            return "too_wide"
+        if height_m < self.spec.pad_height_m:
+            return "too_flat"
+        return None
+
+    def footprints(self, clearance_m: float) -> tuple[Footprint, Footprint]:
+        """The open fingers' rectangle (any object in it blocks) and the hand's (objects whose
+        top reaches the palm block).
+
+        Fingers: across the object as wide as the open gripper plus two finger depths, along it
+        a finger's width. Hand: ``hand_width_m`` across, ``hand_depth_m`` along, its palm
+        ``palm_above_tcp_m`` above the grasp point. Each grown by ``clearance_m``.
+        """
+        s = self.spec
+        fingers = Footprint(
+            half_along_m=s.finger_width_m / 2 + clearance_m,
+            half_across_m=s.max_opening_m / 2 + s.finger_depth_m + clearance_m,
+        )
+        hand = Footprint(
+            half_along_m=s.hand_depth_m / 2 + clearance_m,
+            half_across_m=s.hand_width_m / 2 + clearance_m,
+            clear_above_tcp_m=s.palm_above_tcp_m,
+        )
+        return fingers, hand

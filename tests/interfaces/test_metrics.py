@@ -1,0 +1,244 @@
+"""The metric table: ``docs/metrics.md`` equals ``interfaces.metrics.METRICS``; counts from
+hand-built event lists for the line, per station and per class."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from interfaces.events import Event, EventType
+from interfaces.metrics import (
+    BY_NAME,
+    METRICS,
+    RATES,
+    class_scores,
+    controller_scores,
+    count_events,
+    event_scores,
+    exit_station,
+    fault_counts,
+    in_scope,
+    landing_by_station,
+    rate,
+    station_names,
+    targeted_objects,
+    untargeted_objects,
+)
+
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "metrics.md"
+
+E = EventType
+
+
+def _e(kind: EventType, oid: int, cls: str = "brick", /, **data: object) -> Event:
+    return Event(time_s=0.0, step=0, type=kind, object_id=oid, class_name=cls, data=dict(data))
+
+
+def _page_rows() -> list[list[str]]:
+    lines = PAGE.read_text(encoding="utf-8").splitlines()
+    return [
+        [cell.strip() for cell in line.strip().strip("|").split("|")]
+        for line in lines
+        if line.startswith("| `")
+    ]
+
+
+def test_the_page_lists_every_metric_of_the_table_and_nothing_else() -> None:
+    rows = _page_rows()
+    names = [row[0].strip("`") for row in rows]
+    assert names == [m.name for m in METRICS]
+    for row, metric in zip(rows, METRICS, strict=True):
+        name, unit, kind, ratio_of, scopes, formula, reference = row
+        ratio = f"`{metric.ratio_of[0]}` / `{metric.ratio_of[1]}`" if metric.ratio_of else ""
+        expected = (
+            f"`{metric.name}`",
+            metric.unit,
+            metric.kind,
+            ratio,
+            ", ".join(metric.scopes),
+            metric.formula,
+            metric.reference,
+        )
+        assert (name, unit, kind, ratio_of, scopes, formula, reference) == expected
+
+
+def test_the_page_names_the_metric_of_each_of_the_references_equations() -> None:
+    text = " ".join(PAGE.read_text(encoding="utf-8").split())
+    equations = [m for m in METRICS if m.reference.startswith("eq.")]
+    assert len(equations) == 3
+    for metric in equations:
+        number = re.match(r"eq\. (\d)", metric.reference)
+        assert number is not None
+        assert re.search(rf"\({number.group(1)}\)[^()]*?: `{metric.name}`", text), metric.name
+
+
+def test_every_rate_is_a_ratio_of_two_counts_of_the_table() -> None:
+    counts = {m.name for m in METRICS if m.kind == "count"}
+    assert {m.name for m in RATES} == {m.name for m in METRICS if m.kind == "rate"}
+    for metric in RATES:
+        assert metric.ratio_of is not None
+        assert set(metric.ratio_of) <= counts, metric.name
+        assert metric.formula == " / ".join(metric.ratio_of)
+        assert set(metric.scopes) <= set(BY_NAME[metric.ratio_of[0]].scopes)
+
+
+LINE = [
+    *(_e(E.SPAWNED, i, "wood" if i == 5 else "brick") for i in range(1, 7)),
+    _e(E.PICK_SUCCESS, 1),
+    _e(E.PLACED_IN_BIN, 1, bin="brick", correct=True),
+    _e(E.PICK_SUCCESS, 2),
+    _e(E.PLACED_IN_BIN, 2, bin="wood", correct=False),
+    _e(E.MISSED, 3),
+    _e(E.FELL_OFF, 3),  # missed stays missed
+    _e(E.PICK_SUCCESS, 4),
+    _e(E.PICK_DROPPED, 4),  # lost
+    _e(E.MISSED, 5, "wood"),
+    _e(E.PICK_SUCCESS, 5, "wood"),  # picked after a miss: picked
+    _e(E.UNINTENDED_CONTACT, 6),
+    _e(E.UNINTENDED_CONTACT, 6),
+]
+
+
+def test_count_events_gives_every_fate_of_the_line() -> None:
+    counts = count_events(LINE, duration_s=120.0)
+    assert (counts.spawned, counts.processed, counts.picked, counts.missed, counts.lost) == (
+        6,
+        5,
+        3,
+        1,
+        1,
+    )
+    assert (counts.placed, counts.placed_correct, counts.unintended_contacts) == (2, 1, 2)
+    scores = event_scores(counts)
+    assert scores["pick_success_rate"] == pytest.approx(3 / 5)
+    assert scores["miss_rate"] == pytest.approx(1 / 5)
+    assert scores["pick_throughput_per_min"] == pytest.approx(1.5)
+    assert scores["recovery_rate"] == pytest.approx(1 / 6)
+    assert scores["correct_bin_ratio"] == pytest.approx(1 / 2)
+    assert scores["time_per_object_s"] == pytest.approx(40.0)
+    assert scores["recovery_by_class"] == {"brick": pytest.approx(1 / 5), "wood": 0.0}
+    for metric in RATES:
+        if metric.name in scores:
+            assert scores[metric.name] == rate(metric.name, scores), metric.name
+    assert set(in_scope("class")) <= set(scores)
+
+
+def test_nothing_happened_gives_zero_rates_not_errors() -> None:
+    scores = event_scores(count_events([], duration_s=0.0))
+    assert scores["pick_success_rate"] == scores["pick_throughput_per_min"] == 0.0
+    assert controller_scores(count_events([], 0.0), targeted=0)["success_rate"] == 0.0
+
+
+def _two_stations() -> list[Event]:
+    up, down = {"station": "upstream"}, {"station": "downstream"}
+    return [
+        *(_e(E.SPAWNED, i, "concrete" if i == 4 else "brick") for i in range(1, 6)),
+        # 1: picked upstream, into an upstream bin
+        _e(E.ENTERED_WORKSPACE, 1, **up),
+        _e(E.PICK_SUCCESS, 1, **up),
+        _e(E.PLACED_IN_BIN, 1, bin="brick", correct=True, **up),
+        # 2: missed upstream, picked downstream, into a downstream bin of another class
+        _e(E.ENTERED_WORKSPACE, 2, **up),
+        _e(E.MISSED, 2, **up),
+        _e(E.ENTERED_WORKSPACE, 2, **down),
+        _e(E.PICK_SUCCESS, 2, **down),
+        _e(E.PLACED_IN_BIN, 2, bin="wood", correct=False, **down),
+        # 3: missed by both
+        _e(E.ENTERED_WORKSPACE, 3, **up),
+        _e(E.MISSED, 3, **up),
+        _e(E.ENTERED_WORKSPACE, 3, **down),
+        _e(E.MISSED, 3, **down),
+        # 4: picked upstream, dropped on the belt, then picked downstream and placed
+        _e(E.ENTERED_WORKSPACE, 4, "concrete", **up),
+        _e(E.PICK_SUCCESS, 4, "concrete", **up),
+        _e(E.PICK_DROPPED, 4, "concrete", **up),
+        _e(E.ENTERED_WORKSPACE, 4, "concrete", **down),
+        _e(E.PICK_SUCCESS, 4, "concrete", **down),
+        _e(E.PLACED_IN_BIN, 4, "concrete", bin="concrete", correct=True, **down),
+        # 5: never reached a window; a cell-wide fault; a contact at the downstream robot
+        _e(E.FAULT, 0, "", kind="injected_dropout_start"),
+        _e(E.FAULT, 0, "", kind="controller_timeout", **down),
+        _e(E.UNINTENDED_CONTACT, 5, **down),
+    ]
+
+
+def test_count_events_per_station_and_for_the_line() -> None:
+    events = _two_stations()
+    assert station_names(events) == ["upstream", "downstream"]
+    line = count_events(events, 60.0)
+    up = count_events(events, 60.0, station="upstream")
+    down = count_events(events, 60.0, station="downstream")
+    fields = ("spawned", "processed", "picked", "missed", "lost", "placed", "placed_correct")
+    assert [getattr(line, f) for f in fields] == [5, 4, 3, 1, 0, 3, 2]
+    assert [getattr(up, f) for f in fields] == [4, 4, 1, 2, 1, 1, 1]
+    assert [getattr(down, f) for f in fields] == [3, 3, 2, 1, 0, 2, 1]
+    assert (line.unintended_contacts, up.unintended_contacts, down.unintended_contacts) == (1, 0, 1)
+    assert fault_counts(events) == {"faults": 1, "injected_faults": 1}
+    assert fault_counts(events, station="downstream") == {"faults": 1, "injected_faults": 0}
+    assert fault_counts(events, station="upstream") == {"faults": 0, "injected_faults": 0}
+
+
+def test_for_the_line_only_the_last_station_decides_a_miss() -> None:
+    """An object the upstream station missed is on its way to the next window: undecided for
+    the line until it is picked, lost or missed there (here object 6 at the episode's end)."""
+    from interfaces.cell import load_cell
+
+    up = {"station": "upstream"}
+    events = [
+        *_two_stations(),
+        _e(E.SPAWNED, 6),
+        _e(E.ENTERED_WORKSPACE, 6, **up),
+        _e(E.MISSED, 6, **up),
+        _e(E.SPAWNED, 7),
+        _e(E.ENTERED_WORKSPACE, 7, **up),
+        _e(E.MISSED, 7, **up),
+        _e(E.FELL_OFF, 7),  # off the belt between the windows: lost
+    ]
+    last = exit_station(load_cell("two_pandas").stations)
+    assert last == "downstream"
+    assert exit_station(load_cell("default").stations) == "panda"
+    line = count_events(events, 60.0, line_exit=last)
+    assert (line.spawned, line.processed, line.picked, line.missed, line.lost) == (7, 5, 3, 1, 1)
+    naive = count_events(events, 60.0)
+    assert (naive.processed, naive.missed, naive.lost) == (6, 3, 0)
+    up_counts = count_events(events, 60.0, station="upstream", line_exit=last)
+    assert (up_counts.missed, up_counts.processed) == (4, 6)
+    assert class_scores(events, 60.0, line_exit=last)["brick"]["missed"] == 1
+
+
+def test_count_events_per_class() -> None:
+    events = _two_stations()
+    concrete = count_events(events, 60.0, class_name="concrete")
+    assert (concrete.spawned, concrete.picked, concrete.placed_correct) == (1, 1, 1)
+    brick = count_events(events, 60.0, class_name="brick")
+    assert (brick.spawned, brick.processed, brick.picked, brick.missed) == (4, 3, 2, 1)
+    up_concrete = count_events(events, 60.0, station="upstream", class_name="concrete")
+    assert (up_concrete.spawned, up_concrete.picked, up_concrete.lost) == (1, 0, 1)
+    per_class = class_scores(events, 60.0)
+    assert list(per_class) == ["brick", "concrete"]
+    assert set(per_class["brick"]) == set(in_scope("class"))
+    assert per_class["brick"]["recovery_rate"] == pytest.approx(1 / 4)
+    assert per_class["concrete"]["recovery_rate"] == 1.0
+    assert per_class["brick"]["miss_rate"] == pytest.approx(1 / 3)
+    assert class_scores(events, 60.0, station="upstream")["concrete"]["lost"] == 1
+
+
+def test_targeted_subtracts_the_landing_objects_per_station() -> None:
+    events = _two_stations()
+    stats = [
+        {"pick": {"completed": 3, "aborted": {"lost_track": 1}, "untargeted": {"too_wide": 2}}},
+        {"pick": {"completed": 1, "aborted": {}, "untargeted": {"too_wide": 1, "flat": 4}}},
+    ]
+    # objects 1 (released upstream) and 4 (last released downstream) are still falling
+    assert landing_by_station(events, [1, 4]) == {"upstream": 1, "downstream": 1}
+    assert targeted_objects(stats, landing=2) == 3
+    assert targeted_objects(stats[:1], landing=1) == 3
+    assert targeted_objects([], landing=3) == 0
+    assert untargeted_objects(stats) == {"too_wide": 3, "flat": 4}
+    line = count_events(events, 60.0)
+    assert controller_scores(line, targeted=4) == {
+        "success_rate": pytest.approx(2 / 4),
+        "throughput_per_min": pytest.approx(2.0),
+    }

@@ -1,0 +1,151 @@
+"""The parallel-jaw gripper, twin side: the Panda hand, the xArm gripper, any two-finger jaw.
+
+Command: the opening in metres, 0 (closed) to ``max_opening_m``. Each finger joint is driven
+linearly from ``joint_closed`` to ``joint_open`` as the opening goes from 0 to the full opening
+(position control, each finger with its URDF effort limit, at least ``min_finger_force_N``);
+the measured opening is the mean of the finger joints' fractions times the full opening. On
+``joint_states`` each finger joint reports half the measured opening (velocity 0), whatever
+the joint's own unit, so a controller reads the opening as twice their mean.
+
+Grasp rule (the reference's; the monitor adds the TCP dwell and the pick window): both finger
+links touch the object from opposite sides (their contact normals point against each other)
+while the gripper presses: its commanded opening is narrower than its measured one by more
+than :data:`GRIP_TOLERANCE_M` (the fingers stop on the object while the target lies inside it,
+whatever the object's width). A held object is let go once the gripper no longer presses:
+commanded no narrower than measured, within half the tolerance (:data:`RELEASE_GAP_M`; so a
+jaw-wide object, which holds the fingers at full opening where commanding "open" cannot exceed
+the measured opening, is let go too). An object whose centre of mass is within the full opening
+of the TCP horizontally is being handled: touching it is no unintended contact.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+import pybullet as pb
+
+from interfaces.tools import ParallelJawSpec
+from twin.robot import Robot
+from twin.tools import Normal, Pose
+
+GRIP_TOLERANCE_M = 0.0005
+"""How much narrower than the measured opening the gripper must be commanded to count as
+pressing (a grip starts)."""
+
+RELEASE_GAP_M = -0.5 * GRIP_TOLERANCE_M
+"""Commanded minus measured opening above which a held object is let go: the gripper no longer
+presses. Between this and ``-GRIP_TOLERANCE_M`` a grip neither starts nor ends (no flicker)."""
+
+
+class ParallelJaw:
+    """A parallel-jaw gripper on ``robot``'s body (see the module docstring)."""
+
+    def __init__(self, spec: ParallelJawSpec, robot: Robot) -> None:
+        self.spec = spec
+        self.body = robot.body
+        self.client = robot.client
+        self.tcp_link = robot.link_index(spec.tcp_link, "TCP link")
+        self._fingers = [robot.joint_index(name, "finger joint") for name in spec.joints]
+        links = [robot.link_index(name, "finger link") for name in spec.links]
+        self.contact_links: Mapping[int, int] = {link: i for i, link in enumerate(links)}
+        self.joint_names = spec.joints
+        self.max_command = spec.max_opening_m
+        self.engaged_radius_m = spec.max_opening_m
+        self._effort = [
+            max(float(robot.infos[j][10]), spec.min_finger_force_N) for j in self._fingers
+        ]
+        self._span = tuple(zip(spec.joint_open, spec.joint_closed, strict=True))
+        self._offset = None if not any(spec.tcp_offset_m) else spec.tcp_offset_m
+        self._target_m = spec.max_opening_m
+        self._applied_m = math.nan
+
+    def reset_state(self) -> None:
+        """Open the fingers at rest; the finger motors are set by the next :meth:`apply`."""
+        for j, q in zip(self._fingers, self.spec.joint_open, strict=True):
+            pb.resetJointState(self.body, j, q, 0.0, physicsClientId=self.client)
+        self._target_m = self.spec.max_opening_m
+        self._applied_m = math.nan
+
+    def command(self, value: float) -> None:
+        """Set the opening target in metres (0 = closed, ``max_opening_m`` = open)."""
+        self._target_m = float(np.clip(value, 0.0, self.spec.max_opening_m))
+
+    def apply(self) -> None:
+        """Drive the finger joints to the opening target, if it changed since last applied."""
+        if not self._fingers or self._target_m == self._applied_m:
+            return
+        self._applied_m = self._target_m
+        frac = self._target_m / self.spec.max_opening_m
+        targets = [c + frac * (o - c) for o, c in self._span]
+        pb.setJointMotorControlArray(
+            self.body,
+            self._fingers,
+            pb.POSITION_CONTROL,
+            targetPositions=targets,
+            forces=self._effort,
+            physicsClientId=self.client,
+        )
+
+    @property
+    def target_m(self) -> float:
+        """The commanded opening."""
+        return self._target_m
+
+    def measured(self) -> float:
+        """Measured opening (m), from the finger joints."""
+        if not self._fingers:
+            return 0.0
+        states = pb.getJointStates(self.body, self._fingers, physicsClientId=self.client)
+        fracs = [
+            (s[0] - c) / (o - c) if o != c else 0.0
+            for s, (o, c) in zip(states, self._span, strict=True)
+        ]
+        return float(np.clip(np.mean(fracs), 0.0, 1.0) * self.spec.max_opening_m)
+
+    def joint_report(self) -> tuple[list[float], list[float]]:
+        """Each finger joint: half the measured opening, velocity 0."""
+        n = len(self._fingers)
+        return [0.5 * self.measured()] * n, [0.0] * n
+
+    def link_pose(self) -> Pose:
+        """Pose of the TCP link's frame, world."""
+        state = pb.getLinkState(
+            self.body, self.tcp_link, computeForwardKinematics=True, physicsClientId=self.client
+        )
+        return state[4], state[5]
+
+    def tcp_pose(self) -> Pose:
+        """Pose of the TCP (the TCP link's frame moved by ``tcp_offset_m``), world."""
+        pos, orn = self.link_pose()
+        if self._offset is None:
+            return pos, orn
+        moved, _ = pb.multiplyTransforms(pos, orn, self._offset, (0.0, 0.0, 0.0, 1.0))
+        return (moved[0], moved[1], moved[2]), orn
+
+    def contact_name(self, index: int) -> str:
+        """The finger link's name."""
+        return self.spec.links[index]
+
+    def gap_m(self) -> float:
+        """Commanded minus measured opening: below ``-GRIP_TOLERANCE_M`` the fingers press (a
+        grip on an object wider than half the opening is a grip too), above ``RELEASE_GAP_M``
+        they let go."""
+        return self._target_m - self.measured()
+
+    def grasps(self, touching: Mapping[int, Normal]) -> bool:
+        """Both fingers touch from opposite sides and the gripper presses."""
+        return self._opposite(touching) and self.gap_m() < -GRIP_TOLERANCE_M
+
+    def releases(self) -> bool:
+        """The gripper no longer presses."""
+        return self.gap_m() > RELEASE_GAP_M
+
+    def _opposite(self, touching: Mapping[int, Normal]) -> bool:
+        n = len(self.contact_links)
+        if n < 2 or len(touching) < n:
+            return False
+        normals = list(touching.values())
+        dot = sum(a * b for a, b in zip(normals[0], normals[1], strict=True))
+        return dot < 0.0
