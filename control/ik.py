@@ -21,6 +21,7 @@ from control.errors import RobotModelError
 from interfaces.cell import StationSpec
 from interfaces.errors import ConfigError
 from interfaces.robots import RobotSpec, resolve_urdf
+from interfaces.urdf import station_urdf
 
 FloatArray = NDArray[np.float64]
 
@@ -81,6 +82,7 @@ class Kinematics:
         base_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
         base_yaw_rad: float = 0.0,
         ik: IkConfig | None = None,
+        urdf_path: Path | None = None,
     ) -> None:
         """Build the reduced Pinocchio model of ``robot`` (arm joints only) and its TCP frame.
 
@@ -90,7 +92,7 @@ class Kinematics:
         """
         self._ik = ik if ik is not None else IkConfig()
         try:
-            path = resolve_urdf(robot.urdf)
+            path = urdf_path if urdf_path is not None else resolve_urdf(robot.urdf)
         except ConfigError as exc:
             raise RobotModelError(str(exc)) from None
         try:
@@ -143,8 +145,13 @@ class Kinematics:
     @classmethod
     def of_station(cls, station: StationSpec, ik: IkConfig | None = None) -> Kinematics:
         """The kinematics of a station's robot with its tool's TCP, at the station's base."""
+        try:
+            urdf_path = station_urdf(station.robot, station.tool)
+        except ConfigError as exc:
+            raise RobotModelError(str(exc)) from None
         return cls(
             station.robot,
+            urdf_path=urdf_path,
             tcp_link=station.tool.tcp_link,
             tcp_offset_m=station.tool.tcp_offset_m,
             base_position_m=station.base_position_m,

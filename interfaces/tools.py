@@ -6,7 +6,8 @@ module on the twin's side (``twin/tools/``) and one on the controller's (``contr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from typing import Literal
 
 from interfaces.catalog import entry
@@ -28,10 +29,22 @@ class ParallelJawSpec:
     and ``finger_depth_m`` thick; the hand is ``hand_width_m`` by ``hand_depth_m`` with its palm
     ``palm_above_tcp_m`` above the TCP. ``min_finger_force_N`` is the least motor force of a
     finger joint (URDFs that give none).
+
+    ``mount``: ``builtin`` grippers come with the robot's URDF (the Panda hand, the xArm
+    gripper); a ``flange`` gripper is added to the robot's flange by
+    :func:`interfaces.urdf.station_urdf`: a palm ``hand_width_m`` x ``hand_depth_m`` x
+    ``palm_height_m``, two fingers ``finger_length_m`` long on prismatic joints along the TCP's
+    y axis (0 closed, ``max_opening_m / 2`` each open), the TCP between the fingertips, half a
+    pad height above their tips. ``grip_force_N``: the force the fingers press with. With it, a
+    held object slips out (``pick_dropped``, reason ``slipped``) once the friction the two pads
+    can carry, ``2 mu grip_force_N``, is less than ``mass (g + |a|)`` (``mu`` the object's
+    friction coefficient, ``a`` the TCP's measured acceleration); without it (None) a grasp
+    holds whatever the object, as the reference's rule does.
     """
 
     kind: Literal["parallel_jaw"] = "parallel_jaw"
     name: str
+    mount: Literal["builtin", "flange"] = "builtin"
     tcp_link: str
     tcp_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     joints: tuple[str, ...]
@@ -48,9 +61,17 @@ class ParallelJawSpec:
     hand_depth_m: float = 0.072
     palm_above_tcp_m: float = 0.035
     min_finger_force_N: float = 20.0
+    grip_force_N: float | None = None
+    palm_height_m: float = 0.06
+    finger_length_m: float = 0.08
 
     def __post_init__(self) -> None:
         n = len(self.joints)
+        if self.grip_force_N is not None:
+            require(self.grip_force_N > 0, "tool.grip_force_N", self.grip_force_N, "must be > 0")
+        if self.mount == "flange":
+            require(n == 2, "tool.joints", self.joints, "a flange-mounted jaw has two fingers")
+            require(len(self.links) == 2, "tool.links", self.links, "two finger links")
         require(n > 0, "tool.joints", self.joints, "must not be empty")
         require(len(self.joint_open) == n, "tool.joint_open", self.joint_open, "one per joint")
         require(
@@ -76,10 +97,100 @@ class ParallelJawSpec:
             require(value >= 0, f"tool.{key}", value, "must be >= 0")
 
 
-ToolSpec = ParallelJawSpec
-"""Every kind of tool a station may carry (a union as more kinds are added)."""
+@dataclass(frozen=True, kw_only=True)
+class SuctionCupSpec:
+    """A single vacuum suction cup on the robot's flange, what industrial waste pickers mostly
+    use.
 
-TOOL_KINDS: dict[str, type[ToolSpec]] = {"parallel_jaw": ParallelJawSpec}
+    Geometry (added to the flange by :func:`interfaces.urdf.station_urdf`): a stem of radius
+    ``body_radius_m`` from the flange to the cup's lip, ``stem_length_m`` along the flange's z
+    axis; the TCP is the centre of the lip; the cup's lip is a disc of ``cup_diameter_m``.
+
+    Seal: with the vacuum on, the cup seals on an object when its lip lies on the object's
+    upturned face (within ``contact_tolerance_m`` of it), the whole lip disc lies within that
+    face at the contact point (the extruded proxies have flat tops; a tipped object is judged
+    by the face turned up), and the face is tilted by at most ``max_tilt_rad``. The vacuum then
+    builds up for ``build_up_s`` (generator and hose volume) and the object is held: this is
+    the suction cup's grasp rule (it replaces the fingers' contacts and dwell).
+
+    Holding force (the theoretical holding force of a suction cup, F = dp A, Schmalz, "Holding
+    force", and "Theoretical holding force of a suction cup", schmalz.com): ``F = vacuum_kPa *
+    1000 * pi (cup_diameter_m / 2)^2 * eta``, ``eta`` the seal efficiency of the object's class
+    (``seal_efficiency``, else ``default_seal_efficiency``): the fraction of the vacuum a cup
+    keeps on that surface. Porous, rough and heterogeneous surfaces leak (Schmalz asks for a
+    safety factor of at least 2 on them, against 1.5 on smooth, dense ones), so concrete and
+    brick get a low efficiency, rubber a high one. Every physics step of the carry, ``F`` is
+    checked against ``mass (g + |a|)`` with ``a`` the TCP's measured acceleration: exceeded,
+    the object drops (``pick_dropped``, reason ``suction_overload``). Vacuum off vents the cup
+    in ``vent_s``; the object is released.
+
+    Command (``gripper/command``): 1 turns the vacuum on, 0 off. Measured (``joint_states``,
+    joint ``<name>_vacuum``): the vacuum reached, as a fraction of ``vacuum_kPa`` (0 to 1), as a
+    vacuum switch would report it.
+    """
+
+    kind: Literal["suction_cup"] = "suction_cup"
+    name: str
+    mount: Literal["flange"] = "flange"
+    tcp_link: str
+    tcp_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    cup_diameter_m: float = 0.04
+    stem_length_m: float = 0.15
+    body_radius_m: float = 0.025
+    vacuum_kPa: float = 60.0
+    seal_efficiency: dict[str, float] = field(default_factory=dict)
+    default_seal_efficiency: float = 0.5
+    build_up_s: float = 0.15
+    vent_s: float = 0.05
+    max_tilt_rad: float = 0.35
+    contact_tolerance_m: float = 0.004
+    tcp_half_extents_m: tuple[float, float, float] = (0.01, 0.01, 0.01)
+
+    def __post_init__(self) -> None:
+        for key in (
+            "cup_diameter_m",
+            "stem_length_m",
+            "body_radius_m",
+            "vacuum_kPa",
+            "build_up_s",
+            "vent_s",
+            "max_tilt_rad",
+            "contact_tolerance_m",
+        ):
+            value: float = getattr(self, key)
+            require(value > 0, f"tool.{key}", value, "must be > 0")
+        for name, eta in {
+            **self.seal_efficiency,
+            "(default)": self.default_seal_efficiency,
+        }.items():
+            require(0 < eta <= 1, f"tool.seal_efficiency.{name}", eta, "must be in (0, 1]")
+
+    @property
+    def cup_area_m2(self) -> float:
+        """Area of the cup's lip disc."""
+        return math.pi * (0.5 * self.cup_diameter_m) ** 2
+
+    def efficiency(self, class_name: str) -> float:
+        """The seal efficiency on objects of ``class_name``."""
+        return self.seal_efficiency.get(class_name, self.default_seal_efficiency)
+
+    def holding_force(self, class_name: str) -> float:
+        """The force (N) the sealed cup holds an object of ``class_name`` with."""
+        return self.vacuum_kPa * 1000.0 * self.cup_area_m2 * self.efficiency(class_name)
+
+    @property
+    def vacuum_joint(self) -> str:
+        """The name ``joint_states`` reports the measured vacuum fraction under."""
+        return f"{self.name}_vacuum"
+
+
+ToolSpec = ParallelJawSpec | SuctionCupSpec
+"""Every kind of tool a station may carry."""
+
+TOOL_KINDS: dict[str, type[ParallelJawSpec] | type[SuctionCupSpec]] = {
+    "parallel_jaw": ParallelJawSpec,
+    "suction_cup": SuctionCupSpec,
+}
 """Tool classes by their ``kind``."""
 
 
@@ -93,4 +204,5 @@ def tool_from_data(value: object, where: str) -> ToolSpec:
     if kind not in TOOL_KINDS:
         msg = f"{where}.kind = {kind!r}: unknown tool kind (known: {', '.join(TOOL_KINDS)})"
         raise ConfigError(msg)
-    return from_data(TOOL_KINDS[kind], data, where)
+    tool: ToolSpec = from_data(TOOL_KINDS[kind], data, where)
+    return tool

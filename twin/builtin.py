@@ -8,24 +8,14 @@ meshgen output folder is complete once it exists, it is written atomically).
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
+
+from interfaces.cache import cache_root
+
+__all__ = ["SAMPLE_IMAGES", "SAMPLE_SEED", "builtin_dataset", "cache_root"]
 
 SAMPLE_IMAGES = 24
 SAMPLE_SEED = 0
-
-
-def cache_root() -> Path:
-    """Where cached, regenerable data lives: the built-in dataset and merged collision shapes.
-
-    ``$CDW_TWIN_CACHE``, else ``$XDG_CACHE_HOME/cdw-twin``, else ``~/.cache/cdw-twin``; deleting
-    it only costs the time to regenerate.
-    """
-    env = os.environ.get("CDW_TWIN_CACHE")
-    if env:
-        return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "cdw-twin"
 
 
 def builtin_dataset(

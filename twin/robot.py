@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pybullet as pb
@@ -49,11 +50,12 @@ class Robot:
         *,
         base_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
         base_yaw_rad: float = 0.0,
+        urdf: Path | None = None,
     ) -> None:
         self.client = client
         self.spec = spec
         try:
-            self.urdf = resolve_urdf(spec.urdf)
+            self.urdf = urdf if urdf is not None else resolve_urdf(spec.urdf)
         except ConfigError as exc:
             raise SceneError(str(exc)) from None
         quat = pb.getQuaternionFromEuler([0.0, 0.0, base_yaw_rad])

@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from interfaces.cell import StationSpec
-from twin.errors import ConfigError
+from interfaces.urdf import station_urdf
+from twin.errors import ConfigError, SceneError
 from twin.robot import Robot
 from twin.target_metric import TargetTracker
 from twin.tools import Tool, make_tool
@@ -42,11 +43,16 @@ class Station:
     @classmethod
     def load(cls, client: int, index: int, spec: StationSpec) -> Station:
         """Load the station's robot and build its tool; the arm at home, the tool open."""
+        try:
+            urdf = station_urdf(spec.robot, spec.tool)
+        except ConfigError as exc:
+            raise SceneError(f"station {spec.name!r}: {exc}") from None
         robot = Robot(
             client,
             spec.robot,
             base_position_m=spec.base_position_m,
             base_yaw_rad=spec.base_yaw_rad,
+            urdf=urdf,
         )
         station = cls(index=index, spec=spec, robot=robot, tool=make_tool(spec.tool, robot))
         station.reset()
