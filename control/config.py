@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any, Literal, cast
 
 from control.errors import ControlConfigError
-from control.tools import ControllerTool, make_tool
+from control.tools import ControllerTool, GraspTiming, make_tool
 from interfaces.cell import BeltSpec, Cell, StationSpec, default_cell
 from interfaces.dataclass_io import from_data
 from interfaces.errors import ConfigError
@@ -128,8 +128,8 @@ class MotionConfig:
     control_period_s: float = 1.0 / 120.0
     command_latency_s: float = 0.01
     max_velocity: tuple[float, float, float, float] = (0.8, 0.8, 0.8, 2.4)
-    max_acceleration: tuple[float, float, float, float] = (12.0, 12.0, 12.0, 20.0)
-    max_jerk: tuple[float, float, float, float] = (300.0, 300.0, 300.0, 400.0)
+    max_acceleration: tuple[float, float, float, float] = (2.5, 2.5, 2.5, 20.0)
+    max_jerk: tuple[float, float, float, float] = (60.0, 60.0, 60.0, 400.0)
     feedback_kp: float = 0.5
     feedback_ki_per_s: float = 5.0
     feedback_max_m: float = 0.03
@@ -183,11 +183,13 @@ APPROACH_SPACES = ("cartesian", "joint")
 class PickConfig:
     """Pick sequence geometry and timing.
 
-    The grasp point is ``grasp_below_top_m`` below the object's top (the Panda's palm touches
-    the object when the TCP is lower than about 2 cm below the top), but not below
+    A gripper's grasp point is ``grasp_below_top_m`` below the object's top (the Panda's palm
+    touches the object when the TCP is lower than about 2 cm below the top), but not below
     ``height * grasp_height_fraction`` nor ``min_grasp_height_m`` above the belt surface:
     ``surface_z + max(height - grasp_below_top_m, height * grasp_height_fraction,
-    min_grasp_height_m)``. The approach ends ``approach_height_m`` above it.
+    min_grasp_height_m)``. A suction cup's is on the top, ``top_press_m`` into it so that the
+    lip seals (:meth:`control.tools.ControllerTool.grasp_height_m`). The approach ends
+    ``approach_height_m`` above the grasp point.
     ``arrive_tolerance_m`` and ``arrive_speed_tolerance_mps`` decide when a Ruckig segment has
     caught its moving target; the descent starts once the yaw is within ``yaw_tolerance_rad``
     of the grasp yaw or will be within ``descend_yaw_lead_s`` (the fingertips are still above
@@ -213,10 +215,15 @@ class PickConfig:
     ``drop_tolerance_m``: the release point may lie this far from the bin's drop point along x
     and y (less half the object's length).
 
-    Grip check (skipped when ``/joint_states`` carries no tool joints): when the close ends,
-    and through the lift, a tool measured within ``grip_check_margin_m`` of its grasp command
-    holds nothing: the pick is aborted as ``grip_missed`` and the object may be targeted
-    ``grip_retries`` more times.
+    The waits come from the tool (:meth:`control.tools.ControllerTool.timing`): a gripper's are
+    ``dwell_s``, ``close_s``, ``close_overlap_s`` and ``release_s``; a suction cup does not
+    dwell, waits its build-up plus ``seal_margin_s`` for the seal and vents for its ``vent_s``
+    plus ``vent_margin_s`` over the bin.
+
+    Grip check (skipped when ``joint_states`` carries no tool joints): when the close ends,
+    and through the lift, a tool that holds nothing by its measurement (a gripper measured within
+    ``grip_check_margin_m`` of its grasp command, a cup whose vacuum did not build up) aborts the
+    pick as ``grip_missed`` and the object may be targeted ``grip_retries`` more times.
     """
 
     approach_height_m: float = 0.06
@@ -240,6 +247,9 @@ class PickConfig:
     grip_check_margin_m: float = 0.001
     grip_retries: int = 1
     approach_space: Literal["cartesian", "joint"] = "cartesian"
+    top_press_m: float = 0.003
+    seal_margin_s: float = 0.05
+    vent_margin_s: float = 0.05
 
     def __post_init__(self) -> None:
         """Validate every field."""
@@ -268,15 +278,25 @@ class PickConfig:
         )
 
 
+RANKS = ("urgency", "cycle")
+"""Values of ``scheduler.rank``."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class SchedulerConfig:
     """Target selection: class priorities (larger is picked first) and safety margins.
 
     ``class_priorities`` overrides the priority of some of the cell's classes (the others get
     1.0). ``max_reach_m`` bounds the distance from the robot base to a grasp point;
-    ``grasp_width_margin_m`` is what an object's narrow side must leave of the tool's opening;
+    ``grasp_width_margin_m`` is the margin of the tool's size check
+    (:meth:`~control.tools.ControllerTool.misfit`): what an object's narrow side must leave of a
+    gripper's opening, what it must have to spare around a suction cup's lip;
     ``time_margin_s`` is added to every intercept estimate. ``clearance_m`` grows the
     footprints the tool needs free around a grasp (:meth:`ControllerTool.footprints`).
+    ``rank`` orders the candidates after the class priority: ``urgency`` (the least time left
+    in the window first, so that fewer objects pass) or ``cycle`` (the least time to meet the
+    object and carry it to its bin first, so that more objects are picked per minute; objects
+    near the end of the window are left to stations downstream).
     """
 
     class_priorities: dict[str, float] = field(default_factory=dict)
@@ -285,9 +305,13 @@ class SchedulerConfig:
     time_margin_s: float = 0.05
     min_confidence: float = 0.3
     clearance_m: float = 0.008
+    rank: Literal["urgency", "cycle"] = "urgency"
 
     def __post_init__(self) -> None:
         """Validate every field."""
+        _require(
+            self.rank in RANKS, "scheduler.rank", self.rank, f"must be one of {', '.join(RANKS)}"
+        )
         _require(
             self.clearance_m >= 0.0 and math.isfinite(self.clearance_m),
             "scheduler.clearance_m",
@@ -300,6 +324,46 @@ class SchedulerConfig:
             )
         _require(self.max_reach_m > 0.0, "scheduler.max_reach_m", self.max_reach_m, "must be > 0")
         _require(self.time_margin_s >= 0.0, "scheduler.time_margin_s", self.time_margin_s, ">= 0")
+
+
+ALLOCATION_STRATEGIES = ("first_fit", "class_priority", "tool_fit")
+"""Values of ``allocation.strategy`` (:mod:`control.allocation`)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class AllocationConfig:
+    """How the stations of a line share the stream (:mod:`control.allocation`).
+
+    ``strategy``: ``first_fit`` (never target what another station claimed, else anything the
+    tool can pick), ``class_priority`` (also leave an object of a class this station does not
+    prefer to a downstream station that prefers it and can pick it) or ``tool_fit`` (also leave
+    an object to a downstream station whose tool fits it by ``fit_advantage_m`` more).
+    ``preferred_classes`` names, per station of the cell, the classes it prefers (a station not
+    named prefers the classes only it has bins for, if any). A claim whose object is predicted
+    more than ``claim_expiry_m`` past the claiming station's window is stale (its controller
+    is gone) and ignored. A claim covers another station's track within its radius, half the
+    object's narrow side but at least ``min_claim_radius_m``.
+    """
+
+    strategy: Literal["first_fit", "class_priority", "tool_fit"] = "first_fit"
+    preferred_classes: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    fit_advantage_m: float = 0.02
+    claim_expiry_m: float = 0.3
+    min_claim_radius_m: float = 0.01
+
+    def __post_init__(self) -> None:
+        """Validate every field."""
+        _require(
+            self.strategy in ALLOCATION_STRATEGIES,
+            "allocation.strategy",
+            self.strategy,
+            f"must be one of {', '.join(ALLOCATION_STRATEGIES)}",
+        )
+        for name in ("fit_advantage_m", "claim_expiry_m", "min_claim_radius_m"):
+            value = cast(float, getattr(self, name))
+            _require(
+                value >= 0.0 and math.isfinite(value), f"allocation.{name}", value, "must be >= 0"
+            )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -347,12 +411,15 @@ class ControllerConfig:
     motion: MotionConfig = field(default_factory=MotionConfig)
     pick: PickConfig = field(default_factory=PickConfig)
     scheduler: SchedulerConfig = field(default_factory=SchedulerConfig)
+    allocation: AllocationConfig = field(default_factory=AllocationConfig)
     node: NodeConfig = field(default_factory=NodeConfig)
 
     station: StationSpec = field(init=False, repr=False, compare=False)
     """The station the controller drives."""
     tool: ControllerTool = field(init=False, repr=False, compare=False)
     """The controller's side of the station's tool."""
+    timing: GraspTiming = field(init=False, repr=False, compare=False)
+    """The pick sequence's waits for the tool (:meth:`ControllerTool.timing`)."""
     bins: Mapping[str, Vec3] = field(init=False, repr=False, compare=False)
     """Class name -> drop point above the station's bin for it (world frame)."""
     class_priorities: Mapping[str, float] = field(init=False, repr=False, compare=False)
@@ -365,6 +432,7 @@ class ControllerConfig:
         )
         object.__setattr__(self, "station", station)
         object.__setattr__(self, "tool", make_tool(station.tool))
+        object.__setattr__(self, "timing", self.tool.timing(self.pick))
         object.__setattr__(self, "bins", {b.class_name: b.drop_point_m for b in station.bins})
         classes = self.cell.classes
         for name in self.scheduler.class_priorities:
@@ -376,6 +444,7 @@ class ControllerConfig:
             )
         priorities = {c: self.scheduler.class_priorities.get(c, 1.0) for c in classes}
         object.__setattr__(self, "class_priorities", priorities)
+        self._check_preferences()
         ratio = self.motion.control_period_s / self.physics_dt_s
         _require(
             ratio >= 1.0 - 1e-6 and abs(ratio - round(ratio)) < 1e-6,
@@ -383,6 +452,15 @@ class ControllerConfig:
             self.motion.control_period_s,
             f"must be a whole multiple of the cell's physics step ({self.physics_dt_s} s)",
         )
+
+    def _check_preferences(self) -> None:
+        """Every station and class ``allocation.preferred_classes`` names is the cell's."""
+        names = [s.name for s in self.cell.stations]
+        for station, preferred in self.allocation.preferred_classes.items():
+            key = f"allocation.preferred_classes.{station}"
+            _require(station in names, key, preferred, f"not a station of the cell ({names})")
+            unknown = [c for c in preferred if c not in self.cell.classes]
+            _require(not unknown, key, preferred, f"not classes of the cell: {unknown}")
 
     @property
     def robot(self) -> RobotSpec:
@@ -436,9 +514,14 @@ SECTIONS: dict[str, type] = {
     "motion": MotionConfig,
     "pick": PickConfig,
     "scheduler": SchedulerConfig,
+    "allocation": AllocationConfig,
     "node": NodeConfig,
 }
 """The sections of a parameter file and their dataclasses."""
+
+OVERRIDES = ("robots", "tools")
+"""Keys of a parameter file whose entries, by the station's robot or tool name, override the
+sections for the stations with that robot or tool."""
 
 MOVED_TO_CELL: dict[str, str] = {
     "robot": "the station's robot, tool and base pose",
@@ -465,16 +548,51 @@ def _moved(key: str) -> None:
         raise ControlConfigError(msg)
 
 
-def _check_keys(params: Mapping[str, object]) -> None:
+def _check_keys(params: Mapping[str, object], prefix: str = "") -> None:
     """Refuse keys that moved to the cell file and sections the controller does not have."""
     for key, value in params.items():
         _moved(key)
         if key not in SECTIONS:
-            msg = f"{key}: unknown section (allowed: {', '.join(SECTIONS)})"
+            allowed = ", ".join(SECTIONS) + ("" if prefix else ", " + ", ".join(OVERRIDES))
+            msg = f"{prefix}{key}: unknown section (allowed: {allowed})"
             raise ControlConfigError(msg)
         if isinstance(value, Mapping):
             for inner in value:
                 _moved(f"{key}.{inner}")
+
+
+def _override_entries(params: Mapping[str, object]) -> dict[str, dict[str, Mapping[str, Any]]]:
+    """The ``robots`` and ``tools`` entries, checked: name -> sections, each a mapping."""
+    out: dict[str, dict[str, Mapping[str, Any]]] = {}
+    for key in OVERRIDES:
+        entries = params.get(key) or {}
+        if not isinstance(entries, Mapping):
+            msg = f"{key} = {entries!r}: expected a mapping of names to sections"
+            raise ControlConfigError(msg)
+        for name, sections in entries.items():
+            where = f"{key}.{name}"
+            if not isinstance(sections, Mapping):
+                msg = f"{where} = {sections!r}: expected a mapping of sections"
+                raise ControlConfigError(msg)
+            _check_keys(sections, f"{where}.")
+            out[where] = {section: raw or {} for section, raw in sections.items()}
+    return out
+
+
+def _merged(base: Mapping[str, Any], override: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+    """``base``'s sections with ``override``'s keys replacing theirs, section by section."""
+    merged = dict(base)
+    for section, raw in override.items():
+        if not isinstance(raw, Mapping):
+            msg = f"{section} = {raw!r}: expected a mapping"
+            raise ControlConfigError(msg)
+        below = merged.get(section) or {}
+        merged[section] = {**(below if isinstance(below, Mapping) else {}), **raw}
+    return merged
+
+
+def _sections(raw: Mapping[str, Any]) -> dict[str, Any]:
+    return {name: from_data(SECTIONS[name], value, name) for name, value in raw.items()}
 
 
 def config_from_mapping(
@@ -487,16 +605,28 @@ def config_from_mapping(
     """A :class:`ControllerConfig` from the ``ros__parameters`` mapping, for ``station`` of
     ``cell`` (None: the reference cell; empty station: its first).
 
-    Raises ``ControlConfigError`` naming ``source`` and the dotted key of the first bad value.
+    The sections (``pick``, ``scheduler``, ...) apply to every station; ``robots.<name>`` and
+    then ``tools.<name>`` hold sections whose keys replace those for a station whose robot or
+    tool has that name (one file tunes a line of different robots and tools). Every entry is
+    checked, whichever stations it applies to. Raises ``ControlConfigError`` naming ``source``
+    and the dotted key of the first bad value.
     """
     try:
-        _check_keys(params)
-        sections: dict[str, Any] = {
-            name: from_data(SECTIONS[name], raw, name) for name, raw in params.items()
-        }
-        return ControllerConfig(
-            cell=cell if cell is not None else _default_cell(), station_name=station, **sections
-        )
+        base = {k: v for k, v in params.items() if k not in OVERRIDES}
+        _check_keys(base)
+        overrides = _override_entries(params)
+        for where, override in overrides.items():
+            try:
+                _sections(_merged(base, override))
+            except ConfigError as exc:
+                msg = f"{where}: {exc}"
+                raise ControlConfigError(msg) from None
+        cell = cell if cell is not None else _default_cell()
+        spec = cell.station(station) if station else cell.stations[0]
+        raw = dict(base)
+        for key in (f"robots.{spec.robot.name}", f"tools.{spec.tool.name}"):
+            raw = _merged(raw, overrides.get(key, {}))
+        return ControllerConfig(cell=cell, station_name=station, **_sections(raw))
     except ConfigError as exc:
         msg = f"{source}: {exc}"
         raise ControlConfigError(msg) from None

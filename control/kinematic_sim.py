@@ -2,10 +2,13 @@
 
 One object moves on the belt at constant speed; a simulated camera reports it at 30 Hz with
 Gaussian noise and latency; the arm reaches every joint command exactly ``command_latency_s``
-after it was issued. With a :class:`GripperSpec` the fingers move towards the commanded opening
-at a finite speed and stop on the object's sides when they close around it (or close on nothing
-when it is not ``grippable``), and the controller gets the measured opening; without one the
-opening is not measured. The episode measures the tracking time to 4 mm (from the start of tracking
+after it was issued. With a :class:`GripperSpec` the station's tool is simulated and the
+controller gets its measurement: a gripper's fingers move towards the commanded opening at a
+finite speed and stop on the object's sides when they close around it (or close on nothing
+when it is not ``grippable``); a suction cup with the vacuum on seals once its lip lies on the
+object's top with the lip's disc inside it (never when not ``grippable``), and the vacuum then
+builds up over the cup's ``build_up_s`` (off: it vents over ``vent_s``). Without one the tool
+is not measured. The episode measures the tracking time to 4 mm (from the start of tracking
 the target until the TCP-to-grasp-point distance stays below 4 mm until the gripper has closed)
 by ground truth, with the rule the twin uses (:class:`interfaces.metrics.SettleTimer`). Used by
 the tests and by ``python -m control.bench``.
@@ -25,6 +28,7 @@ from control.pick import Command, Phase, PickController, PickStats, TcpMeasureme
 from control.scheduler import grasp_z_m
 from control.tracking import Detection, Tracker
 from interfaces.metrics import SettleTimer
+from interfaces.tools import SuctionCupSpec
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -52,8 +56,9 @@ class CameraSpec:
 
 @dataclass(frozen=True, kw_only=True)
 class GripperSpec:
-    """The simulated gripper: opening speed (m/s, both fingers together) and whether the
-    object can be gripped at all (False: the fingers close past it, as on a missed grasp)."""
+    """The simulated tool: a gripper's opening speed (m/s, both fingers together) and whether
+    the object can be gripped at all (False: the fingers close past it, a cup never seals, as
+    on a missed grasp)."""
 
     speed_mps: float = 0.2
     grippable: bool = True
@@ -120,7 +125,7 @@ class _SimGripper:
         self.commanded_m = open_m
         self._holding = False
 
-    def step(self, distance_m: float, dt_s: float) -> float:
+    def step(self, distance_m: float, dt_s: float, _lip: tuple[float, float, float]) -> float:
         """Move for ``dt_s`` with the TCP ``distance_m`` from the grasp point; the opening."""
         self._holding = self._gripper.grippable and (self._holding or distance_m < 0.01)
         goal = max(self.commanded_m, self._width_m) if self._holding else self.commanded_m
@@ -128,6 +133,61 @@ class _SimGripper:
         self.opening_m += min(max(goal - self.opening_m, -step), step)
         self._holding = self._holding and self.opening_m <= self._width_m + 1e-9
         return self.opening_m
+
+
+Lip = tuple[float, float, float]
+"""Where a cup's lip is on an object: the room from the lip's centre to the top face's edges
+along and across the object, and the lip's height above the top (m)."""
+
+
+class _SimCup:
+    """A suction cup: sealed while the vacuum is on once the lip lay on the object's top with
+    its disc inside the top face (unless the object is not ``grippable``); the vacuum fraction
+    builds up over ``build_up_s`` while sealed and vents over ``vent_s`` otherwise."""
+
+    def __init__(self, spec: SuctionCupSpec, gripper: GripperSpec) -> None:
+        self._spec, self._gripper = spec, gripper
+        self.commanded_m = 0.0
+        self.vacuum = 0.0
+        self._sealed = False
+
+    def step(self, _distance_m: float, dt_s: float, lip: Lip) -> float:
+        """Advance ``dt_s`` with the lip at ``lip``; the measured vacuum fraction."""
+        spec = self._spec
+        room_along, room_across, above = lip
+        seals = (
+            self._gripper.grippable
+            and abs(above) <= spec.contact_tolerance_m
+            and min(room_along, room_across) >= 0.5 * spec.cup_diameter_m
+        )
+        self._sealed = self.commanded_m >= 0.5 and (self._sealed or seals)
+        if self._sealed:
+            self.vacuum = min(1.0, self.vacuum + dt_s / spec.build_up_s)
+        else:
+            self.vacuum = max(0.0, self.vacuum - dt_s / spec.vent_s)
+        return self.vacuum
+
+
+def _lip(tcp_m: tuple[float, float, float], obj: ObjectSpec, x_m: float, top_z_m: float) -> Lip:
+    """The lip at ``tcp_m`` on ``obj`` whose centre is at ``(x_m, obj.y_m)``."""
+    dx, dy = tcp_m[0] - x_m, tcp_m[1] - obj.y_m
+    c, s = math.cos(obj.yaw_rad), math.sin(obj.yaw_rad)
+    along, across = dx * c + dy * s, -dx * s + dy * c
+    return (
+        0.5 * obj.length_m - abs(along),
+        0.5 * obj.width_m - abs(across),
+        tcp_m[2] - top_z_m,
+    )
+
+
+def _sim_tool(
+    cfg: ControllerConfig, gripper: GripperSpec, obj: ObjectSpec
+) -> _SimGripper | _SimCup:
+    """The station's tool, simulated."""
+    spec = cfg.station.tool
+    if isinstance(spec, SuctionCupSpec):
+        return _SimCup(spec, gripper)
+    return _SimGripper(gripper, obj.width_m, cfg.tool.open_command)
 
 
 def _violation_rad(kin: Kinematics, q: np.ndarray) -> float:
@@ -160,9 +220,7 @@ def run_episode(
     phases: list[tuple[float, Phase]] = []
     worst_violation = 0.0
     release_tcp_m: tuple[float, float, float] | None = None
-    fingers = (
-        None if gripper is None else _SimGripper(gripper, obj.width_m, cfg.tool.open_command_m)
-    )
+    fingers = None if gripper is None else _sim_tool(cfg, gripper, obj)
     openings: list[float] = []
     for tick in range(round(duration_s / dt_s)):
         t_s = tick * dt_s
@@ -171,15 +229,16 @@ def run_episode(
         p = oMtool.translation
         tcp_m = (float(p[0]), float(p[1]), float(p[2]))
         distance = math.dist(tcp_m, (obj.x0_m + speed_mps * t_s, obj.y_m, grasp_z))
-        openings.append(math.nan if fingers is None else fingers.step(distance, dt_s))
+        lip = _lip(tcp_m, obj, obj.x0_m + speed_mps * t_s, cfg.belt.surface_z_m + obj.height_m)
+        openings.append(math.nan if fingers is None else fingers.step(distance, dt_s, lip))
         measured = TcpMeasurement(
-            position_m=tcp_m, yaw_rad=yaw_of(oMtool), tool_measured_m=openings[-1]
+            position_m=tcp_m, yaw_rad=yaw_of(oMtool), tool_measured=openings[-1]
         )
         command: Command = controller.update(
             t_s, measured, tracker.predict_to(t_s), (speed_mps, 0.0)
         )
         if fingers is not None:
-            fingers.commanded_m = command.tool_command_m
+            fingers.commanded_m = command.tool_command
         q_cmd = np.asarray(command.joint_positions_rad)
         worst_violation = max(worst_violation, _violation_rad(kin, q_cmd))
         in_flight.append(q_cmd)

@@ -1,11 +1,14 @@
 """The controller as a ROS 2 node: a thin shell around the pure tracker and pick controller.
 
 It converts messages to the controller's dataclasses and back; the logic lives in
-:mod:`control.tracking`, :mod:`control.scheduler` and :mod:`control.pick`. Topic names, types
-and QoS come from :mod:`interfaces.contract`. The node drives one station of the cell: it lives
-in the station's namespace, and the station's topics (``joint_states``, the commands,
-``lockstep/ack``) are under it (``/s1/joint_states``; the bare names for the empty namespace);
-the cell's topics (belt, detections, priorities, the lockstep tick) are shared by every station.
+:mod:`control.tracking`, :mod:`control.scheduler`, :mod:`control.allocation` and
+:mod:`control.pick`. Topic names, types and QoS come from :mod:`interfaces.contract`. The node
+drives one station of the cell: it lives in the station's namespace, and the station's topics
+(``joint_states``, the commands, ``line/claim``, ``lockstep/ack``) are under it
+(``/s1/joint_states``; the bare names for the empty namespace); the cell's topics (belt,
+detections, priorities, the claims board ``/line/claims``, the lockstep tick) are shared by
+every station. The station's claims go out on its ``line/claim`` with the commands of their
+tick (counted in the ack); the boards the cell relays on ``/line/claims`` are applied in order.
 
 When the control update runs:
 
@@ -23,7 +26,7 @@ When the control update runs:
   would then wait for a message that never comes:
 
   - the ack publisher is created only once this node's subscriptions to the tick and the
-    three counted topics have each matched a publisher (reader side). The twin does not
+    counted topics have each matched a publisher (reader side). The twin does not
     publish tick 0 before it sees that publisher, so the twin's first tick and its messages
     reach readers that already know their writer;
   - no tick is handled before every command publisher and the ack publisher has matched a
@@ -32,8 +35,8 @@ When the control update runs:
   Ticks that arrive earlier wait in the queue; a steady-clock timer re-checks every 5 ms.
 
 Incoming messages are queued with their stamps and applied in a fixed order (belt, detections,
-joint states) up to the stamps the tick names, so the same inputs give the same outputs
-regardless of the DDS delivery order across topics.
+claims boards, joint states) up to the stamps the tick names, so the same inputs give the same
+outputs regardless of the DDS delivery order across topics.
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from trajectory_msgs.msg import JointTrajectoryPoint
 
+from control.allocation import Claim, ClaimState
 from control.config import ControllerConfig
 from control.errors import ControlError, RobotModelError
 from control.ik import Kinematics, yaw_of
@@ -65,6 +69,9 @@ from control.tracking import Detection, Track, Tracker
 from interfaces.contract import (
     ARM_TRAJECTORY,
     BELT_STATE,
+    CLAIM,
+    CLAIM_STATES,
+    CLAIMS,
     COMMANDS,
     COUNTED,
     DETECTIONS,
@@ -84,11 +91,11 @@ FloatArray = NDArray[np.float64]
 @dataclass(frozen=True, kw_only=True, eq=False)
 class JointSample:
     """Measured arm joints at ``stamp_s``: ``positions_rad`` ``(n_arm,) float``, and the
-    tool's measured command value ``tool_measured_m`` (NaN when not measured)."""
+    tool's measured command value ``tool_measured`` (NaN when not measured)."""
 
     stamp_s: float
     positions_rad: FloatArray
-    tool_measured_m: float = math.nan
+    tool_measured: float = math.nan
 
 
 def joint_sample(
@@ -110,9 +117,9 @@ def joint_sample(
     measured = math.nan
     if tool is not None:
         names = tool.joint_names
-        measured = tool.measured_m({n: float(msg.position[index[n]]) for n in names if n in index})
+        measured = tool.measured({n: float(msg.position[index[n]]) for n in names if n in index})
     return JointSample(
-        stamp_s=msg_stamp_s(msg.header.stamp), positions_rad=q, tool_measured_m=measured
+        stamp_s=msg_stamp_s(msg.header.stamp), positions_rad=q, tool_measured=measured
     )
 
 
@@ -135,6 +142,49 @@ def detections_of(msg: Any) -> tuple[float, list[Detection]]:
         for d in msg.detections
     ]
     return stamp_s, detections
+
+
+def claims_of(msg: Any) -> tuple[list[Claim], int]:
+    """The claims of a relayed board (``ClaimArray``), and how many entries were malformed (a
+    state other than :data:`~interfaces.contract.CLAIM_STATES`, or a position, velocity or
+    radius that is not finite)."""
+    claims: list[Claim] = []
+    bad = 0
+    for c in msg.claims:
+        values = (c.position.x, c.position.y, c.velocity.x, c.velocity.y, c.radius_m)
+        if c.state not in CLAIM_STATES or not all(math.isfinite(float(v)) for v in values):
+            bad += 1
+            continue
+        state: ClaimState = c.state
+        claims.append(
+            Claim(
+                station=str(c.station),
+                track_id=int(c.track_id),
+                class_name=str(c.class_name),
+                stamp_s=msg_stamp_s(c.header.stamp),
+                position_m=(float(c.position.x), float(c.position.y)),
+                velocity_mps=(float(c.velocity.x), float(c.velocity.y)),
+                radius_m=float(c.radius_m),
+                state=state,
+            )
+        )
+    return claims, bad
+
+
+def claim_msg(claim: Claim) -> Any:
+    """A ``Claim`` message of ``claim``."""
+    msg = message_class(CLAIM)(
+        station=claim.station,
+        track_id=claim.track_id,
+        class_name=claim.class_name,
+        radius_m=claim.radius_m,
+        state=claim.state,
+    )
+    msg.header.stamp = time_msg(claim.stamp_s)
+    msg.header.frame_id = "world"
+    msg.position.x, msg.position.y = claim.position_m
+    msg.velocity.x, msg.velocity.y = claim.velocity_mps
+    return msg
 
 
 def priorities_of(
@@ -186,7 +236,7 @@ class ControllerNode(Node):
         self.lockstep = lockstep
         self._kin = Kinematics.of_station(config.station, config.ik)
         self._tool = config.tool
-        missing = [n for n in self._tool.joint_names if not self._kin.has_joint(n)]
+        missing = [n for n in self._tool.urdf_joint_names if not self._kin.has_joint(n)]
         if missing:
             msg = f"{self._kin.urdf_path}: tool.joints: no joint {missing[0]!r} in the URDF"
             raise RobotModelError(msg)
@@ -196,6 +246,7 @@ class ControllerNode(Node):
         self._steps_per_update = config.steps_per_update
         self._period_s = config.motion.control_period_s
         self._priorities: dict[str, float] | None = None
+        self._boards: list[list[Claim]] = []
         self._belt_velocity_mps: tuple[float, float] = (0.0, 0.0)
         self._joint: JointSample | None = None
         self.topics: dict[Topic, str] = {
@@ -224,19 +275,26 @@ class ControllerNode(Node):
         self.pub_traj = self._publisher(ARM_TRAJECTORY)
         self.pub_gripper = self._publisher(GRIPPER_COMMAND)
         self.pub_target = self._publisher(PICK_TARGET)
+        self.pub_claim = self._publisher(CLAIM)
         self.pub_ack: Publisher | None = None
-        self._counted_subs = [
+        self._outputs_matched = False
+        self._counted_subs = self._subscribe_inputs()
+
+    def _subscribe_inputs(self) -> list[Any]:
+        """Subscribe to the inputs; the counted ones (and the tick in lockstep) returned."""
+        counted = [
             self._subscribe(JOINT_STATES, self._on_joint_state),
             self._subscribe(BELT_STATE, self._on_belt),
             self._subscribe(DETECTIONS, self._on_detections),
+            self._subscribe(CLAIMS, self._on_claims),
         ]
         self._subscribe(PRIORITIES, self._on_priorities)
-        self._outputs_matched = False
-        if lockstep:
-            self._counted_subs.append(self._subscribe(LOCKSTEP_TICK, self._on_tick))
+        if self.lockstep:
+            counted.append(self._subscribe(LOCKSTEP_TICK, self._on_tick))
             self._match_timer = self.create_timer(
                 0.005, self._on_match_timer, clock=Clock(clock_type=ClockType.STEADY_TIME)
             )
+        return counted
 
     def _publisher(self, topic: Topic) -> Publisher:
         return self.create_publisher(
@@ -265,7 +323,7 @@ class ControllerNode(Node):
         """Whether the ack publisher exists and it and every command topic has a matched
         subscriber (sticky)."""
         if not self._outputs_matched and self.pub_ack is not None:
-            pubs = (self.pub_traj, self.pub_gripper, self.pub_target, self.pub_ack)
+            pubs = (self.pub_traj, self.pub_gripper, self.pub_target, self.pub_claim, self.pub_ack)
             self._outputs_matched = all(p.get_subscription_count() > 0 for p in pubs)
         return self._outputs_matched
 
@@ -295,6 +353,11 @@ class ControllerNode(Node):
         if self.lockstep:
             self._drain_ticks()
 
+    def _on_claims(self, msg: Any) -> None:
+        self._arrived(self._counted[3], msg)
+        if self.lockstep:
+            self._drain_ticks()
+
     def _on_priorities(self, msg: Any) -> None:
         priorities, unknown = priorities_of(list(msg.classes), self.config.classes)
         if unknown:
@@ -310,8 +373,8 @@ class ControllerNode(Node):
 
     def _consume(self, limits_ns: Sequence[int] | None) -> None:
         """Apply queued messages stamped at or before ``limits_ns`` (per counted topic; None:
-        all), belt first, then detections, then joint states."""
-        joints, belt, detections = self._counted
+        all), belt first, then detections, then claims boards, then joint states."""
+        joints, belt, detections, boards = self._counted
         limit = {} if limits_ns is None else dict(zip(self._counted, limits_ns, strict=True))
         for state in self._inbox.take(belt, limit.get(belt)):
             if math.isfinite(state.speed_mps):
@@ -321,6 +384,12 @@ class ControllerNode(Node):
         for frame in self._inbox.take(detections, limit.get(detections)):
             stamp_s, found = detections_of(frame)
             self._tracker.update(stamp_s, found, self._belt_velocity_mps)
+        for board in self._inbox.take(boards, limit.get(boards)):
+            claims, bad = claims_of(board)
+            if bad:
+                self.skipped["bad_claim"] += bad
+                self._warn("claims", f"{boards}: {bad} malformed claims ignored")
+            self._apply_board(claims)
         for message in self._inbox.take(joints, limit.get(joints)):
             sample = joint_sample(message, self._arm_names, self._tool)
             if sample is None:
@@ -344,6 +413,7 @@ class ControllerNode(Node):
                 int(tick.last_joint_state_ns),
                 int(tick.last_belt_state_ns),
                 int(tick.last_detections_ns),
+                int(tick.last_claims_ns),
             )
             if not self._inbox.complete(limits_ns):
                 return
@@ -365,11 +435,21 @@ class ControllerNode(Node):
         """Cumulative command messages published (acks carry the per-tick difference)."""
         return sum(self.published[topic] for topic in self._commands)
 
+    def _apply_board(self, claims: list[Claim]) -> None:
+        """A relayed claims board: to the controller, or kept until it exists."""
+        if self._controller is None:
+            self._boards.append(claims)
+        else:
+            self._controller.apply_claims(claims)
+
     def _ensure_controller(self, q: FloatArray) -> PickController:
         if self._controller is None:
             self._controller = PickController(self.config, kinematics=self._kin, q_init=q)
             if self._priorities is not None:
                 self._controller.set_class_priorities(self._priorities)
+            for board in self._boards:
+                self._controller.apply_claims(board)
+            self._boards.clear()
         return self._controller
 
     def _control(self, t_s: float) -> None:
@@ -391,7 +471,7 @@ class ControllerNode(Node):
             measured = TcpMeasurement(
                 position_m=(float(p[0]), float(p[1]), float(p[2])),
                 yaw_rad=yaw_of(oMtool),
-                tool_measured_m=joint.tool_measured_m,
+                tool_measured=joint.tool_measured,
             )
             tracks = self._tracker.predict_to(t_s)
             command = controller.update(t_s, measured, tracks, self._belt_velocity_mps)
@@ -407,7 +487,7 @@ class ControllerNode(Node):
     def _publish(self, command: Command, tracks: Sequence[Track]) -> None:
         stamp = time_msg(command.t_s)
         self._publish_joints(command, stamp)
-        value = self._tool.clip_command_m(command.tool_command_m)
+        value = self._tool.clip_command(command.tool_command)
         refresh = self._updates % self.config.node.gripper_refresh_every == 0
         if math.isfinite(value) and (value != self._last_tool_command or refresh):
             self.pub_gripper.publish(message_class(GRIPPER_COMMAND)(data=value))
@@ -419,6 +499,9 @@ class ControllerNode(Node):
             self.pub_target.publish(self._target_msg(command, tracks, stamp))
             self.published[self._commands[2]] += 1
             self._last_target_key = key
+        for claim in command.claims:
+            self.pub_claim.publish(claim_msg(claim))
+            self.published[self._commands[3]] += 1
 
     def _publish_joints(self, command: Command, stamp: Any) -> None:
         q = np.asarray(command.joint_positions_rad, dtype=np.float64)
@@ -515,6 +598,8 @@ class ControllerNode(Node):
 __all__ = [
     "ControllerNode",
     "JointSample",
+    "claim_msg",
+    "claims_of",
     "detections_of",
     "joint_sample",
     "priorities_of",

@@ -2,13 +2,14 @@
 
 Sequence per object: ``approach`` (Ruckig to a point above the predicted grasp point, arriving
 with the object's velocity), ``descend`` (to the grasp point, still moving with it), ``dwell``
-(track it for ``dwell_s``), ``close`` (the tool grasps while tracking), ``lift``, ``carry`` (to the
-drop point above the class bin), ``release``, ``return`` (towards the ready pose; a new target may
-be taken from there). With ``pick.approach_space: joint`` the next target is chosen as soon as
-the release ends, and the approach begins as one joint-space move, planned once, that arrives
-above the object with its velocity; the Cartesian approach then takes over. Errors (lost
-target, Ruckig error, IK failure) abort the pick, are counted, and never produce a joint command
-outside the limits: the last valid joint command is held.
+(track it for the tool's dwell; a tool without one skips it), ``close`` (the tool grasps while
+tracking), ``lift``, ``carry`` (to the drop point above the class bin), ``release``, ``return``
+(towards the ready pose; a new target may be taken from there). The waits come from the tool
+(:meth:`control.tools.ControllerTool.timing`). With ``pick.approach_space: joint`` the next
+target is chosen as soon as the release ends, and the approach begins as one joint-space move,
+planned once, that arrives above the object with its velocity; the Cartesian approach then
+takes over. Errors (lost target, Ruckig error, IK failure) abort the pick, are counted, and
+never produce a joint command outside the limits: the last valid joint command is held.
 
 Each tick runs the handler of the current phase, from a table with one handler per
 :class:`Phase`. A handler returns the tick's :class:`Goal`, or a :class:`Transition` when it
@@ -16,6 +17,13 @@ switched the phase: the new phase's handler then runs in the same tick. Before t
 phase that pursues a target, the target checks run (lost for too long, past the pick window),
 and an abort they cause is a transition as well. The tool (:mod:`control.tools`) says what to
 command to grasp and release and whether the grasp holds anything.
+
+On a line of several stations the controller claims its target (:mod:`control.allocation`):
+each :class:`Command` carries the claims of its tick (``claimed`` when a pick starts,
+``released`` when it ends without the object, ``picked`` when the tool holds it), the boards
+the cell relays come in through :meth:`PickController.apply_claims`, the scheduler leaves what
+the allocation gives to other stations, and a target that a station further upstream claims as
+well is given up before the tool acts on it.
 """
 
 from __future__ import annotations
@@ -30,6 +38,7 @@ from enum import StrEnum
 import numpy as np
 from numpy.typing import NDArray
 
+from control.allocation import Allocator, Claim, ClaimState, claim_of
 from control.config import ControllerConfig
 from control.errors import ControlError, IkError, PlanningError
 from control.ik import Kinematics, tool_pose, yaw_of
@@ -76,24 +85,16 @@ FOLLOWING_PHASES = frozenset({Phase.DESCEND, Phase.DWELL, Phase.CLOSE})
 PURSUIT_PHASES = frozenset({Phase.APPROACH, *FOLLOWING_PHASES})
 """Phases that pursue a target: its predicted grasp point leads by ``command_latency_s``."""
 
-MAX_APPROACH_LEAD_S = 1.0
-"""Cap (s) on the approach's lead: it aims where the object will be that much later.
-
-The lead starts at the scheduler's estimate of the time to get above the object and shrinks by
-one control period per tick (the goal is the predicted meeting point, fixed in space), or to
-Ruckig's time left to reach the goal when that is shorter; at zero the approach follows the
-object itself. (A lead that could grow diverges when the arm is barely faster than the belt.)"""
-
 
 @dataclass(frozen=True, kw_only=True)
 class TcpMeasurement:
     """Measured tool: TCP ``position_m`` ``(x, y, z)`` in the world frame, ``yaw_rad``, and the
-    tool's measured command value ``tool_measured_m`` (a gripper's opening, from its joints;
-    NaN when not measured, which turns off the grip check)."""
+    tool's measured command value ``tool_measured`` (a gripper's opening in m, a suction cup's
+    vacuum fraction, from its joints; NaN when not measured, which turns off the grip check)."""
 
     position_m: Vec3
     yaw_rad: float
-    tool_measured_m: float = math.nan
+    tool_measured: float = math.nan
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -102,8 +103,9 @@ class Command:
 
     ``setpoint`` is the Ruckig state, ``commanded_position_m`` the setpoint plus feedback that
     went into the IK, ``joint_positions_rad`` ``(n_arm,)`` is always within the joint limits,
-    ``tool_command_m`` the tool's command (a gripper's opening), ``grasp_point_m`` is the
-    predicted grasp point of the target (None without a target).
+    ``tool_command`` the tool's command (a gripper's opening in m, a cup's vacuum 1 or 0),
+    ``grasp_point_m`` is the predicted grasp point of the target (None without a target),
+    ``claims`` the station's claims made in this tick (:mod:`control.allocation`).
     """
 
     t_s: float
@@ -112,8 +114,9 @@ class Command:
     setpoint: CartesianState
     commanded_position_m: Vec3
     joint_positions_rad: tuple[float, ...]
-    tool_command_m: float
+    tool_command: float
     grasp_point_m: Vec3 | None
+    claims: tuple[Claim, ...] = ()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -155,6 +158,8 @@ class Goal:
 
     target: CartesianTarget | JointGoal
     aim_m: Vec3 | None = None
+    min_duration_s: float | None = None
+    """Reach the Cartesian target no sooner than this (s) from now (None: time-optimal)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -173,6 +178,10 @@ class Transition:
 
 Handler = Callable[[TickInput], Goal | Transition]
 
+JOINT_REPLAN_UNTIL_S = 0.1
+"""The joint-space approach is re-planned to the target's latest prediction until this long
+(s) before it arrives; later corrections are left to the Cartesian approach that follows."""
+
 
 @dataclass(kw_only=True)
 class _Pursuit:
@@ -185,6 +194,8 @@ class _Pursuit:
     tracking_start_s: float = math.nan
     carrying: bool = False
     lift_target: CartesianTarget | None = None
+    counted: bool = False
+    """Whether this pick counted its target as a new one (a grip retry does not)."""
 
 
 @dataclass(kw_only=True, eq=False)
@@ -195,8 +206,8 @@ class _Motion:
     joint_mode: bool = False
     joint_remaining_s: float = 0.0
     yaw_remaining_s: float = 0.0
-    approach_lead_s: float = 0.0
-    approach_waiting: bool = False
+    meet_s: float = -math.inf
+    """When the Cartesian approach plans to be above the target (the scheduler's estimate)."""
     joint_approach: JointApproach | None = None
     ticks_since_command: int = 1
 
@@ -255,6 +266,8 @@ class PickController:
         self._motion = _Motion(drop_q=np.array(self.q_ready))
         self._pursuit = _Pursuit(grasp_yaw_rad=config.ready_yaw_rad)
         self._book = _Book()
+        self._allocator = Allocator(config)
+        self._claims_out: list[Claim] = []
         self._meetings: dict[int, JointApproach | None] = {}
         self._meetings_t_s = math.nan
         self._phase = Phase.RETURN
@@ -312,6 +325,11 @@ class PickController:
         """The message of the latest Ruckig/IK error (empty before the first)."""
         return self._book.last_error
 
+    def apply_claims(self, claims: Sequence[Claim]) -> None:
+        """Take a board of claims the cell relayed (:meth:`control.allocation.Allocator.
+        apply_board`); boards apply in the order they were relayed."""
+        self._allocator.apply_board(claims)
+
     def set_class_priorities(self, priorities: Mapping[str, float]) -> None:
         """Replace the scheduler's class priorities (larger is picked first) from now on."""
         scheduler = replace(self._cfg.scheduler, class_priorities=dict(priorities))
@@ -353,7 +371,7 @@ class PickController:
             position = self._planner.state.position_m
         else:
             self._motion.joint_mode = False
-            self._step_cartesian(plan.target, now)
+            self._step_cartesian(plan.target, now, min_duration_s=plan.min_duration_s)
             position = self._command_cartesian(t_s, measured_tcp)
         target = self._pursuit.target
         return Command(
@@ -363,9 +381,29 @@ class PickController:
             setpoint=self._planner.state,
             commanded_position_m=position,
             joint_positions_rad=tuple(float(v) for v in self._commander.q),
-            tool_command_m=self._tool_command_m(),
+            tool_command=self._tool_command(),
             grasp_point_m=plan.aim_m,
+            claims=self._take_claims(),
         )
+
+    def _take_claims(self) -> tuple[Claim, ...]:
+        claims = tuple(self._claims_out)
+        self._claims_out.clear()
+        return claims
+
+    def _claim(self, state: ClaimState, t_s: float) -> None:
+        """Publish (with the tick's command) this station's claim of ``state`` on its target."""
+        target = self._pursuit.target
+        if target is not None:
+            self._claims_out.append(
+                claim_of(
+                    self._cfg.station.name,
+                    target,
+                    t_s,
+                    state,
+                    self._cfg.allocation.min_claim_radius_m,
+                )
+            )
 
     def _plan(self, now: TickInput) -> Goal:
         """Run the phase handlers of this tick until one returns the tick's goal."""
@@ -383,7 +421,9 @@ class PickController:
 
     def _check_target(self, now: TickInput) -> bool:
         """In a phase that pursues a target: refresh it, and abort the pick when it is lost
-        (approach) or past the pick window (until the gripper closes). True when aborted."""
+        (approach) or past the pick window (until the gripper closes); give the target up when
+        a station further upstream claims it too (until the gripper closes). True when the
+        pursuit ended."""
         phase = self._phase
         if phase not in PURSUIT_PHASES:
             return False
@@ -392,6 +432,10 @@ class PickController:
             return True
         if phase == Phase.CLOSE:
             return False
+        target = self._pursuit.target
+        if target is not None and self._allocator.must_yield(target, now.t_s):
+            self._give_up(now.t_s)
+            return True
         obj = self._object_state(now.t_s, now.belt_velocity_mps)
         x_now = obj[0][0] if obj is not None else math.inf
         if x_now > self._cfg.pick_window_x_m[1]:
@@ -431,38 +475,35 @@ class PickController:
         period_s = self._cfg.motion.control_period_s
         if motion.joint_approach is not None:
             if not (motion.joint_mode and motion.joint_remaining_s <= period_s):
+                self._correct_joint_approach(now)
+                assert motion.joint_approach is not None
                 obj = self._object_state(now.t_s, now.belt_velocity_mps, now_s=now.t_s)
                 aim = obj[0] if obj is not None else None
                 return Goal(target=motion.joint_approach.goal, aim_m=aim)
             motion.joint_approach = None  # above the object, moving with it: Cartesian from here
-            motion.approach_lead_s = 0.0
             pursuit.grasp_yaw_rad = nearest_grasp_yaw(
                 pursuit.grasp_yaw_rad,
                 self._planner.state.position[3],
                 self._cfg.tool.grasp_yaw_period_rad,
             )
-        target, aim = self._following_target(
-            now.t_s, now.belt_velocity_mps, pick.approach_height_m, lead_s=motion.approach_lead_s
-        )
-        waiting = self._not_upstream(target)
-        motion.approach_waiting = waiting is not target
-        if motion.approach_waiting:  # the meeting point is not in the window yet: wait there
-            return Goal(target=waiting, aim_m=aim)
+        target, aim = self._following_target(now.t_s, now.belt_velocity_mps, pick.approach_height_m)
         yaw_error = abs(self._planner.state.position[3] - target.position[3])
-        on_object = motion.approach_lead_s <= period_s  # not on a point ahead of it
         yaw_ready = (
             yaw_error < pick.yaw_tolerance_rad or motion.yaw_remaining_s <= pick.descend_yaw_lead_s
         )
-        if on_object and yaw_ready and self._arrived(target):
+        if yaw_ready and self._arrived(target):
             self._set_phase(Phase.DESCEND, now.t_s)
             return Transition(phase=Phase.DESCEND, tracks=now.tracks, checked=True)
-        return Goal(target=target, aim_m=aim)
+        return Goal(target=target, aim_m=aim, min_duration_s=self._meeting_in_s(target, now.t_s))
 
     def _on_descend(self, now: TickInput) -> Goal | Transition:
-        """Down to the grasp point, moving with the object."""
+        """Down to the grasp point, moving with the object; then the dwell (a tool without one
+        goes on to its close in the same tick, once the yaw is aligned)."""
         target, aim = self._following_target(now.t_s, now.belt_velocity_mps, 0.0)
         if self._arrived(target):
             self._set_phase(Phase.DWELL, now.t_s)
+            if self._cfg.timing.dwell_s == 0.0:
+                return Transition(phase=Phase.DWELL, tracks=now.tracks, checked=True)
         return Goal(target=target, aim_m=aim)
 
     def _on_dwell(self, now: TickInput) -> Goal | Transition:
@@ -470,18 +511,20 @@ class PickController:
         pick = self._cfg.pick
         target, aim = self._following_target(now.t_s, now.belt_velocity_mps, 0.0)
         yaw_error = abs(self._planner.state.position[3] - target.position[3])
-        dwelt = now.t_s - self._phase_start_s >= pick.dwell_s - pick.close_overlap_s
-        if dwelt and yaw_error < pick.yaw_tolerance_rad:
+        timing = self._cfg.timing
+        dwelt = now.t_s - self._phase_start_s >= timing.dwell_s - timing.close_overlap_s
+        if dwelt and yaw_error < pick.yaw_tolerance_rad and self._commander.on_goal:
             self._set_phase(Phase.CLOSE, now.t_s)
         return Goal(target=target, aim_m=aim)
 
     def _on_close(self, now: TickInput) -> Goal | Transition:
         """The tool grasps while following; then the grip check and the lift."""
-        if now.t_s - self._phase_start_s >= self._cfg.pick.close_s:
+        if now.t_s - self._phase_start_s >= self._cfg.timing.close_s:
             if self._holds_nothing():
                 self._abort("grip_missed", now.t_s)
                 return Transition(phase=self._phase, tracks=())
             self._pursuit.carrying = True
+            self._claim("picked", now.t_s)
             self._start_lift(now.t_s)
             return Transition(phase=Phase.LIFT, tracks=now.tracks)
         target, aim = self._following_target(now.t_s, now.belt_velocity_mps, 0.0)
@@ -515,7 +558,7 @@ class PickController:
 
     def _on_release(self, now: TickInput) -> Goal | Transition:
         """The tool opens over the bin; then the pick is complete."""
-        if now.t_s - self._phase_start_s >= self._cfg.pick.release_s:
+        if now.t_s - self._phase_start_s >= self._cfg.timing.release_s:
             pursuit, book = self._pursuit, self._book
             book.completed += 1
             if pursuit.target is not None:
@@ -545,6 +588,24 @@ class PickController:
                 book.excluded.add(track_id)
             else:
                 book.targeted_ids.discard(track_id)  # may be scheduled again
+        self._end_pursuit(t_s)
+
+    def _give_up(self, t_s: float) -> None:
+        """Leave the target to a station further upstream that claims it too: not a target of
+        this station after all (``claimed_by_other``), and never chosen again."""
+        book, pursuit = self._book, self._pursuit
+        if pursuit.target is not None:
+            track_id = pursuit.target.track_id
+            book.targeted -= pursuit.counted
+            book.targeted_ids.discard(track_id)
+            book.excluded.add(track_id)
+            book.untargeted[track_id] = "claimed_by_other"
+        self._end_pursuit(t_s)
+
+    def _end_pursuit(self, t_s: float) -> None:
+        """Release the target (a ``released`` claim) and lift, or return."""
+        pursuit = self._pursuit
+        self._claim("released", t_s)
         following = self._phase in FOLLOWING_PHASES
         pursuit.target = None
         pursuit.tracking_start_s = math.nan
@@ -569,8 +630,9 @@ class PickController:
         intercept_s = decision.intercept_s
         pursuit.target = track
         pursuit.seen_s = t_s
-        if track.track_id not in book.grip_misses:  # a retry is not a new target
-            book.targeted += 1
+        pursuit.counted = track.track_id not in book.grip_misses  # a retry is not a new target
+        book.targeted += pursuit.counted
+        self._claim("claimed", t_s)
         book.targeted_ids.add(track.track_id)
         book.untargeted.pop(track.track_id, None)
         pursuit.tracking_start_s = t_s
@@ -593,9 +655,12 @@ class PickController:
                 tcp_yaw_rad=self._planner.state.position[3],
             )
         )
-        motion.approach_lead_s = min(decision.approach_s, MAX_APPROACH_LEAD_S)
-        motion.approach_waiting = False
         motion.yaw_remaining_s = math.inf  # until the first Cartesian step of this pick
+        motion.meet_s = (
+            t_s + decision.approach_s + self._cfg.scheduler.time_margin_s
+            if motion.joint_approach is None
+            else -math.inf
+        )
         self._set_phase(Phase.APPROACH, t_s)
         motion.joint_remaining_s = math.inf  # until the new joint move's first step
 
@@ -635,6 +700,7 @@ class PickController:
             excluded_ids=book.excluded | book.targeted_ids,
             tcp_yaw_rad=self._planner.state.position[3],
             approach_estimate=estimate,
+            allow=self._allocator.chooser(t_s),
         )
         for item in result.untargeted:
             if item.track_id not in book.targeted_ids:
@@ -675,6 +741,49 @@ class PickController:
             return None
         return meeting
 
+    def _correct_joint_approach(self, now: TickInput) -> None:
+        """Re-plan the joint-space approach when the target's latest prediction moved its
+        meeting point by more than half ``pick.arrive_tolerance_m``: the same arrival time, the
+        grasp yaw of the plan, from the joint planner's current state. Like the Cartesian goals,
+        the meeting point is the object's when the command takes effect (``command_latency_s``
+        after the tick).
+
+        The move is planned on a young track, whose velocity is still a few percent off: at
+        0.6 m/s the meeting point moves by 1-2 cm while the arm travels, and the arm would reach
+        the pick window's exit catching up with the object. Not in the last
+        :data:`JOINT_REPLAN_UNTIL_S` (the Cartesian approach corrects the rest), nor when the
+        arm is still in the move of the previous pick (its state is not the move's).
+        """
+        motion, cfg = self._motion, self._cfg
+        approach = motion.joint_approach
+        if approach is None or not motion.joint_mode:
+            return
+        goal = approach.goal
+        remaining_s = goal.arrive_s - now.t_s
+        arrive_cmd_s = goal.arrive_s + cfg.motion.command_latency_s  # as the Cartesian goals
+        obj = self._object_state(arrive_cmd_s, now.belt_velocity_mps, now_s=now.t_s)
+        if obj is None or remaining_s <= JOINT_REPLAN_UNTIL_S or goal.dq is None:
+            return
+        (x, y, z), (vx, vy, _) = obj
+        z += cfg.pick.approach_height_m
+        planned = self._kin.fk(goal.q).translation
+        if math.dist((x, y, z), planned) <= 0.5 * cfg.pick.arrive_tolerance_m:
+            return
+        result = self._kin.solve(tool_pose((x, y, z), approach.yaw_rad), goal.q)
+        if not result.success:
+            return
+        q = np.array(result.q)
+        dq = self._kin.joint_velocity(q, np.array([vx, vy, 0.0, 0.0]))
+        try:
+            self._joint_planner.start_move(q, dq, min_duration_s=remaining_s)
+        except PlanningError:
+            with contextlib.suppress(PlanningError):  # keep to the move as planned
+                self._joint_planner.start_move(goal.q, goal.dq, min_duration_s=remaining_s)
+            return
+        motion.joint_approach = JointApproach(
+            goal=JointGoal(q=q, dq=dq, arrive_s=goal.arrive_s), yaw_rad=approach.yaw_rad
+        )
+
     def _object_state(
         self, t_s: float, belt_velocity_mps: tuple[float, float], *, now_s: float | None = None
     ) -> tuple[Vec3, Vec3] | None:
@@ -711,22 +820,16 @@ class PickController:
         return t_s - pursuit.seen_s <= self._cfg.pick.lost_timeout_s
 
     def _following_target(
-        self,
-        t_s: float,
-        belt_velocity_mps: tuple[float, float],
-        height_m: float,
-        *,
-        lead_s: float = 0.0,
+        self, t_s: float, belt_velocity_mps: tuple[float, float], height_m: float
     ) -> tuple[CartesianTarget, Vec3]:
         """Ruckig goal ``height_m`` above the target's grasp point, and the grasp point itself.
 
-        The goal is the target's predicted state when the command takes effect, ``lead_s``
-        later still (the approach aims where the object will be when the arm gets there).
+        The goal is the target's predicted state (position and velocity) when the command takes
+        effect: the planner meets the moving object itself (:meth:`CartesianPlanner.step`).
         """
         t_cmd = t_s + self._cfg.motion.command_latency_s
-        obj = self._object_state(t_cmd + lead_s, belt_velocity_mps, now_s=t_s)
-        now = obj if lead_s == 0.0 else self._object_state(t_cmd, belt_velocity_mps, now_s=t_s)
-        if obj is None or now is None:
+        obj = self._object_state(t_cmd, belt_velocity_mps, now_s=t_s)
+        if obj is None:
             msg = "following without a target"
             raise ControlError(msg)
         (x, y, z), (vx, vy, _) = obj
@@ -734,21 +837,41 @@ class PickController:
             position=(x, y, z + height_m, self._pursuit.grasp_yaw_rad),
             velocity=(vx, vy, 0.0, 0.0),
         )
-        return target, now[0]
+        return target, (x, y, z)
 
-    def _not_upstream(self, target: CartesianTarget) -> CartesianTarget:
-        """An approach target upstream of the pick window waits at its entry, at rest.
+    def _meeting_in_s(self, target: CartesianTarget, t_s: float) -> float | None:
+        """Time (s) from now at which the approach meets the moving target: no sooner than the
+        scheduler planned (:attr:`_Motion.meet_s`), nor than the target is a run-up past the
+        pick window's entry (the distance in which the arm, from rest, gets to the belt's
+        speed). None: as soon as the planner can.
 
-        Chasing an object upstream takes the arm to the edge of its workspace; it meets the
-        object where the window begins instead, and follows it from there.
+        The planner meets the object itself, moving with it, at that time: where the scheduler
+        found the arm can reach it, in the window (the arm does not chase it upstream, to the
+        edge of the workspace), and never waiting at rest at the window's entry while the
+        object comes (the arm would then have to catch up with it).
         """
-        x_min = self._cfg.pick_window_x_m[0]
-        if target.position[0] >= x_min:
-            return target
-        return CartesianTarget(position=(x_min, *target.position[1:]))
+        x, vx = target.position[0], target.velocity[0]
+        until_s = self._motion.meet_s - t_s
+        if vx > 0.0:
+            # a run-up past the entry, and a control period (the setpoints are samples of it)
+            run_up_m = self._run_up(vx)[1] + vx * self._cfg.motion.control_period_s
+            x_entry = self._cfg.pick_window_x_m[0] + run_up_m
+            until_s = max(until_s, (x_entry - x) / vx)
+        return until_s if until_s > self._cfg.motion.control_period_s else None
+
+    def _run_up(self, speed_mps: float) -> tuple[float, float]:
+        """Time (s) and distance (m) along x in which the TCP gets from rest to ``speed_mps``
+        (a jerk-limited ramp at the x limits)."""
+        motion = self._cfg.motion
+        a, j = motion.max_acceleration[0], motion.max_jerk[0]
+        time_s = speed_mps / a + a / j
+        return time_s, 0.5 * speed_mps * time_s
 
     def _arrived(self, target: CartesianTarget) -> bool:
-        """True when the setpoint is on the moving target (position and velocity)."""
+        """True when the setpoint is on the moving target (position and velocity) and the joint
+        command on the setpoint (not still catching up within the joint limits)."""
+        if not self._commander.on_goal:
+            return False
         state = self._planner.state
         period_s = self._cfg.motion.control_period_s
         previous = [
@@ -761,24 +884,27 @@ class PickController:
         )
 
     # -- the tool -----------------------------------------------------------------------------
-    def _grasp_command_m(self) -> float:
+    def _grasp_command(self) -> float:
         """The tool's command when it grasps the target."""
         target = self._pursuit.target
         width = target.width_m if target is not None else 0.0
-        return self._cfg.tool.grasp_command_m(width, self._cfg.pick.grip_squeeze_m)
+        return self._cfg.tool.grasp_command(width, self._cfg.pick.grip_squeeze_m)
 
-    def _tool_command_m(self) -> float:
-        grasping = self._phase == Phase.CLOSE or (
-            self._pursuit.carrying and self._phase in (Phase.LIFT, Phase.CARRY)
+    def _tool_command(self) -> float:
+        phase = self._phase
+        grasping = (
+            phase == Phase.CLOSE
+            or (self._pursuit.carrying and phase in (Phase.LIFT, Phase.CARRY))
+            or (self._cfg.timing.grasp_on_descent and phase in (Phase.DESCEND, Phase.DWELL))
         )
-        return self._grasp_command_m() if grasping else self._cfg.tool.open_command_m
+        return self._grasp_command() if grasping else self._cfg.tool.open_command
 
     def _holds_nothing(self) -> bool:
         """The tool, commanded to grasp, measured within ``pick.grip_check_margin_m`` of its
         command: nothing held it back (:meth:`~control.tools.ControllerTool.holds_nothing`)."""
         return self._cfg.tool.holds_nothing(
-            self._measured.tool_measured_m,
-            self._grasp_command_m(),
+            self._measured.tool_measured,
+            self._grasp_command(),
             self._cfg.pick.grip_check_margin_m,
         )
 
@@ -789,7 +915,8 @@ class PickController:
     def _sync_cartesian(self, q: FloatArray, dq: FloatArray) -> None:
         oMtool = self._kin.fk(q)  # noqa: N806
         p = oMtool.translation
-        v = self._kin.tcp_velocity(q, dq)
+        vmax = self._cfg.motion.max_velocity
+        v = np.clip(self._kin.tcp_velocity(q, dq), -np.asarray(vmax), np.asarray(vmax))
         self._planner.reset(
             CartesianState(
                 position=(float(p[0]), float(p[1]), float(p[2]), yaw_of(oMtool)),
@@ -800,9 +927,8 @@ class PickController:
     def _step_joint(self, goal: JointGoal) -> None:
         motion = self._motion
         if not motion.joint_mode:
-            q = self._commander.q
-            velocity = np.asarray(self._planner.state.velocity, dtype=np.float64)
-            self._joint_planner.reset(q, self._kin.joint_velocity(q, velocity))
+            # the joint move continues the commands' own velocity (the arm's, within limits)
+            self._joint_planner.reset(self._commander.q, self._commander.dq)
             motion.joint_mode = True
         try:
             step = (
@@ -814,19 +940,16 @@ class PickController:
             self._book.error("ruckig_error", f"{self._phase}: {exc}")
             return
         motion.joint_remaining_s = step.remaining_s
-        self._commander.reset(step.q)
+        self._commander.reset(step.q, step.dq)
         self._sync_cartesian(step.q, step.dq)
 
-    def _step_cartesian(self, target: CartesianTarget, now: TickInput) -> None:
+    def _step_cartesian(
+        self, target: CartesianTarget, now: TickInput, *, min_duration_s: float | None = None
+    ) -> None:
         motion = self._motion
         try:
-            step = self._planner.step(target)
+            step = self._planner.step(target, min_duration_s=min_duration_s)
             motion.yaw_remaining_s = step.yaw_remaining_s
-            if self._phase == Phase.APPROACH and not motion.approach_waiting:
-                period_s = self._cfg.motion.control_period_s
-                motion.approach_lead_s = max(
-                    0.0, min(motion.approach_lead_s - period_s, step.position_remaining_s)
-                )
         except PlanningError as exc:
             self._book.error("ruckig_error", f"{self._phase}: {exc}")
             if self._pursuit.target is not None and not self._pursuit.carrying:
@@ -857,8 +980,17 @@ class PickController:
                 position, setpoint.position[3], ticks=motion.ticks_since_command
             )
             motion.ticks_since_command = 1
+            if not self._commander.on_goal and self._phase in FOLLOWING_PHASES:
+                # the arm was told to go where the command is, not to the setpoint: the
+                # feedback compares it with that, and does not wind up on the command's lag
+                lag = np.asarray(position) - self._kin.fk(self._commander.q).translation
+                self._feedback.shift_last((-float(lag[0]), -float(lag[1]), -float(lag[2])))
+            elif not self._commander.on_goal and self._phase == Phase.APPROACH:
+                # the setpoint ran ahead of what the joints can do: plan on from where they are
+                self._sync_cartesian(self._commander.q, self._commander.dq)
         except IkError as exc:
             self._book.error("ik_failure", f"{self._phase}: {exc}")
+            self._commander.brake()
             motion.ticks_since_command += 1
             limit = self._cfg.pick.ik_failures_to_abort
             if (

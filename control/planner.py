@@ -118,9 +118,12 @@ class _AxisGroup:
         acceleration: list[float],
         limits: tuple[list[float], list[float], list[float], list[float]],
         period_s: float,
+        min_duration_s: float | None = None,
     ) -> tuple[list[float], list[float], list[float], float]:
-        """New relative (position, velocity, acceleration) after ``period_s`` and time left."""
+        """New relative (position, velocity, acceleration) after ``period_s`` and time left;
+        the goal is reached no sooner than ``min_duration_s`` from now (when given)."""
         inp = self.input
+        inp.minimum_duration = min_duration_s
         inp.current_position = relative_position
         inp.current_velocity = relative_velocity
         inp.current_acceleration = acceleration
@@ -180,18 +183,11 @@ class CartesianPlanner:
             raise PlanningError(msg)
         self._state = state
 
-    def step(self, target: CartesianTarget, *, speed_scale: float = 1.0) -> PlannerStep:
-        """Advance one control period towards a target moving at constant velocity.
-
-        ``target.position`` is where the target is when the new setpoint takes effect and
-        ``target.velocity`` how it moves (the object's velocity, or zero for a fixed point).
-        Ruckig plans in the frame moving with the target (relative goal: zero offset, zero
-        relative velocity, velocity limits shifted by the target velocity), so the world
-        trajectory intercepts the moving target exactly and then moves with it (feed-forward of
-        the target velocity). ``speed_scale`` in (0, 1] scales the velocity and acceleration
-        limits. Raises ``PlanningError`` for non-finite targets, a target velocity at or above
-        the limits or any other Ruckig error; the state is then unchanged.
-        """
+    def _relative(
+        self, target: CartesianTarget, speed_scale: float
+    ) -> tuple[list[float], list[float], tuple[list[float], list[float], list[float], list[float]]]:
+        """The state relative to the moving target, and the limits in its frame (see
+        :meth:`step`)."""
         values = (*target.position, *target.velocity)
         if not all(math.isfinite(v) for v in values):
             msg = f"non-finite Ruckig target {target}"
@@ -214,7 +210,31 @@ class CartesianPlanner:
         v_hi = [limit - v for v, limit in zip(target.velocity, vmax, strict=True)]
         v_lo = [-limit - v for v, limit in zip(target.velocity, vmax, strict=True)]
         amax = [a * speed_scale for a in motion.max_acceleration]
-        jmax = list(motion.max_jerk)
+        return relative, relative_velocity, (v_lo, v_hi, amax, list(motion.max_jerk))
+
+    def step(
+        self,
+        target: CartesianTarget,
+        *,
+        speed_scale: float = 1.0,
+        min_duration_s: float | None = None,
+    ) -> PlannerStep:
+        """Advance one control period towards a target moving at constant velocity.
+
+        ``target.position`` is where the target is when the new setpoint takes effect and
+        ``target.velocity`` how it moves (the object's velocity, or zero for a fixed point).
+        Ruckig plans in the frame moving with the target (relative goal: zero offset, zero
+        relative velocity, velocity limits shifted by the target velocity), so the world
+        trajectory intercepts the moving target exactly and then moves with it (feed-forward of
+        the target velocity). ``speed_scale`` in (0, 1] scales the velocity and acceleration
+        limits. With ``min_duration_s`` x, y and z meet the target no sooner than that (s) from
+        now (Ruckig's minimum duration; a longer time-optimal trajectory is not shortened).
+        Raises ``PlanningError`` for non-finite targets, a target velocity at or above
+        the limits or any other Ruckig error; the state is then unchanged.
+        """
+        relative, relative_velocity, (v_lo, v_hi, amax, jmax) = self._relative(target, speed_scale)
+        state = self._state
+        period_s = self._motion.control_period_s
         try:
             p3, v3, a3, left_xyz = self._xyz.solve(
                 relative[:3],
@@ -222,6 +242,7 @@ class CartesianPlanner:
                 list(state.acceleration[:3]),
                 (v_lo[:3], v_hi[:3], amax[:3], jmax[:3]),
                 period_s,
+                min_duration_s,
             )
             p1, v1, a1, left_yaw = self._yaw.solve(
                 relative[3:],
@@ -269,6 +290,12 @@ class FeedbackTerm:
         self._integral = np.zeros(3)
         self._history.clear()
 
+    def shift_last(self, offset_m: tuple[float, float, float]) -> None:
+        """Move the latest setpoint of the history by ``offset_m`` (where the arm was actually
+        commanded to go when the joint command could not reach the setpoint)."""
+        if self._history:
+            self._history[-1] = self._history[-1] + np.asarray(offset_m, dtype=np.float64)
+
     def correction(
         self,
         setpoint_m: tuple[float, float, float],
@@ -294,46 +321,75 @@ class FeedbackTerm:
         return (float(out[0]), float(out[1]), float(out[2]))
 
 
+ON_GOAL_RAD = 2e-3
+"""A joint command this close to its IK solution (every joint) has landed on it."""
+
+
 class JointCommander:
-    """Cartesian setpoint to joint positions with the IK warm-started from the last command."""
+    """Cartesian setpoint to joint positions with the IK warm-started from the last command.
+
+    The joint commands form a trajectory within the robot's joint velocity limits (times
+    ``motion.joint_velocity_margin``) and datasheet acceleration limits, sampled every control
+    period: between two commands no joint's velocity changes by more than its acceleration
+    limit times the period. An arm that follows commands only within those limits (the real
+    one, and the twin) then follows these exactly, with no lag of its own. Each IK solution is
+    a moving goal: while the goal is reachable within the limits the command lands on it;
+    otherwise each joint heads for it as fast as its limits allow, braking in time not to
+    overshoot it (the tool lags and catches up).
+    """
 
     def __init__(self, kinematics: Kinematics, motion: MotionConfig, q_init: FloatArray) -> None:
-        """Start from ``q_init`` ``(n_arm,) float`` (clipped into the limits)."""
+        """Start at rest at ``q_init`` ``(n_arm,) float`` (clipped into the limits)."""
         self._kin = kinematics
-        self._max_step_rad = np.asarray(
-            kinematics.velocity_limit_rps * motion.control_period_s * motion.joint_velocity_margin
-        )
+        self._dt_s = motion.control_period_s
+        self._vmax = np.asarray(kinematics.velocity_limit_rps * motion.joint_velocity_margin)
+        self._amax = np.asarray(kinematics.acceleration_limit_rps2, dtype=np.float64)
+        self._dv = self._amax * self._dt_s
         self._q = np.clip(
             np.asarray(q_init, dtype=np.float64), kinematics.lower_rad, kinematics.upper_rad
         )
+        self._dq = np.zeros_like(self._q)
+        self._goal = self._q.copy()
+        self._goal_dq = np.zeros_like(self._q)
         self.rate_limited = 0
-        """Commands that were slowed to the joint velocity limits."""
+        """Commands that could not land on the IK solution within the joint limits."""
+        self.on_goal = True
+        """Whether the last command landed on its IK solution (False while catching up)."""
 
     @property
     def q(self) -> FloatArray:
-        """The last accepted joint command ``(n_arm,) float``."""
+        """The last joint command ``(n_arm,) float``."""
         return self._q.copy()
 
-    def reset(self, q: FloatArray) -> None:
-        """Continue from ``q`` (e.g. measured joint positions)."""
+    @property
+    def dq(self) -> FloatArray:
+        """The joint velocity of the last command ``(n_arm,) float`` (rad/s)."""
+        return self._dq.copy()
+
+    def reset(self, q: FloatArray, dq: FloatArray | None = None) -> None:
+        """Continue from ``q`` moving at ``dq`` (None: at rest), e.g. a joint-space move's
+        latest step."""
         self._q = np.clip(np.asarray(q, dtype=np.float64), self._kin.lower_rad, self._kin.upper_rad)
+        velocity = np.zeros_like(self._q) if dq is None else np.asarray(dq, dtype=np.float64)
+        self._dq = np.clip(np.nan_to_num(velocity), -self._vmax, self._vmax)
+        self._goal = self._q.copy()
+        self._goal_dq = self._dq.copy()
+        self.on_goal = True
 
     def command(
         self, position_m: tuple[float, float, float], yaw_rad: float, *, ticks: int = 1
     ) -> IkResult:
         """Solve the IK for the setpoint and move the command towards it.
 
-        ``ticks`` is the number of control periods since the last accepted command. A solution
-        that would move some joint faster than its velocity limit (times
-        ``joint_velocity_margin``) allows is approached at that limit: the whole joint step is
-        scaled down uniformly, so the tool keeps its direction and lags; ``rate_limited`` counts
-        those ticks. Raises ``IkError`` when the setpoint is not finite, the IK does not
-        converge or the solution is outside the joint limits; the last command is then kept.
+        ``ticks`` is the number of control periods since the last solved setpoint (the goal's
+        velocity is estimated over them). Raises ``IkError`` when the setpoint is not finite,
+        the IK does not converge or the solution is outside the joint limits; the command is
+        then unchanged (call :meth:`brake` to go on within the limits).
         """
         if not all(math.isfinite(v) for v in (*position_m, yaw_rad)):
             msg = f"non-finite Cartesian setpoint {position_m}, yaw {yaw_rad}"
             raise IkError(msg)
-        result = self._kin.solve(tool_pose(position_m, yaw_rad), self._q)
+        result = self._kin.solve(tool_pose(position_m, yaw_rad), self._goal)  # its branch
         if not result.success:
             msg = (
                 f"IK did not converge for position {position_m} yaw {yaw_rad:.3f} "
@@ -343,15 +399,42 @@ class JointCommander:
         if not self._kin.within_limits(result.q):
             msg = f"IK solution {result.q} is outside the joint limits"
             raise IkError(msg)
-        step = result.q - self._q
-        allowed = self._max_step_rad * max(ticks, 1)
-        largest = float(np.max(np.abs(step) / allowed))
-        if largest > 1.0:
-            self.rate_limited += 1
-            step = step / largest
-        # a convex combination of two configurations inside the box limits stays inside
-        self._q = self._q + step
+        goal = np.asarray(result.q, dtype=np.float64)
+        goal_dq = np.clip(
+            (goal - self._goal) / (self._dt_s * max(ticks, 1)), -self._vmax, self._vmax
+        )
+        self._goal, self._goal_dq = goal, goal_dq
+        self._advance(goal, goal_dq)
         return result
+
+    def brake(self) -> None:
+        """One control period on without a goal (the IK failed): every joint slows down at its
+        acceleration limit, and stops at its position limits."""
+        dq = np.sign(self._dq) * np.maximum(np.abs(self._dq) - self._dv, 0.0)
+        self._move(dq)
+        self.on_goal = False
+        self._goal, self._goal_dq = self._q.copy(), self._dq.copy()
+
+    def _advance(self, goal: FloatArray, goal_dq: FloatArray) -> None:
+        """One control period towards ``goal`` moving at ``goal_dq``: land on it when the
+        limits allow, otherwise close in as fast as they allow without overshooting."""
+        dt, dv = self._dt_s, self._dv
+        # the error relative to the goal as it was a period ago (where the command is now)
+        ahead = goal - goal_dq * dt - self._q
+        # closing speed relative to the goal from which the joint can still stop on it
+        brake = np.sqrt(dv * dv + 2.0 * self._amax * np.abs(ahead)) - dv
+        relative = np.clip(ahead / dt, -brake, brake)
+        dq = np.clip(goal_dq + relative, self._dq - dv, self._dq + dv)
+        dq = np.clip(dq, -self._vmax, self._vmax)
+        self._move(dq)
+        self.on_goal = float(np.max(np.abs(self._q - goal))) <= ON_GOAL_RAD
+        self.rate_limited += not self.on_goal
+
+    def _move(self, dq: FloatArray) -> None:
+        q = self._q + dq * self._dt_s
+        clipped = np.clip(q, self._kin.lower_rad, self._kin.upper_rad)
+        self._dq = np.where(clipped == q, dq, (clipped - self._q) / self._dt_s)
+        self._q = clipped
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -395,8 +478,10 @@ class JointPlanner:
         """Plans where time synchronisation failed and the fallback solved the move."""
 
     def reset(self, q: FloatArray, dq: FloatArray | None = None) -> None:
-        """Continue from ``q`` (and ``dq``, clipped to the velocity limits), zero acceleration."""
-        vmax = np.asarray(self._input.max_velocity)
+        """Continue from ``q`` (and ``dq``, clipped to the joint velocity limits), zero
+        acceleration. A ``dq`` above the transfer speed (``transfer_speed_scale``) is kept: the
+        move brakes down to it within the acceleration limits rather than jump to it."""
+        vmax = np.asarray(self._kin.velocity_limit_rps)
         self._q = np.clip(np.asarray(q, dtype=np.float64), self._kin.lower_rad, self._kin.upper_rad)
         velocity = np.zeros_like(self._q) if dq is None else np.asarray(dq, dtype=np.float64)
         self._dq = np.clip(np.nan_to_num(velocity), -vmax, vmax)

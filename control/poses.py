@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from control.config import ControllerConfig
 from control.errors import PlanningError
-from control.ik import Kinematics, tool_pose
+from control.ik import Kinematics, tool_pose, yaw_of
 from control.planner import JointPlanner
 from control.scheduler import grasp_height_m, nearest_grasp_yaw
 from control.tracking import Track
@@ -98,8 +98,12 @@ def solve_meeting(
 
     The meeting time is a fixed point: the time-optimal duration of the move (Ruckig, from the
     current joint state of ``joint_planner``) to the pose above where the object will be then.
+    (An object still upstream of the pick window then is left to the scheduler, ``upstream``:
+    committing to it earlier would plan the move on a young track's velocity, far ahead.)
     The IK is seeded by the ready posture turned at the base towards the meeting point; of the
-    grasp yaws the one that moves the joints least is kept. None when no pose or move is found.
+    grasp yaws the one that moves the joints least is kept (a tool whose grasp does not depend
+    on the object's yaw takes the yaw of that turned ready posture, so its wrist keeps the ready
+    angle from pick to pick). None when no pose or move is found.
     """
     period_rad = config.tool.grasp_yaw_period_rad
     vx, vy = track.velocity_mps
@@ -107,6 +111,9 @@ def solve_meeting(
     dt_s = JOINT_APPROACH_GUESS_S
     near = nearest_grasp_yaw(track.yaw_rad, tcp_yaw_rad, period_rad)
     yaws: tuple[float, ...] = (near, near + period_rad)
+    if period_rad == 0.0:
+        x, y = track.position_at(t_s + dt_s)
+        yaws = (yaw_of(kinematics.fk(_turned_ready(kinematics, config, q_ready, x, y))),)
     q_goal: FloatArray | None = None
     yaw_goal = near
     for _ in range(5):
@@ -149,9 +156,12 @@ def best_grasp_yaw(
 
     The one nearest the current yaw, unless the last joint (the one that turns the tool,
     +-2.9 rad on the Panda) would end within :data:`WRIST_MARGIN_RAD` of a limit at the
-    predicted intercept point; then the one with more room there.
+    predicted intercept point; then the one with more room there. A tool whose grasp does not
+    depend on the object's yaw keeps the current yaw.
     """
     period_rad = config.tool.grasp_yaw_period_rad
+    if period_rad == 0.0:
+        return tcp_yaw_rad
     near = nearest_grasp_yaw(track.yaw_rad, tcp_yaw_rad, period_rad)
     dt_s = intercept_s if math.isfinite(intercept_s) else 0.0
     x = track.position_m[0] + track.velocity_mps[0] * dt_s
@@ -221,7 +231,9 @@ def drop_pose(
     seed = np.array(q_now)
     seed[0] = np.clip(seed[0] + turn, lower, upper)
     best: FloatArray | None = None
-    for yaw in (yaw_now + turn, yaw_now + turn + config.tool.grasp_yaw_period_rad):
+    period_rad = config.tool.grasp_yaw_period_rad
+    yaws = (yaw_now + turn,) if period_rad == 0.0 else (yaw_now + turn, yaw_now + turn + period_rad)
+    for yaw in yaws:
         result = kinematics.solve(tool_pose(drop_m, yaw), seed)
         if result.success and (
             best is None or abs(result.q[-1] - q_now[-1]) < abs(best[-1] - q_now[-1])

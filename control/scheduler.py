@@ -1,13 +1,15 @@
 """Choose the next object to pick, and say why every other object is not picked.
 
 An object is a candidate when its class has a bin at this station, the tool can grasp an object
-of its size (:meth:`~control.tools.ControllerTool.misfit`), the arm can intercept it inside the
-station's pick window and finish the dwell before it leaves the window, its grasp point stays
-within reach until the tool has closed, and no other object lies in the footprints the tool
-comes down on (:meth:`~control.tools.ControllerTool.footprints`). The arm can intercept an
+of its size (:meth:`~control.tools.ControllerTool.misfit`), the line's allocation lets this
+station have it (:mod:`control.allocation`), the arm can intercept it inside the station's pick
+window and finish the dwell before it leaves the window, its grasp point stays within reach
+until the tool has closed, and no other object lies in the footprints the tool comes down on
+(:meth:`~control.tools.ControllerTool.footprints`). The arm can intercept an
 object when it can be above it inside the window: the earliest such meeting is searched, not
 iterated. Among candidates the highest class priority wins, then the least time left in the
-window, then the shortest time to intercept.
+window, then the shortest time to intercept; with ``scheduler.rank: cycle`` (throughput
+first) the shortest time to intercept and carry to the bin comes before the time left.
 """
 
 from __future__ import annotations
@@ -24,7 +26,10 @@ UNTARGETED_REASONS: tuple[str, ...] = (
     "no_bin",
     "too_wide",
     "too_flat",
+    "too_small",
     "excluded",
+    "claimed_by_other",
+    "left_for_downstream",
     "too_late",
     "upstream",
     "out_of_reach",
@@ -80,17 +85,9 @@ def move_time_s(
 
 
 def grasp_z_m(height_m: float, config: ControllerConfig) -> float:
-    """World z of the grasp point of an object ``height_m`` tall lying on the belt.
-
-    ``pick.grasp_below_top_m`` below its top, but not below ``pick.grasp_height_fraction`` of
-    its height nor ``pick.min_grasp_height_m`` above the belt surface.
-    """
-    pick = config.pick
-    return config.belt.surface_z_m + max(
-        height_m - pick.grasp_below_top_m,
-        height_m * pick.grasp_height_fraction,
-        pick.min_grasp_height_m,
-    )
+    """World z of the grasp point of an object ``height_m`` tall lying on the belt: where the
+    tool grasps it (:meth:`~control.tools.ControllerTool.grasp_height_m`)."""
+    return config.belt.surface_z_m + config.tool.grasp_height_m(height_m, config.pick)
 
 
 def base_lift_m(track: Track, config: ControllerConfig) -> float:
@@ -114,7 +111,10 @@ _BISECTIONS = 7
 
 def nearest_grasp_yaw(yaw_rad: float, reference_rad: float, period_rad: float) -> float:
     """``yaw_rad + k * period_rad`` closest to ``reference_rad``: of the grasp yaws a tool
-    symmetric under turns of ``period_rad`` (pi for a parallel gripper) allows, the nearest."""
+    symmetric under turns of ``period_rad`` (pi for a parallel gripper) allows, the nearest.
+    A period of 0 (a tool whose grasp does not depend on the object's yaw): ``reference_rad``."""
+    if period_rad == 0.0:
+        return reference_rad
     return yaw_rad + period_rad * round((reference_rad - yaw_rad) / period_rad)
 
 
@@ -139,10 +139,14 @@ def approach_time_s(
     *,
     tcp_yaw_rad: float | None = None,
 ) -> float:
-    """Earliest time from ``now_s`` at which the TCP can be above the moving track's grasp point.
+    """Earliest time from ``now_s`` at which the TCP can be above the moving track's grasp point,
+    moving with it.
 
-    The first ``t >= 0`` with ``move_time(|tcp - p(now + t)|) <= t``, ``p`` the track's
-    constant-velocity prediction at approach height: a scan in 0.1 s steps, then bisection to
+    The first ``t >= 0`` with ``move_time(|tcp - p(now + t)|) + reverse_s <= t``, ``p`` the
+    track's constant-velocity prediction at approach height, ``reverse_s`` the time to match
+    the track's speed along x when the TCP meets it moving against it (the meeting point is on
+    the track's upstream side of the TCP: the TCP has to turn round), ``|vx| / a``; moving with
+    the track, the speed matching overlaps the move. A scan in 0.1 s steps, then bisection to
     about 1 ms. (A fixed-point iteration on ``t`` oscillates for fast objects far upstream.)
     With ``tcp_yaw_rad`` the tool's turn to the grasp yaw bounds ``t`` from below as well
     (:func:`yaw_turn_s`). ``math.inf`` when there is no such time within
@@ -153,9 +157,12 @@ def approach_time_s(
     z = grasp_height_m(track, config) + config.pick.approach_height_m
     turn_s = 0.0 if tcp_yaw_rad is None else yaw_turn_s(track, tcp_yaw_rad, config)
 
+    vx = track.velocity_mps[0]
+
     def late(t_s: float) -> bool:
         x, y = track.position_at(now_s + t_s)
-        return move_time_s(math.dist(tcp_position_m, (x, y, z)), v, a, j) <= t_s
+        reverse_s = abs(vx) / a if (x - tcp_position_m[0]) * vx < 0.0 else 0.0
+        return move_time_s(math.dist(tcp_position_m, (x, y, z)), v, a, j) + reverse_s <= t_s
 
     lo = turn_s  # no meeting before the turn is done
     if lo > INTERCEPT_HORIZON_S:
@@ -206,6 +213,22 @@ def _corners(
     ]
 
 
+def _disc_overlap(
+    centre: tuple[float, float], radius_m: float, corners: list[tuple[float, float]]
+) -> bool:
+    """Whether a disc overlaps a rectangle (its corners in order): the rectangle's point
+    nearest the centre, in the rectangle's own axes, lies within the radius."""
+    (x0, y0), (x1, y1), _, (x3, y3) = corners
+    ox, oy = 0.5 * (x0 + corners[2][0]), 0.5 * (y0 + corners[2][1])
+    dx, dy = centre[0] - ox, centre[1] - oy
+    distance_sq = 0.0
+    for ex, ey in ((x0 - x1, y0 - y1), (x0 - x3, y0 - y3)):  # the two side directions
+        half = 0.5 * math.hypot(ex, ey)
+        along = abs(dx * ex + dy * ey) / (2.0 * half) if half > 0.0 else 0.0
+        distance_sq += max(0.0, along - half) ** 2
+    return distance_sq <= radius_m * radius_m
+
+
 def _overlap(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> bool:
     """Separating-axis test of two convex quadrilaterals (corner lists in order)."""
     for poly in (a, b):
@@ -231,6 +254,7 @@ def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) 
     grasp_z = grasp_height_m(track, config)
     areas = [
         (
+            f,
             _corners(track.position_m, track.yaw_rad, f.half_along_m, f.half_across_m),
             None if f.clear_above_tcp_m is None else grasp_z + f.clear_above_tcp_m - clearance,
         )
@@ -246,12 +270,37 @@ def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) 
             continue  # bounding circles apart: the rectangles cannot overlap
         footprint = _corners(other.position_m, other.yaw_rad, other.length_m / 2, other.width_m / 2)
         top_z = config.belt.surface_z_m + base_lift_m(other, config) + other.height_m
-        for corners, min_top_z in areas:
+        for area, corners, min_top_z in areas:
             if min_top_z is not None and not top_z >= min_top_z:
                 continue  # too low to reach this part of the tool
-            if _overlap(corners, footprint):
+            hit = (
+                _disc_overlap(track.position_m, area.half_along_m, footprint)
+                if area.disc
+                else _overlap(corners, footprint)
+            )
+            if hit:
                 return other.track_id
     return None
+
+
+def carry_time_s(track: Track, meet_s: float, config: ControllerConfig) -> float:
+    """Estimated time to carry ``track``, met at ``meet_s``, to its bin: the turn of the base
+    joint between the two bearings, at the robot's datasheet limits of that joint (0 without a
+    datasheet velocity, or a bin)."""
+    robot = config.robot
+    drop = config.bins.get(track.class_name)
+    if drop is None or not robot.joint_max_velocity_rps:
+        return 0.0
+    base = config.base_position_m
+    x, y = track.position_at(meet_s)
+    turn = math.atan2(drop[1] - base[1], drop[0] - base[0]) - math.atan2(y - base[1], x - base[0])
+    turn = abs(math.remainder(turn, 2.0 * math.pi))
+    return move_time_s(
+        turn,
+        robot.joint_max_velocity_rps[0] * config.motion.transfer_speed_scale,
+        robot.joint_max_acceleration_rps2[0],
+        robot.joint_max_jerk_rps3[0],
+    )
 
 
 def _static_reason(
@@ -291,11 +340,11 @@ def _timing_reason(
     intercept_s = approach_s + descend_after_s(config)
     x_min, x_max = config.pick_window_x_m
     x_meet, y_meet = track.position_at(now_s + intercept_s)
-    pick = config.pick
+    timing = config.timing
     x_done, y_done = track.position_at(
-        now_s + intercept_s + pick.dwell_s - pick.close_overlap_s + pick.close_s
+        now_s + intercept_s + timing.dwell_s - timing.close_overlap_s + timing.close_s
     )
-    x_dwelt, _ = track.position_at(now_s + intercept_s + pick.dwell_s)
+    x_dwelt, _ = track.position_at(now_s + intercept_s + timing.dwell_s)
     if x_dwelt > x_max or track.position_m[0] > x_max:
         return "too_late"
     x_above, _ = track.position_at(now_s + approach_s)
@@ -321,6 +370,7 @@ def schedule(
     excluded_ids: Collection[int] = (),
     tcp_yaw_rad: float | None = None,
     approach_estimate: Callable[[Track], float] | None = None,
+    allow: Callable[[Track], str | None] | None = None,
 ) -> Schedule:
     """Choose the next target among confirmed ``tracks`` (already predicted to ``now_s``).
 
@@ -328,7 +378,8 @@ def schedule(
     ``tcp_yaw_rad``, the tool's yaw now, adds the turn to each grasp yaw to its meeting time.
     ``approach_estimate(track)``, when given, replaces :func:`approach_time_s` as the time (s)
     until the arm can be above the track (``inf`` when it cannot): the joint-space approach
-    estimates its own move.
+    estimates its own move. ``allow(track)``, when given, is the line's allocation: the reason
+    this station must leave the track to another (:mod:`control.allocation`), or None.
     """
     x_max = config.pick_window_x_m[1]
     ranked: list[tuple[tuple[float, float, float, int], Track, float, float]] = []
@@ -338,6 +389,8 @@ def schedule(
         if not track.confirmed:
             continue
         reason = _static_reason(track, config, excluded_ids)
+        if reason is None and allow is not None:
+            reason = allow(track)
         approach_s = math.inf
         if reason is None:  # the intercept search only for tracks that could be picked
             approach_s = (
@@ -352,7 +405,11 @@ def schedule(
         vx = track.velocity_mps[0]
         time_left_s = (x_max - track.position_m[0]) / vx if vx > 1e-6 else math.inf
         priority = config.class_priorities.get(track.class_name, 0.0)
-        key = (-priority, time_left_s, approach_s + after_s, track.track_id)
+        if config.scheduler.rank == "cycle":
+            cycle_s = approach_s + after_s + carry_time_s(track, now_s + approach_s, config)
+            key = (-priority, cycle_s, time_left_s, track.track_id)
+        else:
+            key = (-priority, time_left_s, approach_s + after_s, track.track_id)
         ranked.append((key, track, approach_s, time_left_s))
     if not ranked:
         return Schedule(

@@ -2,10 +2,16 @@
 
 Generates the built-in procedural sample, meshes it, runs one closed-loop episode per belt speed
 (0.2, 0.4, 0.6 m/s: the twin node and the controller as two processes in lockstep, each on its
-own ROS domain, exactly as ``cdw-twin run``), writes the HTML report and prints summary tables:
-the meshed objects per class, and per speed the picks, success and miss rates, tracking time to
-4 mm, closed-loop round-trip latency and real-time factor. Everything goes under ``--out``
-(default ``out/demo``): ``sample/``, ``meshes/``, ``runs/speed_*`` and ``report/report.html``.
+own ROS domain, exactly as ``cdw-twin run``), then one episode of the sorting line
+(``experiments/scenarios/line.yaml``: several stations along the belt, one controller process
+each), writes the HTML report and prints summary tables: the meshed objects per class; per speed
+the picks, success and miss rates, tracking time to 4 mm, closed-loop round-trip latency and
+real-time factor; and per station of the line and for the whole line the picks per minute,
+recovery, success and miss rate. Everything goes under ``--out`` (default ``out/demo``):
+``sample/``, ``meshes/``, ``runs/speed_*``, ``runs/line`` and ``report/report.html``.
+
+The line's episode is shorter than the others (``--line-seconds``): in lockstep every station's
+controller must answer every tick, so the line runs slower than real time.
 """
 
 from __future__ import annotations
@@ -19,6 +25,10 @@ from collections import defaultdict
 from pathlib import Path
 
 SPEEDS_MPS = (0.2, 0.4, 0.6)
+LINE_SECONDS = 20.0
+"""Sim seconds of the line's episode."""
+LINE_SCENARIO = Path(__file__).resolve().parent / "scenarios" / "line.yaml"
+"""The line the demo runs after the single-station speeds."""
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -27,6 +37,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--images", type=int, default=24, help="sample images (24)")
     parser.add_argument("--seconds", type=float, default=40.0, help="episode length (40 s)")
     parser.add_argument("--seed", type=int, default=0, help="seed (0)")
+    parser.add_argument(
+        "--line-scenario", type=Path, default=LINE_SCENARIO, help="the line's scenario file"
+    )
+    parser.add_argument(
+        "--line-seconds",
+        type=float,
+        default=LINE_SECONDS,
+        help="line episode length (%(default)s s)",
+    )
 
 
 def _print_table(title: str, header: list[str], rows: list[list[str]]) -> None:
@@ -83,9 +102,48 @@ def _speed_row(run_dir: Path) -> list[str]:
     ]
 
 
-def run(args: argparse.Namespace) -> int:
-    """Sample, mesh, run closed-loop episodes, report, summarise."""
+def _run_episode(
+    out: Path, meshes: Path, args: argparse.Namespace, scenario: Path | None, speed: float | None
+) -> int:
+    """One lockstep episode through ``cdw-twin run`` into ``out``; returns its exit status."""
     from experiments import run as run_cmd
+
+    options = argparse.Namespace(
+        scenario=scenario,
+        speed=speed,
+        episodes=1,
+        seed=args.seed,
+        duration=args.line_seconds if scenario is not None else args.seconds,
+        mode="lockstep",
+        dataset=meshes,
+        cell=None,
+        out=out,
+        json=True,
+    )
+    with contextlib.redirect_stdout(io.StringIO()):
+        return run_cmd.run(options)
+
+
+def line_rows(run_dir: Path) -> list[list[str]]:
+    """The line table of a run folder's first episode: per station, then the line, the picks
+    per minute, recovery, success and miss rate (``episodes.json``)."""
+    row = json.loads((run_dir / "episodes.json").read_text(encoding="utf-8"))[0]
+    blocks = [*((f"  {k}", v) for k, v in row["stations"].items()), ("line", row)]
+    return [
+        [
+            name,
+            str(block["picked"]),
+            _fmt(block["pick_throughput_per_min"], ".1f"),
+            _fmt(block["recovery_rate"], ".2f"),
+            _fmt(block["success_rate"], ".2f"),
+            _fmt(block["miss_rate"], ".2f"),
+        ]
+        for name, block in blocks
+    ]
+
+
+def run(args: argparse.Namespace) -> int:
+    """Sample, mesh, run closed-loop episodes and the line, report, summarise."""
     from experiments.report import write_report
     from meshgen.config import MeshgenConfig
     from meshgen.pipeline import mesh_dataset
@@ -109,23 +167,19 @@ def run(args: argparse.Namespace) -> int:
     for speed in SPEEDS_MPS:
         run_dir = out / "runs" / f"speed_{speed:.1f}"
         print(f"closed loop at {speed:.1f} m/s, {args.seconds:.0f} s (lockstep) ...", flush=True)
-        options = argparse.Namespace(
-            scenario=None,
-            speed=speed,
-            episodes=1,
-            seed=args.seed,
-            duration=args.seconds,
-            mode="lockstep",
-            dataset=meshes,
-            cell=None,
-            out=run_dir,
-            json=True,
-        )
-        with contextlib.redirect_stdout(io.StringIO()):
-            code = run_cmd.run(options)
+        code = _run_episode(run_dir, meshes, args, None, speed)
         if code != 0:
             return code
         run_dirs.append(run_dir)
+    line_dir = out / "runs" / "line"
+    print(
+        f"the line ({args.line_scenario.name}), {args.line_seconds:.0f} s (lockstep) ...",
+        flush=True,
+    )
+    code = _run_episode(line_dir, meshes, args, args.line_scenario, None)
+    if code != 0:
+        return code
+    run_dirs.append(line_dir)
     report = write_report(run_dirs, out / "report")
     _print_table(
         f"Closed-loop episodes ({args.seconds:.0f} s each, lockstep, twin + controller processes)",
@@ -140,7 +194,14 @@ def run(args: argparse.Namespace) -> int:
             "RTT p99 ms",
             "RTF",
         ],
-        [_speed_row(d) for d in run_dirs],
+        [_speed_row(d) for d in run_dirs[:-1]],
+    )
+    line = json.loads((line_dir / "run.json").read_text(encoding="utf-8"))
+    _print_table(
+        f"The line: cell {line['cell']}, {len(line['stations'])} stations, "
+        f"{line['speed_mps']} m/s, {args.line_seconds:.0f} s (lockstep, a controller per station)",
+        ["station", "picks", "picks/min", "recovery", "success", "miss"],
+        line_rows(line_dir),
     )
     print(f"\nreport: {report}")
     return 0

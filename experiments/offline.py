@@ -8,6 +8,7 @@ is enough to recompute the scores exactly, for the line and for each station::
     metrics = offline_metrics(Path("runs/ep0/recording.mcap"))
     metrics["scores"]                       # == summary.json["scores"]
     metrics["stations"]["upstream"]         # == summary.json["stations"]["upstream"]["scores"]
+    metrics["bins"]["upstream"]["brick"]    # the purity of upstream's brick bin
     for log_time_ns, msg in read_topic(Path("runs/ep0/recording.mcap"), "/conveyor/state"):
         msg.header.stamp.sec, msg.speed_mps
 
@@ -185,11 +186,19 @@ def offline_metrics(recording: Path, cell: Path | str | None = None) -> dict[str
     Keys: ``recording``, ``complete`` (finished cleanly), ``message_counts`` (per topic),
     ``physics_hz``, ``steps``, ``duration_s``, ``events`` (count per type), ``scores`` (the
     line's, as ``summary.json`` ``scores``), ``stations`` (per station the events name, as
-    ``summary.json`` ``stations[name]["scores"]``), ``tracking`` (None) and ``tracking_note``
-    (why).
+    ``summary.json`` ``stations[name]["scores"]``), ``classes`` (per class, the metrics of
+    scope class), ``bins`` (per station and bin, the metrics of scope bin: purity),
+    ``tracking`` (None) and ``tracking_note`` (why).
     """
     from interfaces.cell import load_cell
-    from interfaces.metrics import count_events, event_scores, exit_station, station_names
+    from interfaces.metrics import (
+        bin_scores,
+        class_scores,
+        count_events,
+        event_scores,
+        exit_station,
+        station_names,
+    )
 
     line_exit = exit_station(load_cell(cell).stations)
 
@@ -216,6 +225,8 @@ def offline_metrics(recording: Path, cell: Path | str | None = None) -> dict[str
             name: event_scores(count_events(events, duration_s, station=name))
             for name in station_names(events)
         },
+        "classes": class_scores(events, duration_s, line_exit=line_exit),
+        "bins": bin_scores(events),
         "tracking": None,
         "tracking_note": TRACKING_NOTE,
     }

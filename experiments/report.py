@@ -17,14 +17,20 @@ of every run are pooled and grouped by belt speed. Figures:
 6. success and miss rate per speed with 95 % Wilson score intervals over the pooled counts
    (``success_rate`` = placed_correct / targeted, ``miss_rate`` = missed / processed: the
    metric table's rates, ``docs/metrics.md``);
-7. mesh-generation timing of the dataset against the reference (24 ms/image, 5.3 ms/object);
+7. line recovery against the number of stations of the run's cell, one line per belt speed:
+   the mean over the episodes (seeds) with its 95 % Student t interval
+   (:mod:`experiments.report_line`; ``cdw-twin report`` on a sweep over ``stations`` x speed);
+8. mesh-generation timing of the dataset against the reference (24 ms/image, 5.3 ms/object);
    meshgen records whole-run means only, so those are shown;
-8. source polygons (the dataset's annotation files when found next to it, else the pixel polygon
+9. source polygons (the dataset's annotation files when found next to it, else the pixel polygon
    meshgen recorded in ``scene.json``) over the generated footprints (bottom face of each mesh,
    placed at its ``scene.csv`` centroid) for up to four images.
 
-The tables give per belt speed and per episode the line's numbers and, when a run has several
-stations, per speed and station each station's. Every episode's numbers are
+The tables give per cell and belt speed and per episode the line's numbers (picks per minute,
+recovery, success, miss rate, ...) and, when a run has several stations, per cell, speed and
+station each station's; then recovery against the number of stations, recovery and purity per
+class, and the purity of each bin (runs of different cells at one speed are never pooled).
+Every episode's numbers are
 :func:`experiments.run.episode_metrics` of its folder (the events, the twin's summary and every
 controller's stats), the same as the run's ``episodes.json``.
 
@@ -47,6 +53,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from experiments import stats
+from experiments.report_line import (
+    BIN_COLUMNS,
+    CLASS_COLUMNS,
+    STATIONS_COLUMNS,
+    bin_rows,
+    class_rows,
+    fig_recovery_stations,
+    recovery_by_stations,
+)
 from interfaces.errors import CdwTwinError
 from interfaces.fileio import write_atomic
 from interfaces.metrics import BY_NAME, rate
@@ -80,11 +95,20 @@ class Episode:
     telemetry: dict[str, Any] | None
     metrics: dict[str, Any] | None
     """:func:`experiments.run.episode_metrics` of the folder (None when it cannot be read)."""
+    cell: str = ""
+    """The name of the cell the run used (``run.json``'s ``cell``)."""
+    stations: tuple[str, ...] = ()
+    """The stations of that cell (``run.json``'s ``stations``, else the episode's metrics)."""
 
     @property
     def name(self) -> str:
         """``<run folder>/<episode folder>``."""
         return f"{self.run_dir.name}/{self.folder.name}"
+
+    @property
+    def n_stations(self) -> int:
+        """How many stations the episode's cell has."""
+        return len(self.stations) or len((self.metrics or {}).get("stations") or {}) or 1
 
 
 @dataclass(frozen=True)
@@ -104,12 +128,26 @@ class RunData:
         """Episodes at belt speed ``speed``."""
         return [e for e in self.episodes if e.speed_mps == speed]
 
-    def stations(self) -> list[str]:
-        """Every station some episode has metrics for, in order of first appearance."""
+    def stations(self, episodes: Sequence[Episode] | None = None) -> list[str]:
+        """Every station some episode (of ``episodes``, default all) has metrics for, in order
+        of first appearance."""
         seen: dict[str, None] = {}
-        for ep in self.episodes:
+        for ep in self.episodes if episodes is None else episodes:
             seen.update(dict.fromkeys((ep.metrics or {}).get("stations") or {}))
         return list(seen)
+
+    def groups(self) -> list[tuple[str, float]]:
+        """The distinct (cell, belt speed) of the episodes, by number of stations, cell and
+        speed: the runs the tables pool (episodes without a speed are left out)."""
+        keys: set[tuple[int, str, float]] = set()
+        for e in self.episodes:
+            if e.speed_mps is not None:
+                keys.add((e.n_stations, e.cell, e.speed_mps))
+        return [(cell, speed) for _, cell, speed in sorted(keys)]
+
+    def in_group(self, cell: str, speed: float) -> list[Episode]:
+        """Episodes of cell ``cell`` at belt speed ``speed``."""
+        return [e for e in self.episodes if e.cell == cell and e.speed_mps == speed]
 
 
 # -- statistics -------------------------------------------------------------------------------
@@ -207,6 +245,8 @@ def _episode(run_dir: Path, folder: Path, run: dict[str, Any], notes: list[str])
         speed = run.get("speed_mps")
     seed = summary.get("seed") if summary else None
     complete = summary is not None and summary.get("complete") is not False
+    metrics = _metrics(folder, str(run.get("mode", "")), notes) if complete else None
+    stations = run.get("stations") or list((metrics or {}).get("stations") or {})
     return Episode(
         run_dir=run_dir,
         folder=folder,
@@ -214,7 +254,9 @@ def _episode(run_dir: Path, folder: Path, run: dict[str, Any], notes: list[str])
         seed=None if seed is None else int(seed),
         summary=summary,
         telemetry=_optional_json(folder / "twin" / "telemetry.json", notes),
-        metrics=_metrics(folder, str(run.get("mode", "")), notes) if complete else None,
+        metrics=metrics,
+        cell=str(run.get("cell") or "cell"),
+        stations=tuple(str(s) for s in stations),
     )
 
 
@@ -243,8 +285,9 @@ def load_runs(paths: Sequence[Path]) -> RunData:
 
 
 # -- per-episode numbers ----------------------------------------------------------------------
-COUNT_KEYS = ("picked", "placed_correct", "targeted", "missed", "processed")
-"""The counts the report pools: the two rates' (``success_rate``, ``miss_rate``) and picks."""
+COUNT_KEYS = ("picked", "placed_correct", "targeted", "missed", "processed", "spawned")
+"""The counts the report pools: the rates' (``success_rate``, ``miss_rate``,
+``recovery_rate``) and picks."""
 
 
 def _counts(ep: Episode, station: str | None = None) -> dict[str, int] | None:
@@ -319,11 +362,16 @@ def episode_rows(data: RunData) -> list[dict[str, Any]]:
     return rows
 
 
+def _picks_per_min(blocks: Sequence[dict[str, Any] | None]) -> float | None:
+    return stats.mean_of((b or {}).get("pick_throughput_per_min") for b in blocks)
+
+
 def speed_rows(data: RunData) -> list[dict[str, Any]]:
-    """One row per belt speed over the pooled episodes (rates with Wilson 95 % intervals)."""
+    """One row per cell and belt speed over the pooled episodes (rates with Wilson 95 %
+    intervals; picks per minute the mean over the episodes)."""
     rows = []
-    for speed in data.speeds():
-        eps = data.at_speed(speed)
+    for cell, speed in data.groups():
+        eps = data.in_group(cell, speed)
         total = _pooled([_counts(ep) for ep in eps])
         rtt = [v for ep in eps for v in _rtt(ep)]
         latencies = [_latency(ep) for ep in eps]
@@ -333,10 +381,15 @@ def speed_rows(data: RunData) -> list[dict[str, Any]]:
         rtfs = [float(ep.summary["real_time_factor"]) for ep in eps if ep.summary]
         rows.append(
             {
+                "cell": cell,
+                "stations": eps[0].n_stations,
                 "speed_mps": speed,
                 "episodes": len(eps),
                 "picks": total.get("picked"),
                 **{f"{k}_total": v for k, v in total.items() if k != "picked"},
+                "pick_throughput_per_min": _picks_per_min([ep.metrics for ep in eps]),
+                "recovery_rate": _pooled_rate("recovery_rate", total),
+                "recovery_ci95": _wilson("recovery_rate", total),
                 "success_rate": _pooled_rate("success_rate", total),
                 "success_ci95": _wilson("success_rate", total),
                 "miss_rate": _pooled_rate("miss_rate", total),
@@ -351,22 +404,25 @@ def speed_rows(data: RunData) -> list[dict[str, Any]]:
 
 
 def station_rows(data: RunData) -> list[dict[str, Any]]:
-    """One row per belt speed and station over the pooled episodes (rates with Wilson 95 %
-    intervals), from each episode's station metrics."""
+    """One row per cell, belt speed and station over the pooled episodes (rates with Wilson
+    95 % intervals), from each episode's station metrics."""
     rows = []
-    for speed in data.speeds():
-        eps = data.at_speed(speed)
-        for station in data.stations():
+    for cell, speed in data.groups():
+        eps = data.in_group(cell, speed)
+        for station in data.stations(eps):
             total = _pooled([_counts(ep, station) for ep in eps])
             blocks = [((ep.metrics or {}).get("stations") or {}).get(station) or {} for ep in eps]
             rows.append(
                 {
+                    "cell": cell,
                     "speed_mps": speed,
                     "station": station,
                     "episodes": len(eps),
                     "picks": total.get("picked"),
+                    "pick_throughput_per_min": _picks_per_min(blocks),
                     "placed_correct": total.get("placed_correct"),
                     "targeted": total.get("targeted"),
+                    "recovery_rate": _pooled_rate("recovery_rate", total),
                     "success_rate": _pooled_rate("success_rate", total),
                     "success_ci95": _wilson("success_rate", total),
                     "miss_rate": _pooled_rate("miss_rate", total),
@@ -573,11 +629,15 @@ def fig_rates(data: RunData) -> Figure:
             hi.append(b - rate)
             ax.annotate(f"n={row[total]}", (i + offset, b), ha="center", va="bottom", fontsize=7)
         ax.errorbar(xs, ys, yerr=[lo, hi], fmt="o", capsize=4, color=colour, label=label)
-    ax.set_xticks(x, [f"{r['speed_mps']} m/s" for r in rows])
+    several = len({r["cell"] for r in rows}) > 1
+    labels = [
+        f"{r['cell']}\n{r['speed_mps']} m/s" if several else f"{r['speed_mps']} m/s" for r in rows
+    ]
+    ax.set_xticks(x, labels)
     ax.set_xlim(-0.6, len(rows) - 0.4)
     ax.set_ylim(-0.02, 1.1)
     ax.set_ylabel("rate (95 % Wilson interval, pooled episodes)")
-    ax.set_xlabel("belt speed")
+    ax.set_xlabel("cell and belt speed" if several else "belt speed")
     ax.set_title("Success and miss rate per belt speed")
     ax.legend(fontsize="small")
     ax.grid(alpha=0.3, axis="y")
@@ -735,6 +795,7 @@ FIGURES: tuple[tuple[str, str, Callable[[RunData], Figure]], ...] = (
     ("rtt_hist", "Round-trip latency histogram", fig_rtt_hist),
     ("tracking", "Tracking time to 4 mm per speed", fig_tracking),
     ("rates", "Success and miss rate per speed (95 % Wilson intervals)", fig_rates),
+    ("recovery_stations", "Recovery against the number of stations", fig_recovery_stations),
     ("meshgen", "Mesh-generation timing", fig_meshgen),
     ("footprints", "Source polygons over generated footprints", fig_footprints),
 )
@@ -776,9 +837,14 @@ def _table(rows: list[dict[str, Any]], columns: Sequence[tuple[str, str]]) -> st
 
 
 SPEED_COLUMNS = (
+    ("cell", "cell"),
+    ("stations", "stations"),
     ("speed_mps", "speed (m/s)"),
     ("episodes", "episodes"),
     ("picks", "picks"),
+    ("pick_throughput_per_min", "picks/min"),
+    ("recovery_rate", "recovery"),
+    ("recovery_ci95", "recovery 95% CI"),
     ("success_rate", "success"),
     ("success_ci95", "success 95% CI"),
     ("miss_rate", "miss"),
@@ -789,12 +855,15 @@ SPEED_COLUMNS = (
     ("real_time_factor", "RTF"),
 )
 STATION_COLUMNS = (
+    ("cell", "cell"),
     ("speed_mps", "speed (m/s)"),
     ("station", "station"),
     ("episodes", "episodes"),
     ("picks", "picks"),
+    ("pick_throughput_per_min", "picks/min"),
     ("placed_correct", "placed correct"),
     ("targeted", "targeted"),
+    ("recovery_rate", "recovery"),
     ("success_rate", "success"),
     ("success_ci95", "success 95% CI"),
     ("miss_rate", "miss"),
@@ -832,10 +901,29 @@ def _station_section(data: RunData) -> str:
     if len(data.stations()) < 2:
         return ""
     return (
-        '<h2 id="per-station">Per belt speed and station</h2>'
+        '<h2 id="per-station">Per cell, belt speed and station</h2>'
         "<p>Each station's own events (its window, its bins) and its controller's targets; "
-        "rates pool the counts of every episode at a speed.</p>"
+        "rates pool the counts of every episode of a cell at a speed.</p>"
         f"{_table(station_rows(data), STATION_COLUMNS)}"
+    )
+
+
+def _line_section(data: RunData) -> str:
+    """Recovery against the number of stations, recovery and purity per class, purity per
+    bin."""
+    return (
+        '<h2 id="recovery-stations">Recovery against the number of stations</h2>'
+        "<p>Line recovery (objects placed in their class's bin / objects that entered the "
+        "belt): the mean over the episodes (seeds) with its 95 % Student t interval, and the "
+        "pooled counts with a Wilson interval.</p>"
+        f"{_table(recovery_by_stations(data), STATIONS_COLUMNS)}"
+        '<h2 id="per-class">Per class: recovery and purity</h2>'
+        "<p>Recovery: objects of the class placed in its bin / objects of the class that "
+        "entered. Purity: objects of the class / all objects that came to rest in the bins "
+        f"sorting it, over every station.</p>{_table(class_rows(data), CLASS_COLUMNS)}"
+        '<h2 id="per-bin">Per bin: purity</h2>'
+        "<p>Objects of the bin's class / all objects that came to rest in it (bins nothing "
+        f"came to rest in are left out).</p>{_table(bin_rows(data), BIN_COLUMNS)}"
     )
 
 
@@ -874,11 +962,12 @@ def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
         f"<title>cdw-twin report</title><style>{_CSS}</style></head><body>"
         "<h1>cdw-twin report</h1>"
         f"<p>Runs:</p><ul>{runs}</ul><p>Datasets:</p><ul>{sets}</ul>"
-        "<h2>Per belt speed</h2>"
-        "<p>Rates pool the counts of every episode at a speed; intervals are Wilson score "
-        "intervals (95 %). RTT pools every command's round trip.</p>"
+        "<h2>Per cell and belt speed</h2>"
+        "<p>Rates pool the counts of every episode of a cell at a speed; intervals are Wilson "
+        "score intervals (95 %). RTT pools every command's round trip.</p>"
         f"{_table(speed_rows(data), SPEED_COLUMNS)}"
         f"{_station_section(data)}"
+        f"{_line_section(data)}"
         f"<h2>Per episode</h2>{_table(episode_rows(data), EPISODE_COLUMNS)}"
         + "".join(sections)
         + (f'<div class="notes"><p>Notes:</p><ul>{notes}</ul></div>' if notes else "")
@@ -907,9 +996,12 @@ __all__ = [
     "Episode",
     "ReportError",
     "RunData",
+    "bin_rows",
+    "class_rows",
     "episode_rows",
     "find_run_dirs",
     "load_runs",
+    "recovery_by_stations",
     "speed_rows",
     "station_rows",
     "wilson_interval",

@@ -70,7 +70,10 @@ Metrics per episode: every metric of the table (:data:`interfaces.metrics.METRIC
 its older name), per station in ``stations`` and per object class in ``classes``; the line's
 ``targeted`` counts every controller's, less the objects still falling into a bin at the end
 (:func:`interfaces.metrics.targeted_objects`), a station's its own controller's, less the
-landing objects it released. ``untargeted`` gives the objects never targeted, by reason.
+landing objects it released. ``untargeted`` gives the objects never targeted, by reason (a
+station's block also each reason's share of the objects its controller decided about,
+``untargeted_share``), ``dropped_by_reason`` the drops by reason, and a station's ``bins`` the
+purity of each of its bins (the metrics of scope ``bin``).
 """
 
 from __future__ import annotations
@@ -660,49 +663,74 @@ class EpisodeRecord:
         return [int(i) for i in self.summary.get("landing_in_bins", [])]
 
 
-def scope_metrics(record: EpisodeRecord, station: str | None) -> dict[str, Any]:
-    """The table's metrics of the line (``station`` None) or of one station, and
-    ``untargeted``."""
-    from interfaces.metrics import (
-        controller_scores,
-        count_events,
-        event_scores,
-        fault_counts,
-        landing_by_station,
-        targeted_objects,
-        tracking_metrics,
-        untargeted_objects,
-    )
+def _scope_inputs(
+    record: EpisodeRecord, station: str | None
+) -> tuple[list[dict[str, Any]], int, Any, int]:
+    """The controller stats, landing objects, tracking block and restarts of the line
+    (``station`` None) or of one station."""
+    from interfaces.metrics import landing_by_station
 
-    counts = count_events(
-        record.events, record.duration_s, station=station, line_exit=record.line_exit
-    )
     if station is None:
         stats = [s for instances in record.stats.values() for s in instances]
         landing = len(record.landing)
         tracking = record.summary.get("tracking")
         restarts = max((len(s) for s in record.stats.values()), default=1) - 1
-    else:
-        stats = record.stats.get(station, [])
-        landing = landing_by_station(record.events, record.landing).get(station, 0)
-        tracking = ((record.summary.get("stations") or {}).get(station) or {}).get("tracking")
-        if tracking is None and len(record.stats) == 1:
-            tracking = record.summary.get("tracking")
-        restarts = len(stats) - 1
+        return stats, landing, tracking, restarts
+    stats = record.stats.get(station, [])
+    landing = landing_by_station(record.events, record.landing).get(station, 0)
+    tracking = ((record.summary.get("stations") or {}).get(station) or {}).get("tracking")
+    if tracking is None and len(record.stats) == 1:
+        tracking = record.summary.get("tracking")
+    return stats, landing, tracking, len(stats) - 1
+
+
+def scope_metrics(record: EpisodeRecord, station: str | None) -> dict[str, Any]:
+    """The table's metrics of the line (``station`` None) or of one station, with the
+    controllers' ``untargeted`` objects by reason and the drops by reason
+    (``dropped_by_reason``); a station's block adds each reason's share of the objects its
+    controller decided about (``untargeted_share``) and its bins' scores (``bins``, scope
+    ``bin``)."""
+    from interfaces.metrics import (
+        bin_scores,
+        considered_objects,
+        controller_scores,
+        count_events,
+        event_scores,
+        fault_counts,
+        targeted_objects,
+        tracking_metrics,
+        untargeted_objects,
+        untargeted_scores,
+    )
+
+    counts = count_events(
+        record.events, record.duration_s, station=station, line_exit=record.line_exit
+    )
+    stats, landing, tracking, restarts = _scope_inputs(record, station)
     targeted = targeted_objects(stats, landing)
     untargeted = untargeted_objects(stats)
+    allocation = untargeted_scores(untargeted, considered_objects(stats))
+    scores = event_scores(counts)
     values: dict[str, Any] = {
-        **event_scores(counts),
+        **scores,
         **controller_scores(counts, targeted),
         **tracking_metrics(tracking),
         **fault_counts(record.events, station=station),
+        **allocation,
         "targeted": targeted,
-        "untargeted_total": sum(untargeted.values()),
         "controller_restarts": max(0, restarts),
         "real_time_factor": record.summary.get("real_time_factor"),
     }
     names = in_scope("line" if station is None else "station")
-    return {**{name: values[name] for name in names}, "untargeted": untargeted}
+    out = {
+        **{name: values[name] for name in names},
+        "untargeted": untargeted,
+        "dropped_by_reason": scores["dropped_by_reason"],
+    }
+    if station is not None:
+        out["untargeted_share"] = allocation["untargeted_share"]
+        out["bins"] = bin_scores(record.events, station=station).get(station, {})
+    return out
 
 
 def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:

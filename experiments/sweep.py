@@ -8,23 +8,36 @@ Example grid file (paths relative to the grid file)::
       speed: [0.2, 0.4, 0.6]
       duration_s: [30.0]
       mode: [lockstep]
-    dataset: ../data/meshes   # optional; default: each scenario's own
+      cell: [suction]         # run the scenarios on this cell (a shipped name or a path)
+      stations: [1, 2, 3, 4]  # run only the first k stations of the scenario's cell
+    dataset: ../data/meshes   # optional; default: each scenario's own; --dataset overrides it
+    headline: [recovery_rate] # optional: the metrics sweep.json lists first
 
 Each grid cell (a scenario with one choice of every override) is a run folder with the layout
 of ``cdw-twin run`` (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``, ``epNNN/``,
-``episodes.json``, ``run.json``): its scenario's cell runs one controller per station. Every
-grid cell x seed is one episode through :func:`experiments.run.run_episode` on its own ROS
-domain; ``N`` run at once, each driven by a thread. ``sweep.json`` and ``sweep.csv`` hold per
-grid cell the means with 95 % confidence intervals, for the line and (``sweep.json``
-``aggregate.stations``; ``sweep.csv`` rows with a ``station``, for a cell of several stations)
-per station:
+``episodes.json``, ``run.json``): its scenario's cell (or the ``cell`` override; with
+``stations: k`` its first k stations, in the cell file's order) runs one controller per station,
+and ``cell.yaml`` is the cell it ran. Every grid cell x seed is one episode through
+:func:`experiments.run.run_episode` on its own ROS domain; ``N`` run at once, each driven by a
+thread. ``sweep.json`` and ``sweep.csv`` hold per grid cell the means with 95 % confidence
+intervals, for the line and (``sweep.json`` ``aggregate.stations``; ``sweep.csv`` rows with a
+``station``, for a cell of several stations) per station, and in ``sweep.json`` per object
+class (``aggregate.classes``):
 
 - every metric of the table (``docs/metrics.md``): Student t interval over the cell's
   episodes, ``mean +- t(0.975, n-1) * s / sqrt(n)`` (none for n < 2);
 - every rate of the table (a ratio of two counts, such as ``success_rate``, placed_correct of
   targeted, and ``miss_rate``, missed of processed) also as a Wilson score interval over the
   counts pooled across the episodes, which stays inside [0, 1] and is meaningful with few
-  episodes.
+  episodes;
+- per reason, the controllers' untargeted objects (``untargeted``), their share of the objects
+  a station's controller decided about (``untargeted_share``, per station) and the drops
+  (``dropped_by_reason``), each with a Student t interval.
+
+``sweep.json``'s ``headline`` lists the grid's ``headline`` metrics first, one row per grid
+cell and metric (the line's, or each station's for a per-station metric such as
+``unfit_share``) with mean, interval and, for a rate, the pooled value and its Wilson
+interval: the figures a benchmark grid (``experiments/grids/``) exists to measure.
 
 A grid's ``seeds`` must be distinct: a seed run twice in a cell would count one sample as two
 and narrow the interval for nothing.
@@ -48,7 +61,6 @@ import dataclasses
 import io
 import itertools
 import json
-import math
 import re
 import signal
 import sys
@@ -61,11 +73,11 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import yaml
 
-from experiments.stats import wilson_interval
+from experiments.stats import student_t_interval, wilson_interval
 from interfaces.dataclass_io import from_data
 from interfaces.errors import ConfigError
 from interfaces.fileio import write_atomic
-from interfaces.metrics import RATES, Scope, in_scope
+from interfaces.metrics import BY_NAME, METRICS, RATES, Scope, in_scope
 
 if TYPE_CHECKING:
     from experiments.run import EpisodeSpec, RunOptions
@@ -90,16 +102,44 @@ STATION_CI_METRICS = in_scope("station")
 STATION_WILSON_RATES = _pooled_rates("station")
 """The per-station rates also given as Wilson intervals."""
 
+CLASS_CI_METRICS = in_scope("class")
+"""The per-class metrics aggregated with Student t intervals."""
+
+CLASS_WILSON_RATES = _pooled_rates("class")
+"""The per-class rates also given as Wilson intervals."""
+
+REASON_BLOCKS = ("untargeted", "untargeted_share", "dropped_by_reason")
+"""The per-reason blocks of an episode's metrics (the controllers' untargeted objects, their
+share of the objects that entered a station's window, drops), each reason aggregated with a
+Student t interval (a reason missing from an episode counts 0 there)."""
+
 
 @dataclass(frozen=True)
 class GridOverrides:
-    """Values to sweep; each non-empty list multiplies the cells."""
+    """Values to sweep; each non-empty list multiplies the cells.
+
+    ``cell``: the cell the scenario runs on (a shipped cell's name or a path relative to the
+    grid file) instead of its own. ``stations``: run only the first k stations of the
+    scenario's cell (in the cell file's order: a line lists its stations upstream first), so
+    one grid gives a figure against the number of stations; the truncated cell is what the grid
+    cell's run folder keeps as ``cell.yaml``.
+    """
 
     speed: tuple[float, ...] = ()
     duration_s: tuple[float, ...] = ()
     mode: tuple[Literal["lockstep", "realtime"], ...] = ()
+    cell: tuple[str, ...] = ()
+    stations: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
+        for i, k in enumerate(self.stations):
+            if k < 1:
+                msg = f"overrides.stations[{i}] = {k!r}: must be >= 1 (the first k stations)"
+                raise ConfigError(msg)
+        for i, name in enumerate(self.cell):
+            if not name:
+                msg = f"overrides.cell[{i}] = {name!r}: name a shipped cell or a cell file"
+                raise ConfigError(msg)
         for i, v in enumerate(self.speed):
             if not 0.0 <= v <= 2.0:
                 msg = f"overrides.speed[{i}] = {v!r}: must be in [0, 2] m/s"
@@ -119,8 +159,15 @@ class Grid:
     episodes: int | None = None
     overrides: GridOverrides = field(default_factory=GridOverrides)
     dataset: str | None = None
+    headline: tuple[str, ...] = ()
+    """Metrics of the table that ``sweep.json`` lists first, per grid cell (``headline``):
+    the figures the grid exists to measure."""
 
     def __post_init__(self) -> None:
+        for i, name in enumerate(self.headline):
+            if name not in BY_NAME:
+                msg = f"headline[{i}] = {name!r}: not a metric of the table (docs/metrics.md)"
+                raise ConfigError(msg)
         if not self.scenarios:
             msg = "scenarios = []: list at least one scenario file"
             raise ConfigError(msg)
@@ -173,10 +220,34 @@ class GridCell:
     mode: Literal["lockstep", "realtime"]
     seeds: tuple[int, ...]
     overrides: dict[str, Any]
+    stations: int | None = None
+    """Run only the first ``stations`` stations of the scenario's cell (None: all of them)."""
 
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "cell"
+
+
+def _override_cell(value: str, base: Path) -> str:
+    """A grid's ``cell`` override as a scenario's ``cell``: a shipped name as it is, a path
+    made absolute from the grid file's folder."""
+    if "/" in value or value.endswith((".yaml", ".yml")):
+        path = Path(value).expanduser()
+        return str(path if path.is_absolute() else (base / path).resolve())
+    return value
+
+
+def _apply(scenario: Scenario, chosen: dict[str, Any], base: Path) -> Scenario:
+    """``scenario`` with the overrides of one grid cell applied (validated by the dataclass)."""
+    resolved = scenario
+    if "speed" in chosen:
+        system = dataclasses.replace(resolved.system, belt_speed_mps=chosen["speed"])
+        resolved = dataclasses.replace(resolved, system=system)
+    if "duration_s" in chosen:
+        resolved = dataclasses.replace(resolved, duration_s=chosen["duration_s"])
+    if "cell" in chosen:
+        resolved = dataclasses.replace(resolved, cell=_override_cell(chosen["cell"], base))
+    return resolved
 
 
 def expand(grid: Grid, base: Path) -> list[GridCell]:
@@ -195,16 +266,11 @@ def expand(grid: Grid, base: Path) -> list[GridCell]:
         scenario = Scenario.load(path)
         for values in itertools.product(*(v for _, v in axes)):
             chosen = dict(zip(names, values, strict=True))
-            resolved = scenario
-            if "speed" in chosen:
-                system = dataclasses.replace(resolved.system, belt_speed_mps=chosen["speed"])
-                resolved = dataclasses.replace(resolved, system=system)
-            if "duration_s" in chosen:
-                resolved = dataclasses.replace(resolved, duration_s=chosen["duration_s"])
+            resolved = _apply(scenario, chosen, base)
             seeds = grid.seeds or tuple(
                 resolved.seed + i for i in range(grid.episodes if grid.episodes else 1)
             )
-            suffix = "".join(f"-{k}{v}" for k, v in chosen.items())
+            suffix = "".join(f"-{k}{Path(v).stem if k == 'cell' else v}" for k, v in chosen.items())
             cells.append(
                 GridCell(
                     name=_slug(f"{scenario.name}{suffix}"),
@@ -213,6 +279,7 @@ def expand(grid: Grid, base: Path) -> list[GridCell]:
                     mode=chosen.get("mode", "lockstep"),
                     seeds=seeds,
                     overrides=chosen,
+                    stations=chosen.get("stations"),
                 )
             )
     seen: dict[str, int] = {}
@@ -233,19 +300,31 @@ def _own_dataset(grid: Grid, grid_path: Path, cell: GridCell) -> Path | None:
     return None
 
 
-def student_t_interval(values: Sequence[float]) -> tuple[float | None, float | None, float | None]:
-    """Mean and 95 % Student t interval of ``values`` (interval None for fewer than 2)."""
-    from scipy import stats
+def _interval(values: Sequence[float]) -> dict[str, Any]:
+    mean, low, high = student_t_interval(values)
+    return {"mean": mean, "ci95_low": low, "ci95_high": high, "n": len(values)}
 
-    n = len(values)
-    if n == 0:
-        return None, None, None
-    mean = math.fsum(values) / n
-    if n < 2:
-        return mean, None, None
-    sd = math.sqrt(math.fsum((v - mean) ** 2 for v in values) / (n - 1))
-    half = float(stats.t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
-    return mean, mean - half, mean + half
+
+def _pooled(rows: Sequence[dict[str, Any]], num: str, den: str) -> dict[str, Any]:
+    successes = sum(int(r.get(num) or 0) for r in rows)
+    trials = sum(int(r.get(den) or 0) for r in rows)
+    low, high = wilson_interval(successes, trials)
+    return {
+        "successes": successes,
+        "trials": trials,
+        "pooled": successes / trials if trials else None,
+        "ci95_low": low,
+        "ci95_high": high,
+    }
+
+
+def aggregate_reasons(rows: Sequence[dict[str, Any]], block: str) -> dict[str, dict[str, Any]]:
+    """Per reason of the episodes' ``block`` (:data:`REASON_BLOCKS`), its mean with a Student t
+    interval over the episodes that have the block (a reason one of them lacks counts 0 there);
+    reasons sorted."""
+    blocks = [r[block] for r in rows if isinstance(r.get(block), dict)]
+    reasons = sorted({str(k) for b in blocks for k in b})
+    return {reason: _interval([float(b.get(reason) or 0.0) for b in blocks]) for reason in reasons}
 
 
 def aggregate_cell(
@@ -253,49 +332,88 @@ def aggregate_cell(
     metrics: Sequence[str] = CI_METRICS,
     rates: dict[str, tuple[str, str]] | None = None,
 ) -> dict[str, Any]:
-    """Per-metric ``{mean, ci95_low, ci95_high, n}`` and pooled Wilson intervals of the rates.
+    """Per-metric ``{mean, ci95_low, ci95_high, n}``, pooled Wilson intervals of the rates and,
+    per reason, the untargeted objects and the drops (:data:`REASON_BLOCKS`, those the rows
+    have).
 
-    ``rows`` are :func:`experiments.run.episode_metrics` dicts (or their ``stations`` blocks,
-    with ``metrics`` and ``rates`` of the station scope); a metric that is None in an episode
-    (e.g. no settled pursuit) leaves that episode out of that metric only. Failed episodes
-    (``"failed": true``) are counted in ``failed`` and left out of everything else.
+    ``rows`` are :func:`experiments.run.episode_metrics` dicts (or their ``stations`` or
+    ``classes`` blocks, with ``metrics`` and ``rates`` of that scope); a metric that is None in
+    an episode (e.g. no settled pursuit) leaves that episode out of that metric only. Failed
+    episodes (``"failed": true``) are counted in ``failed`` and left out of everything else.
     """
     rates = WILSON_RATES if rates is None else rates
     failed = sum(1 for r in rows if r.get("failed"))
     rows = [r for r in rows if not r.get("failed")]
     out: dict[str, Any] = {"episodes": len(rows), "failed": failed, "metrics": {}, "wilson": {}}
     for key in metrics:
-        values = [float(r[key]) for r in rows if r.get(key) is not None]
-        mean, low, high = student_t_interval(values)
-        out["metrics"][key] = {"mean": mean, "ci95_low": low, "ci95_high": high, "n": len(values)}
+        out["metrics"][key] = _interval([float(r[key]) for r in rows if r.get(key) is not None])
     for rate, (num, den) in rates.items():
-        successes = sum(int(r.get(num) or 0) for r in rows)
-        trials = sum(int(r.get(den) or 0) for r in rows)
-        low, high = wilson_interval(successes, trials)
-        out["wilson"][rate] = {
-            "successes": successes,
-            "trials": trials,
-            "pooled": successes / trials if trials else None,
-            "ci95_low": low,
-            "ci95_high": high,
-        }
+        out["wilson"][rate] = _pooled(rows, num, den)
+    for block in REASON_BLOCKS:
+        if any(block in r for r in rows):
+            out[block] = aggregate_reasons(rows, block)
     return out
+
+
+def _aggregate_entries(
+    rows: Sequence[dict[str, Any]],
+    block: str,
+    metrics: Sequence[str],
+    rates: dict[str, tuple[str, str]],
+) -> dict[str, dict[str, Any]]:
+    good = [r for r in rows if not r.get("failed")]
+    names: dict[str, None] = {}
+    for row in good:
+        names.update(dict.fromkeys(row.get(block) or {}))
+    return {
+        name: aggregate_cell(
+            [r[block][name] for r in good if name in (r.get(block) or {})], metrics, rates
+        )
+        for name in names
+    }
 
 
 def aggregate_stations(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """:func:`aggregate_cell` of each station's block over the successful episodes."""
-    good = [r for r in rows if not r.get("failed")]
-    names: dict[str, None] = {}
-    for row in good:
-        names.update(dict.fromkeys(row.get("stations") or {}))
-    return {
-        name: aggregate_cell(
-            [r["stations"][name] for r in good if name in (r.get("stations") or {})],
-            STATION_CI_METRICS,
-            STATION_WILSON_RATES,
+    return _aggregate_entries(rows, "stations", STATION_CI_METRICS, STATION_WILSON_RATES)
+
+
+def aggregate_classes(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """:func:`aggregate_cell` of each object class's block (the line's, per class: recovery,
+    purity, ...) over the successful episodes; classes sorted."""
+    out = _aggregate_entries(rows, "classes", CLASS_CI_METRICS, CLASS_WILSON_RATES)
+    return dict(sorted(out.items()))
+
+
+def headline(cell: dict[str, Any], names: Sequence[str]) -> list[dict[str, Any]]:
+    """The grid's ``headline`` metrics of one grid cell's entry of ``sweep.json``: one row per
+    metric and scope (the line's when the table gives the metric for the line, else each
+    station's), with the mean, its 95 % Student t interval over the seeds and, for a rate, the
+    pooled value with its Wilson interval."""
+    agg = cell["aggregate"]
+    rows = []
+    for name in names:
+        scopes = (
+            [("line", agg)]
+            if "line" in BY_NAME[name].scopes
+            else [(f"station {s}", a) for s, a in (agg.get("stations") or {}).items()]
         )
-        for name in names
-    }
+        for scope, block in scopes:
+            row: dict[str, Any] = {
+                "cell": cell["cell"],
+                "stations": len(cell["stations"]),
+                "speed_mps": cell["speed_mps"],
+                "metric": name,
+                "scope": scope,
+                **block["metrics"].get(name, _interval([])),
+            }
+            wilson = block["wilson"].get(name)
+            if wilson is not None:
+                row["pooled"] = wilson["pooled"]
+                row["wilson_low"] = wilson["ci95_low"]
+                row["wilson_high"] = wilson["ci95_high"]
+            rows.append(row)
+    return rows
 
 
 CSV_HEADER = (
@@ -310,6 +428,12 @@ CSV_HEADER = (
 )
 """The leading columns of ``sweep.csv``; then mean and interval of every metric and rate."""
 
+CSV_METRICS = tuple(m.name for m in METRICS if {"line", "station"} & set(m.scopes))
+"""The metric columns of ``sweep.csv``: every metric given for the line or per station."""
+
+CSV_RATES = {**WILSON_RATES, **STATION_WILSON_RATES}
+"""The pooled-rate columns of ``sweep.csv``."""
+
 
 def _csv_row(cell: dict[str, Any], station: str, agg: dict[str, Any]) -> list[Any]:
     row: list[Any] = [
@@ -322,10 +446,10 @@ def _csv_row(cell: dict[str, Any], station: str, agg: dict[str, Any]) -> list[An
         agg["episodes"],
         agg.get("failed", 0),
     ]
-    for key in CI_METRICS:
+    for key in CSV_METRICS:
         m = agg["metrics"].get(key)
         row += [None, None, None] if m is None else [m["mean"], m["ci95_low"], m["ci95_high"]]
-    for rate in WILSON_RATES:
+    for rate in CSV_RATES:
         w = agg["wilson"].get(rate)
         row += [None, None, None] if w is None else [w["pooled"], w["ci95_low"], w["ci95_high"]]
     return ["" if v is None else v for v in row]
@@ -334,19 +458,27 @@ def _csv_row(cell: dict[str, Any], station: str, agg: dict[str, Any]) -> list[An
 def sweep_csv(cells: Sequence[dict[str, Any]]) -> str:
     """``sweep.csv``: one row per grid cell (``station`` empty: the line), mean and interval of
     every metric, and for a cell of several stations one more row per station (a metric not
-    given per station is left empty)."""
+    given per station, or not for the line, is left empty; in a cell of one station the line
+    is the station, so its row also gives the per-station metrics, such as ``unfit_share``)."""
     header = list(CSV_HEADER)
-    for key in CI_METRICS:
+    for key in CSV_METRICS:
         header += [f"{key}_mean", f"{key}_ci95_low", f"{key}_ci95_high"]
-    for rate in WILSON_RATES:
+    for rate in CSV_RATES:
         header += [f"{rate}_pooled", f"{rate}_wilson_low", f"{rate}_wilson_high"]
     buffer = io.StringIO()
     writer = csv.writer(buffer)
     writer.writerow(header)
     for cell in cells:
         agg = cell["aggregate"]
-        writer.writerow(_csv_row(cell, "", agg))
         stations = agg.get("stations") or {}
+        if len(stations) == 1:
+            (only,) = stations.values()
+            agg = {
+                **agg,
+                "metrics": {**only["metrics"], **agg["metrics"]},
+                "wilson": {**only["wilson"], **agg["wilson"]},
+            }
+        writer.writerow(_csv_row(cell, "", agg))
         if len(stations) > 1:
             for name, station_agg in stations.items():
                 writer.writerow(_csv_row(cell, name, station_agg))
@@ -358,6 +490,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("grid", type=Path, help="grid YAML (scenarios, seeds, overrides)")
     parser.add_argument("--workers", type=int, default=1, help="episodes at once (1)")
     parser.add_argument("--out", type=Path, default=None, help="sweep folder (default runs/...)")
+    parser.add_argument(
+        "--dataset", type=Path, default=None, help="meshgen output folder (overrides the grid's)"
+    )
     parser.add_argument("--json", action="store_true", help="print the sweep summary as JSON")
 
 
@@ -390,6 +525,7 @@ class CellRun:
         rows = self.ordered_rows()
         agg = aggregate_cell(rows)
         agg["stations"] = aggregate_stations(rows)
+        agg["classes"] = aggregate_classes(rows)
         scenario = self.cell.scenario
         return {
             "cell": self.cell.name,
@@ -418,6 +554,21 @@ class _Checked:
     own_dataset: Path | None
 
 
+def first_stations(cell: Cell, k: int, where: str) -> Cell:
+    """``cell`` with only its first ``k`` stations (named ``<name>_first<k>``); errors name
+    ``where`` (the grid file) and the cell file when it has fewer."""
+    n = len(cell.stations)
+    if k > n:
+        msg = (
+            f"{where}: overrides.stations = {k}: the cell {cell.source or cell.name} has "
+            f"{n} station(s)"
+        )
+        raise ConfigError(msg)
+    if k == n:
+        return cell
+    return dataclasses.replace(cell, name=f"{cell.name}_first{k}", stations=cell.stations[:k])
+
+
 def _check_cells(grid: Grid, grid_path: Path) -> list[_Checked]:
     """Every grid cell's scenario, cell file, controller parameters and dataset, checked."""
     from experiments.run import controller_params
@@ -430,6 +581,8 @@ def _check_cells(grid: Grid, grid_path: Path) -> list[_Checked]:
         where = str(cell.scenario_path)
         params = controller_params(cell.scenario.controller, cell.scenario_path.parent)
         station_cell = scenario_cell(cell.scenario, cell.scenario_path.parent, where)
+        if cell.stations is not None:
+            station_cell = first_stations(station_cell, cell.stations, str(grid_path))
         own = _own_dataset(grid, grid_path, cell)
         dataset = own or builtin_dataset()
         check_scenario(cell.scenario, dataset, where=where, cell=station_cell)
@@ -445,12 +598,22 @@ def _check_cells(grid: Grid, grid_path: Path) -> list[_Checked]:
     return checked
 
 
-def prepare_sweep(grid_path: Path, out: Path) -> list[CellRun]:
+def load_grid(grid_path: Path, dataset: Path | None = None) -> Grid:
+    """The grid file, its ``dataset`` replaced by ``dataset`` (a path from the command line,
+    relative to the working directory) when given."""
+    grid = Grid.load(grid_path)
+    if dataset is not None:
+        grid = dataclasses.replace(grid, dataset=str(dataset.expanduser().resolve()))
+    return grid
+
+
+def prepare_sweep(grid_path: Path, out: Path, *, dataset: Path | None = None) -> list[CellRun]:
     """Check every grid cell (before anything is written), then write each one's run folder
-    (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``, empty tables)."""
+    (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``, empty tables). ``dataset``
+    overrides the grid's (:func:`load_grid`)."""
     from experiments.run import run_options, write_run_scenario, write_tables
 
-    checked = _check_cells(Grid.load(grid_path), grid_path)
+    checked = _check_cells(load_grid(grid_path, dataset), grid_path)
     out.mkdir(parents=True, exist_ok=True)
     runs = []
     for c in checked:
@@ -480,9 +643,17 @@ class Sweep:
     finish."""
 
     def __init__(
-        self, grid_path: Path, out: Path, workers: int, runs: list[CellRun], *, quiet: bool = False
+        self,
+        grid_path: Path,
+        out: Path,
+        workers: int,
+        runs: list[CellRun],
+        *,
+        quiet: bool = False,
+        headline: Sequence[str] = (),
     ) -> None:
         self.grid_path = grid_path
+        self.headline = tuple(headline)
         self.out = out
         self.workers = workers
         self.runs = runs
@@ -504,6 +675,7 @@ class Sweep:
             "episodes": sum(c["aggregate"]["episodes"] for c in cells),
             "failed": sum(c["failed"] for c in cells),
             "wall_s": time.monotonic() - self._wall0,
+            "headline": [row for c in cells for row in headline(c, self.headline)],
             "cells": cells,
         }
         if self.stopped:
@@ -610,13 +782,21 @@ class Sweep:
 
 
 def run_sweep(
-    grid_path: Path, out: Path, workers: int, *, quiet: bool = False
+    grid_path: Path,
+    out: Path,
+    workers: int,
+    *,
+    quiet: bool = False,
+    dataset: Path | None = None,
 ) -> tuple[dict[str, Any], int]:
-    """Run a grid; returns the ``sweep.json`` content and the exit status."""
+    """Run a grid (its dataset replaced by ``dataset`` when given); returns the ``sweep.json``
+    content and the exit status."""
     if workers < 1:
         msg = f"--workers = {workers}: must be >= 1"
         raise ConfigError(msg)
-    sweep = Sweep(grid_path, out, workers, prepare_sweep(grid_path, out), quiet=quiet)
+    runs = prepare_sweep(grid_path, out, dataset=dataset)
+    names = Grid.load(grid_path).headline
+    sweep = Sweep(grid_path, out, workers, runs, quiet=quiet, headline=names)
     sweep.write_all(False)
     sweep.execute()
     return sweep.finish()
@@ -626,10 +806,15 @@ def run(args: argparse.Namespace) -> int:
     """Run the sweep and print its summary."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out: Path = args.out or Path("runs") / f"sweep-{args.grid.stem}-{stamp}"
-    data, code = run_sweep(args.grid, out, args.workers, quiet=args.json)
+    data, code = run_sweep(args.grid, out, args.workers, quiet=args.json, dataset=args.dataset)
     if args.json:
         print(json.dumps(data))
     else:
+        for row in data["headline"]:
+            print(
+                f"{row['cell']:>32}: {row['scope']} {row['metric']} {_fmt(row['mean'])} "
+                f"[{_fmt(row['ci95_low'])}, {_fmt(row['ci95_high'])}] over {row['n']} seeds"
+            )
         for cell in data["cells"]:
             agg = cell["aggregate"]
             sr = agg["metrics"]["success_rate"]

@@ -105,6 +105,10 @@ GROUND_TRUTH_TOPIC = _cell(
 PING_ECHO = _cell("/ping/echo", "cdw_interfaces/msg/Ping", STREAM)
 LOCKSTEP_TICK = _cell("/lockstep/tick", "cdw_interfaces/msg/LockstepTick", STREAM)
 FAULTS = _cell("/twin/faults", "std_msgs/msg/String", STREAM)
+CLAIMS = _cell("/line/claims", "cdw_interfaces/msg/ClaimArray", STATE)
+
+CLAIM_STATES: tuple[str, ...] = ("claimed", "released", "picked")
+"""The values of a ``Claim``'s ``state``: the station pursues the object, gave it up, holds it."""
 
 # -- subscribed by the cell -------------------------------------------------------------------
 ARM_TRAJECTORY = _station(
@@ -113,6 +117,7 @@ ARM_TRAJECTORY = _station(
 GRIPPER_COMMAND = _station("gripper/command", "std_msgs/msg/Float64", STATE, "controller")
 PICK_TARGET = _station("controller/target", "cdw_interfaces/msg/PickTarget", STATE, "controller")
 LOCKSTEP_ACK = _station("lockstep/ack", "cdw_interfaces/msg/StepAck", STREAM, "controller")
+CLAIM = _station("line/claim", "cdw_interfaces/msg/Claim", STATE, "controller")
 BELT_SETPOINT = _cell("/conveyor/speed_setpoint", "std_msgs/msg/Float64", STATE, "client")
 PRIORITIES = _cell("/sorting/priorities", "cdw_interfaces/msg/SortingPriorities", LATCHED, "client")
 PING = _cell("/ping", "cdw_interfaces/msg/Ping", STREAM, "client")
@@ -129,6 +134,7 @@ PUBLISHED: tuple[Topic, ...] = (
     PING_ECHO,
     LOCKSTEP_TICK,
     FAULTS,
+    CLAIMS,
 )
 """Every topic the cell publishes."""
 
@@ -137,6 +143,7 @@ SUBSCRIBED: tuple[Topic, ...] = (
     GRIPPER_COMMAND,
     PICK_TARGET,
     LOCKSTEP_ACK,
+    CLAIM,
     BELT_SETPOINT,
     PRIORITIES,
     PING,
@@ -146,10 +153,10 @@ SUBSCRIBED: tuple[Topic, ...] = (
 TOPICS: tuple[Topic, ...] = PUBLISHED + SUBSCRIBED
 """The whole contract."""
 
-COUNTED: tuple[Topic, ...] = (JOINT_STATES, BELT_STATE, DETECTIONS)
+COUNTED: tuple[Topic, ...] = (JOINT_STATES, BELT_STATE, DETECTIONS, CLAIMS)
 """Lockstep: the topics a ``LockstepTick`` counts, in the order of its ``last_*_ns`` fields."""
 
-COMMANDS: tuple[Topic, ...] = (ARM_TRAJECTORY, GRIPPER_COMMAND, PICK_TARGET)
+COMMANDS: tuple[Topic, ...] = (ARM_TRAJECTORY, GRIPPER_COMMAND, PICK_TARGET, CLAIM)
 """Lockstep: the station topics whose messages a ``StepAck`` counts in ``n_commands``."""
 
 

@@ -13,12 +13,21 @@ a fate. For one station, the same rules apply to the events that name that stati
 ``data["station"]``); for one class, to the events about objects of that class.
 
 Every metric has *scopes*: ``line`` (the whole cell), ``station`` (one station's events and
-controller) and ``class`` (the objects of one class). A rate (``kind`` ``rate``) is the ratio
+controller), ``class`` (the objects of one class) and ``bin`` (the objects that came to rest in
+one bin of one station). A rate (``kind`` ``rate``) is the ratio
 of two counts of the table (``ratio_of``); pooled over episodes it is the ratio of the summed
 counts (with a Wilson interval), never the mean of the ratios.
 
 The reference's equations: (1) success rate = picked / processed, (2) miss rate = missed /
 processed, (3) throughput = picked per minute. Every ratio is 0 when its denominator is 0.
+
+Line scores: ``recovery_rate`` (per class: objects placed in their class's bin / objects of that
+class that entered), ``purity`` (of each bin, :func:`bin_scores`; per class over the line: the
+share of the class's own objects among all objects that came to rest in the bins sorting it),
+the line's ``miss_rate`` (the most downstream station's misses), ``pick_throughput_per_min``
+per station and for the line; drops by reason (``dropped_by_reason``, :data:`DROP_REASONS`) and
+the controllers' allocation decisions per station (``untargeted`` by reason,
+:func:`untargeted_scores`).
 """
 
 from __future__ import annotations
@@ -29,11 +38,22 @@ from typing import Any, Literal
 
 from interfaces.events import Event, EventType
 
-Scope = Literal["line", "station", "class"]
-"""Where a metric is given: for the whole line, per station, per object class."""
+Scope = Literal["line", "station", "class", "bin"]
+"""Where a metric is given: for the whole line, per station, per object class, per bin."""
 
 EVENT_SCOPES: tuple[Scope, ...] = ("line", "station", "class")
 CELL_SCOPES: tuple[Scope, ...] = ("line", "station")
+BIN_SCOPES: tuple[Scope, ...] = ("line", "station", "class", "bin")
+
+DROP_REASONS: tuple[str, ...] = ("released", "slipped", "suction_overload", "seal_lost")
+"""Why a held object dropped (``pick_dropped`` ``data["reason"]``): the tool opened away from
+every bin, the jaws' friction could not carry it, the cup's holding force could not, the cup's
+seal was lost. An event without a reason (logs written before drops carried one) counts as
+``released``, the only kind of drop then."""
+
+UNFIT_REASONS: tuple[str, ...] = ("too_wide", "too_flat", "too_small")
+"""The controllers' ``untargeted`` reasons that say the station's tool cannot take the object
+(wider than the jaws open, too flat for the pads, a top face smaller than the suction cup)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -102,6 +122,22 @@ METRICS: tuple[Metric, ...] = (
         unit="objects",
         formula="objects that came to rest in their class's bin",
         kind="count",
+        scopes=BIN_SCOPES,
+    ),
+    Metric(
+        name="binned",
+        unit="objects",
+        formula="objects of any class that came to rest in the scope's bins: every bin (line), "
+        "the station's (station), those sorting the class (class), the bin itself (bin)",
+        kind="count",
+        scopes=BIN_SCOPES,
+    ),
+    Metric(
+        name="dropped",
+        unit="drops",
+        formula="held objects that dropped (`pick_dropped` events), by reason in "
+        "`dropped_by_reason`: released, slipped, suction_overload, seal_lost",
+        kind="count",
         scopes=EVENT_SCOPES,
     ),
     Metric(
@@ -116,6 +152,22 @@ METRICS: tuple[Metric, ...] = (
         unit="objects",
         formula="objects a controller never targeted (by reason in `untargeted`)",
         kind="count",
+    ),
+    Metric(
+        name="considered",
+        unit="objects",
+        formula="objects a station's controller decided about: those it targeted (its `pick` "
+        "counter `targeted`) and those it never targeted (`untargeted_total`)",
+        kind="count",
+        scopes=("station",),
+    ),
+    Metric(
+        name="untargeted_unfit",
+        unit="objects",
+        formula="objects a station's controller never targeted because its tool cannot take "
+        "them (`untargeted` reasons too_wide, too_flat, too_small)",
+        kind="count",
+        scopes=("station",),
     ),
     Metric(
         name="unintended_contacts",
@@ -176,6 +228,22 @@ METRICS: tuple[Metric, ...] = (
         kind="rate",
         ratio_of=("placed_correct", "placed"),
         scopes=EVENT_SCOPES,
+    ),
+    Metric(
+        name="purity",
+        unit="1",
+        formula="placed_correct / binned",
+        kind="rate",
+        ratio_of=("placed_correct", "binned"),
+        scopes=BIN_SCOPES,
+    ),
+    Metric(
+        name="unfit_share",
+        unit="1",
+        formula="untargeted_unfit / considered",
+        kind="rate",
+        ratio_of=("untargeted_unfit", "considered"),
+        scopes=("station",),
     ),
     Metric(
         name="time_per_object_s",
@@ -260,16 +328,25 @@ class Counts:
     lost: int = 0
     placed: int = 0
     placed_correct: int = 0
+    binned: int = 0
+    dropped: int = 0
     unintended_contacts: int = 0
     duration_s: float = 0.0
     placed_correct_by_class: Mapping[str, int] = field(default_factory=dict)
     spawned_by_class: Mapping[str, int] = field(default_factory=dict)
+    dropped_by_reason: Mapping[str, int] = field(default_factory=dict)
 
 
 def station_of(event: Event) -> str | None:
     """The station an event names (its ``data["station"]``), None for a cell-wide event."""
     station = event.data.get("station")
     return None if station is None else str(station)
+
+
+def drop_reason(event: Event) -> str:
+    """Why a ``pick_dropped`` event's object dropped (:data:`DROP_REASONS`; ``released`` when
+    the event names no reason)."""
+    return str(event.data.get("reason") or "released")
 
 
 def _selected(
@@ -290,6 +367,44 @@ def exit_station(stations: Iterable[Any]) -> str:
     return str(max(stations, key=lambda s: s.pick_window_x_m[1]).name)
 
 
+@dataclass
+class _Tally:
+    """The running state of :func:`count_events`."""
+
+    spawned: dict[int, str] = field(default_factory=dict)
+    fate: dict[int, str] = field(default_factory=dict)
+    placed: set[int] = field(default_factory=set)
+    placed_correct: dict[int, str] = field(default_factory=dict)
+    binned: set[int] = field(default_factory=set)
+    drops: list[str] = field(default_factory=list)
+    unintended: int = 0
+
+
+def _count_fate(tally: _Tally, event: Event, *, station: str | None, line_exit: str | None) -> None:
+    """Apply one event (already selected) to the objects' fates and the counters."""
+    oid, kind = event.object_id, event.type
+    if kind is EventType.SPAWNED and station is None:
+        tally.spawned[oid] = event.class_name
+    elif kind is EventType.ENTERED_WORKSPACE and station is not None:
+        tally.spawned.setdefault(oid, event.class_name)
+    elif kind is EventType.PICK_SUCCESS:
+        tally.fate[oid] = "picked"
+    elif kind is EventType.MISSED:
+        if station is not None or line_exit is None or station_of(event) in (None, line_exit):
+            tally.fate.setdefault(oid, "missed")
+    elif kind in (EventType.FELL_OFF, EventType.PICK_DROPPED):
+        if tally.fate.get(oid) != "missed":
+            tally.fate[oid] = "lost"
+        if kind is EventType.PICK_DROPPED:
+            tally.drops.append(drop_reason(event))
+    elif kind is EventType.PLACED_IN_BIN:
+        tally.placed.add(oid)
+        if event.data.get("correct"):
+            tally.placed_correct[oid] = event.class_name
+    elif kind is EventType.UNINTENDED_CONTACT:
+        tally.unintended += 1
+
+
 def count_events(
     events: Iterable[Event],
     duration_s: float,
@@ -302,7 +417,8 @@ def count_events(
 
     With ``station``, only events that name that station count, and ``spawned`` is the number
     of objects that entered its pick window. With ``class_name``, only events about objects of
-    that class count.
+    that class count, except ``binned``: the objects of any class that came to rest in a bin
+    sorting ``class_name`` (so ``purity`` is the share of that class in its bins).
 
     ``line_exit`` (for the line, ``station`` None) names the station whose window ends the line
     (:func:`exit_station`): then only its ``missed`` events (and those naming no station) make
@@ -310,44 +426,31 @@ def count_events(
     the next window (undecided) unless it is picked, lost or missed there. Without it every
     ``missed`` event counts, which is exact for a cell of one station.
     """
-    spawned: dict[int, str] = {}
-    fate: dict[int, str] = {}
-    placed: set[int] = set()
-    placed_correct: dict[int, str] = {}
-    unintended = 0
-    for event in _selected(events, station, class_name):
-        oid, kind = event.object_id, event.type
-        if kind is EventType.SPAWNED and station is None:
-            spawned[oid] = event.class_name
-        elif kind is EventType.ENTERED_WORKSPACE and station is not None:
-            spawned.setdefault(oid, event.class_name)
-        elif kind is EventType.PICK_SUCCESS:
-            fate[oid] = "picked"
-        elif kind is EventType.MISSED:
-            if station is not None or line_exit is None or station_of(event) in (None, line_exit):
-                fate.setdefault(oid, "missed")
-        elif kind in (EventType.FELL_OFF, EventType.PICK_DROPPED):
-            if fate.get(oid) != "missed":
-                fate[oid] = "lost"
-        elif kind is EventType.PLACED_IN_BIN:
-            placed.add(oid)
-            if event.data.get("correct"):
-                placed_correct[oid] = event.class_name
-        elif kind is EventType.UNINTENDED_CONTACT:
-            unintended += 1
-    outcomes = list(fate.values())
+    tally = _Tally()
+    for event in _selected(events, station, None):
+        if event.type is EventType.PLACED_IN_BIN and (
+            class_name is None or event.data.get("bin") == class_name
+        ):
+            tally.binned.add(event.object_id)
+        if class_name is not None and event.class_name != class_name:
+            continue
+        _count_fate(tally, event, station=station, line_exit=line_exit)
+    outcomes = list(tally.fate.values())
     return Counts(
-        spawned=len(spawned),
-        processed=len(fate),
+        spawned=len(tally.spawned),
+        processed=len(tally.fate),
         picked=outcomes.count("picked"),
         missed=outcomes.count("missed"),
         lost=outcomes.count("lost"),
-        placed=len(placed),
-        placed_correct=len(placed_correct),
-        unintended_contacts=unintended,
+        placed=len(tally.placed),
+        placed_correct=len(tally.placed_correct),
+        binned=len(tally.binned),
+        dropped=len(tally.drops),
+        unintended_contacts=tally.unintended,
         duration_s=duration_s,
-        placed_correct_by_class=_tally(placed_correct.values()),
-        spawned_by_class=_tally(spawned.values()),
+        placed_correct_by_class=_tally(tally.placed_correct.values()),
+        spawned_by_class=_tally(tally.spawned.values()),
+        dropped_by_reason=_tally(tally.drops),
     )
 
 
@@ -383,6 +486,7 @@ def _count_values(counts: Counts) -> dict[str, float]:
         "lost": counts.lost,
         "placed": counts.placed,
         "placed_correct": counts.placed_correct,
+        "binned": counts.binned,
     }
 
 
@@ -398,11 +502,14 @@ def event_scores(counts: Counts) -> dict[str, Any]:
         "lost": counts.lost,
         "placed": counts.placed,
         "placed_correct": counts.placed_correct,
+        "binned": counts.binned,
+        "dropped": counts.dropped,
         "pick_success_rate": rate("pick_success_rate", values),
         "miss_rate": rate("miss_rate", values),
         "pick_throughput_per_min": ratio(counts.picked, minutes),
         "recovery_rate": rate("recovery_rate", values),
         "correct_bin_ratio": rate("correct_bin_ratio", values),
+        "purity": rate("purity", values),
         "time_per_object_s": ratio(counts.duration_s, counts.picked),
         "unintended_contacts": counts.unintended_contacts,
         "duration_s": counts.duration_s,
@@ -413,6 +520,7 @@ def event_scores(counts: Counts) -> dict[str, Any]:
             )
             for name, n in sorted(counts.spawned_by_class.items())
         },
+        "dropped_by_reason": dict(sorted(counts.dropped_by_reason.items())),
     }
 
 
@@ -439,6 +547,64 @@ def class_scores(
         scores = event_scores(counts)
         out[class_name] = {name: scores[name] for name in names}
     return out
+
+
+def bin_scores(
+    events: Iterable[Event], *, station: str | None = None
+) -> dict[str, dict[str, dict[str, Any]]]:
+    """Per station and bin (by the class it sorts), the metrics of scope ``bin``: ``binned``
+    (objects of any class that came to rest in it), ``placed_correct`` (those of its class) and
+    ``purity``; only bins something came to rest in, stations in order of first appearance
+    (``""`` for events that name no station). With ``station``, that station's bins only."""
+    binned: dict[str, dict[str, set[int]]] = {}
+    correct: dict[str, dict[str, set[int]]] = {}
+    for event in _selected(events, station, None):
+        if event.type is not EventType.PLACED_IN_BIN:
+            continue
+        where, bin_name = station_of(event) or "", str(event.data.get("bin", ""))
+        binned.setdefault(where, {}).setdefault(bin_name, set()).add(event.object_id)
+        if event.data.get("correct"):
+            correct.setdefault(where, {}).setdefault(bin_name, set()).add(event.object_id)
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    for where, bins in binned.items():
+        out[where] = {}
+        for bin_name, objects in bins.items():
+            values = {
+                "binned": len(objects),
+                "placed_correct": len(correct.get(where, {}).get(bin_name, ())),
+            }
+            out[where][bin_name] = {**values, "purity": rate("purity", values)}
+    return out
+
+
+def considered_objects(controller_stats: Sequence[Mapping[str, Any]]) -> int:
+    """Objects the controllers decided about, summed over instances: each one's ``pick``
+    counters ``targeted`` (objects it committed to at least once) and ``untargeted`` (objects
+    it never targeted, by reason); the two are disjoint."""
+    total = 0
+    for ctl in controller_stats:
+        pick = ctl.get("pick") or {}
+        total += int(pick.get("targeted", 0))
+        total += sum(int(v) for v in (pick.get("untargeted") or {}).values())
+    return total
+
+
+def untargeted_scores(untargeted: Mapping[str, int], considered: int) -> dict[str, Any]:
+    """The allocation figures of one station from its controllers' ``untargeted`` counts (by
+    reason, :func:`untargeted_objects`) and the objects they decided about
+    (:func:`considered_objects`): ``untargeted_total``, ``considered``, ``untargeted_unfit``
+    (:data:`UNFIT_REASONS`), ``unfit_share`` and ``untargeted_share`` (each reason's count /
+    ``considered``)."""
+    unfit = sum(int(untargeted.get(reason, 0)) for reason in UNFIT_REASONS)
+    return {
+        "untargeted_total": sum(int(v) for v in untargeted.values()),
+        "considered": considered,
+        "untargeted_unfit": unfit,
+        "unfit_share": rate("unfit_share", {"untargeted_unfit": unfit, "considered": considered}),
+        "untargeted_share": {
+            reason: ratio(int(n), considered) for reason, n in sorted(untargeted.items())
+        },
+    }
 
 
 def station_names(events: Iterable[Event]) -> list[str]:

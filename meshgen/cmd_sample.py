@@ -9,7 +9,14 @@ from pathlib import Path
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the ``sample`` options."""
     parser.add_argument("--out", type=Path, required=True, help="dataset folder to write")
-    parser.add_argument("--images", type=int, default=24, help="number of images (default 24)")
+    from meshgen.sample import DEFAULT_IMAGES
+
+    parser.add_argument(
+        "--images",
+        type=int,
+        default=DEFAULT_IMAGES,
+        help=f"number of images (default {DEFAULT_IMAGES})",
+    )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
 
 

@@ -31,10 +31,11 @@ def builtin_dataset(
     """
     from meshgen.config import MeshgenConfig
     from meshgen.pipeline import mesh_dataset
-    from meshgen.sample import write_sample
+    from meshgen.sample import SAMPLE_VERSION, write_sample
 
     per_image = (9, 12) if dense else (3, 7)
-    name = f"builtin-i{images}-s{seed}" + ("-dense" if dense else "")
+    # the generator's version is in the name: a cache of an older generator is not reused
+    name = f"builtin-v{SAMPLE_VERSION}-i{images}-s{seed}" + ("-dense" if dense else "")
     base = (root or cache_root()) / name
     meshes = base / "meshes"
     if (meshes / "index.csv").is_file():

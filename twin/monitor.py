@@ -2,14 +2,18 @@
 
 Grasp approximation (as the reference defines it), per station: contacts come from the contact
 points on the links of the station's tool (:mod:`twin.tools`); a small box about its TCP (the
-tool's ``tcp_half_extents_m``) is the overlap volume. A pick succeeds when the TCP volume has
-overlapped the object continuously for the tool's dwell time (0.6 s default) *and* the tool's
-grasp rule holds (a parallel jaw: opposite finger contacts while it presses) *and* the object
-is in that station's pick window at that step: on the belt with its centre of mass's x in
-``StationSpec.pick_window_x_m``. A grasp that completes outside the window (past it, or off the
-belt, e.g. an object dragged along by the fingers) is not a pick; an object that left a
-station's window downstream unpicked is ``missed`` there. The object is then held by a fixed
-constraint to the tool's TCP link until the tool lets it go (its release rule).
+tool's ``tcp_half_extents_m``) is the overlap volume. A pick succeeds when the TCP volume
+overlaps the object *and* the tool's grasp rule holds (a parallel jaw: the overlap has lasted
+its dwell time, 0.6 s default, and the fingers touch from opposite sides while it presses; a
+suction cup: sealed on the object's upturned face and the vacuum built up) *and* the object is
+in that station's pick window at that step: on the belt with its centre of mass's x in
+``StationSpec.pick_window_x_m``. Should the rule hold for several objects at one step (two
+objects side by side between the fingers), the one whose centre of mass is nearest the TCP
+horizontally is the one held and credited. A grasp that completes outside the window (past
+it, or off the belt, e.g. an object dragged along by the fingers) is not a pick; an object that
+left a station's window downstream unpicked is ``missed`` there. The object is then held by a
+fixed constraint to the tool's TCP link until the tool lets it go (its carry rule: released as
+commanded, slipped out of a jaw, a suction cup overloaded or its seal lost).
 
 Fates and events (every event about a robot or a window names its ``station``):
 
@@ -21,7 +25,8 @@ Fates and events (every event about a robot or a window names its ``station``):
 - ``placed_in_bin``: the object came to lie inside a bin (``correct`` when the bin sorts its
   class; ``station`` is the bin's); it is removed from the physics (it is sorted) but keeps its
   ground truth.
-- ``pick_dropped``: a held object was released (or lost) away from every bin.
+- ``pick_dropped``: a held object was let go away from every bin; ``reason`` is the tool's
+  (``released``, ``slipped``, ``suction_overload``, ``seal_lost``).
 - ``unintended_contact``: a robot link touches an object the robot is not picking (neither held
   by it, nor overlapping its TCP volume, nor within its tool's engaged radius).
 """
@@ -40,7 +45,7 @@ from interfaces.events import Event, EventType
 from twin.objects import read_obj_triangles
 from twin.station import Station
 from twin.stream import Placement
-from twin.tools import Normal, Pose
+from twin.tools import Candidate, HeldObject, Normal, Pose
 from twin.top_view import FloatArray, TopView, top_view
 from twin.world import SpawnedBody, World
 
@@ -153,6 +158,9 @@ class _Watch:
     held: _Record | None = None
     fingers: dict[int, dict[int, Normal]] = field(default_factory=dict)
     arm: dict[int, set[int]] = field(default_factory=dict)
+    grasped: list[tuple[float, _Record, float]] = field(default_factory=list)
+    """This step's objects the tool grasps in the pick window: (squared horizontal distance
+    from the TCP, record, overlap time)."""
 
     @property
     def name(self) -> str:
@@ -307,6 +315,8 @@ class Monitor:
         """
         events, self._pending = self._pending, []
         emit = _Emitter(events, step, time_s)
+        for watch in self._watches:
+            watch.station.tool.tick(time_s)
         touched, stations = self._read_contacts()
         one = len(stations) == 1
         tcp_x, tcp_y, lo, hi, _ = stations[0]
@@ -362,6 +372,9 @@ class Monitor:
             elif self._evaluate(record, emit, time_s):
                 load += record.mass_kg
         self.load_mass_kg = load
+        for watch in self._watches:
+            if watch.grasped:
+                self._credit(watch, emit, time_s)
         return events
 
     def _ride(
@@ -424,7 +437,7 @@ class Monitor:
         x, y, z = record.position
         over = self._bin_at(x, y)
         if record.held_by is not None:
-            self._release_check(record, over, emit)
+            self._carry(record, over, emit, time_s)
         if self._fate(record, over, emit):
             return False
         belt = self.cell.belt
@@ -450,13 +463,14 @@ class Monitor:
                 return entry
         return None
 
-    def _release_check(
-        self, record: _Record, over: tuple[BinSpec, str] | None, emit: _Emitter
+    def _carry(
+        self, record: _Record, over: tuple[BinSpec, str] | None, emit: _Emitter, time_s: float
     ) -> None:
-        """Let go of a held object once its station's tool releases it."""
+        """Let go of a held object once its station's tool does (released, slipped, ...)."""
         assert record.held_by is not None
         watch = self._watches[record.held_by]
-        if watch.station.tool.releases():
+        reason = watch.station.tool.carry(time_s)
+        if reason is not None:
             self._release(record)
             if over is None:
                 emit(
@@ -464,6 +478,7 @@ class Monitor:
                     record,
                     position_m=list(record.position),
                     station=watch.name,
+                    reason=reason,
                 )
 
     def _fate(self, record: _Record, over: tuple[BinSpec, str] | None, emit: _Emitter) -> bool:
@@ -545,23 +560,36 @@ class Monitor:
             or (dx * dx + dy * dy < tool.engaged_radius_m**2)
         )
         touching = self._contacts(watch, at, record, engaged, emit)
-        if (
-            watch.held is None
-            and record.held_by is None
-            and at.in_window
-            and at.overlap_since is not None
-            and time_s - at.overlap_since >= tool.spec.dwell_s - 1e-9
-            and tool.grasps(touching)
-        ):
-            self._attach(record, watch)
-            emit(
-                EventType.PICK_SUCCESS,
-                record,
-                dwell_s=time_s - at.overlap_since,
-                position_m=list(record.position),
-                station=watch.name,
+        if watch.held is None and record.held_by is None and at.overlap_since is not None:
+            candidate = Candidate(
+                object_id=record.id,
+                time_s=time_s,
+                overlap_s=time_s - at.overlap_since,
+                touching=touching,
+                tcp_pose=watch.tcp_pose,
+                shape_key=self._shape_key(record),
+                mesh_pose=partial(self._mesh_pose, record),
+                triangles=partial(self._triangles, record),
             )
+            if tool.grasps(candidate) and at.in_window:
+                watch.grasped.append((dx * dx + dy * dy, record, candidate.overlap_s))
         return at.overlap_since is not None or bool(at.fingers) or bool(at.arm_links)
+
+    def _credit(self, watch: _Watch, emit: _Emitter, time_s: float) -> None:
+        """The station's tool holds the object it grasps nearest its TCP: attach it, credit
+        the pick."""
+        _, record, overlap_s = min(watch.grasped, key=lambda g: (g[0], g[1].id))
+        watch.grasped.clear()
+        if record.held_by is not None:  # another station took it at this step
+            return
+        self._attach(record, watch, time_s)
+        emit(
+            EventType.PICK_SUCCESS,
+            record,
+            dwell_s=overlap_s,
+            position_m=list(record.position),
+            station=watch.name,
+        )
 
     def _contacts(
         self, watch: _Watch, at: _AtStation, record: _Record, engaged: bool, emit: _Emitter
@@ -589,7 +617,7 @@ class Monitor:
         at.arm_links = links
         return touching
 
-    def _attach(self, record: _Record, watch: _Watch) -> None:
+    def _attach(self, record: _Record, watch: _Watch, time_s: float) -> None:
         c = self.client
         station = watch.station
         link_pos, link_orn = station.tool.link_pose()
@@ -614,6 +642,16 @@ class Monitor:
         record.picked = True
         record.on_belt = False
         watch.held = record
+        station.tool.hold(
+            HeldObject(
+                object_id=record.id,
+                body=record.body,
+                class_name=record.class_name,
+                mass_kg=record.mass_kg,
+                friction=record.placement.friction,
+            ),
+            time_s,
+        )
 
     def _release(self, record: _Record) -> None:
         if record.constraint is not None:
@@ -623,6 +661,7 @@ class Monitor:
             watch = self._watches[record.held_by]
             if watch.held is record:
                 watch.held = None
+                watch.station.tool.release()
         record.held_by = None
         record.released_step = self._step
 
@@ -639,10 +678,27 @@ class Monitor:
         self._by_body.pop(record.body, None)
         self.world.remove(record.body)
 
+    @staticmethod
+    def _shape_key(record: _Record) -> tuple[str, float]:
+        """Objects with the same key have the same mesh (scaled to the same height)."""
+        return (str(record.placement.spec.mesh_path), record.height_m)
+
+    def _mesh_pose(self, record: _Record) -> Pose:
+        """The pose of the object's mesh frame, world (its pose as of this step)."""
+        _, orientation = pb.multiplyTransforms(
+            (0.0, 0.0, 0.0), record.orientation, (0.0, 0.0, 0.0), record.inertial_inv
+        )
+        q = (orientation[0], orientation[1], orientation[2], orientation[3])
+        return record.position, q
+
+    def _triangles(self, record: _Record) -> FloatArray:
+        """The object's mesh triangles ``(n, 3, 3)`` in its mesh frame, m (cached)."""
+        return self._vertices(record).reshape(-1, 3, 3)
+
     def _vertices(self, record: _Record) -> FloatArray:
         """The object's mesh vertices in its body frame, m (z scaled to its height); cached."""
         spec = record.placement.spec
-        key = (str(spec.mesh_path), record.height_m)
+        key = self._shape_key(record)
         vertices = self._vertex_cache.get(key)
         if vertices is None:
             vertices = read_obj_triangles(spec.mesh_path).reshape(-1, 3)

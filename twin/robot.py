@@ -1,8 +1,12 @@
 """A robot arm in PyBullet: load it from its URDF at a station's base pose, command its joints.
 
 The robot is data (:class:`interfaces.robots.RobotSpec`): URDF, arm joints, home pose, motor
-gains. Only the arm lives here; the tool the robot carries (fingers, TCP) is a
-:mod:`twin.tools` object built on the same body. Loading checks every named joint and raises
+gains, acceleration limits (position and velocity limits come from the URDF, which for a station
+carries the datasheet's, :func:`interfaces.urdf.station_urdf`). The joint motors get the
+commanded targets through a :class:`twin.joint_limiter.JointLimiter`, so the arm never moves
+faster or accelerates harder than its limits, whatever it is commanded. Only the arm lives
+here; the tool the robot carries (fingers, TCP) is a :mod:`twin.tools` object built on the same
+body. Loading checks every named joint and raises
 :class:`twin.errors.SceneError` naming the URDF and the missing name before anything runs.
 """
 
@@ -18,6 +22,7 @@ import pybullet as pb
 from interfaces.errors import ConfigError
 from interfaces.robots import RobotSpec, resolve_urdf
 from twin.errors import SceneError
+from twin.joint_limiter import JointLimiter
 
 HOLD_S = 0.05
 """How long a commanded velocity moves the position target on after the command."""
@@ -40,7 +45,8 @@ class Robot:
     """One robot arm in one PyBullet client (``client`` is passed to every call).
 
     ``joints`` and ``links`` map the URDF's joint and link names to PyBullet indices; a tool on
-    the same body looks its own up with :meth:`joint_index` and :meth:`link_index`.
+    the same body looks its own up with :meth:`joint_index` and :meth:`link_index`. ``dt_s`` is
+    the physics step: :meth:`drive` is called once per step.
     """
 
     def __init__(
@@ -51,6 +57,7 @@ class Robot:
         base_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
         base_yaw_rad: float = 0.0,
         urdf: Path | None = None,
+        dt_s: float = 1.0 / 240.0,
     ) -> None:
         self.client = client
         self.spec = spec
@@ -83,6 +90,15 @@ class Robot:
         self._q_command = self._q_target.copy()
         self._qd_target = np.zeros(len(self.arm_joints))
         self._since_command_s = 0.0
+        self._changed = True
+        self.limiter = JointLimiter(
+            velocity_rps=self.limits.velocity,
+            acceleration_rps2=np.array(spec.joint_max_acceleration_rps2, dtype=float),
+            jerk_rps3=np.array(spec.joint_max_jerk_rps3, dtype=float),
+            dt_s=dt_s,
+            hold_s=HOLD_S,
+            start_rad=self._q_target,
+        )
         n = len(self.arm_joints)
         self._gains = ([spec.position_gain] * n, [spec.velocity_gain] * n)
 
@@ -127,12 +143,15 @@ class Robot:
         self._q_command = self._q_target.copy()
         self._qd_target = np.zeros(len(self.arm_joints))
         self._since_command_s = 0.0
+        self.limiter.reset(self._q_target)
+        self._changed = True
 
     def command(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
         """Set arm joint position targets (and feed-forward velocities); clipped to the limits.
 
         With velocities, the position target moves on with them between commands (as a
-        trajectory controller interpolates a point with velocity), for up to ``HOLD_S``.
+        trajectory controller interpolates a point with velocity), for up to ``HOLD_S``. The
+        motors follow from the next :meth:`drive`, through the joint limiter.
         """
         self._q_command = np.clip(np.asarray(q, dtype=float), self.limits.lower, self.limits.upper)
         self._q_target = self._q_command.copy()
@@ -142,6 +161,8 @@ class Robot:
             else np.clip(np.asarray(qd, dtype=float), -self.limits.velocity, self.limits.velocity)
         )
         self._since_command_s = 0.0
+        self.limiter.command(self._q_command, self._qd_target)
+        self._changed = True
 
     def extrapolate(self, dt_s: float) -> None:
         """Advance the position target along the commanded velocity by one step."""
@@ -150,16 +171,40 @@ class Robot:
         self._since_command_s += dt_s
         q = self._q_command + self._qd_target * min(self._since_command_s, HOLD_S)
         self._q_target = np.clip(q, self.limits.lower, self.limits.upper)
-        self.apply_commands()
+        self._changed = True
+
+    def drive(self) -> None:
+        """Once per physics step, after this step's command or extrapolation: hand the targets
+        to the motors through the joint limiter (nothing to do while they rest unchanged).
+
+        A joint the limiter passes gets its targets exactly as commanded (position, and the
+        commanded velocity as the feed-forward); a limited one the limiter's reference.
+        """
+        limiter = self.limiter
+        was_limited = limiter.any_limited
+        if not self._changed and not was_limited:
+            limiter.step(self._q_target, None)
+            return
+        self._changed = False
+        moving = self._since_command_s < HOLD_S and self._qd_target.any()
+        q, qd = limiter.step(self._q_target, self._qd_target if moving else None)
+        if was_limited or limiter.any_limited:
+            self._set_motors(q, np.where(limiter.limited, qd, self._qd_target))
+        else:
+            self._set_motors(self._q_target, self._qd_target)
 
     def apply_commands(self) -> None:
-        """Hand the current arm targets to PyBullet's joint motors."""
+        """Hand the current arm targets to PyBullet's joint motors as they are (the start pose
+        of an episode; :meth:`drive` limits every later command)."""
+        self._set_motors(self._q_target, self._qd_target)
+
+    def _set_motors(self, q: np.ndarray, qd: np.ndarray) -> None:
         pb.setJointMotorControlArray(
             self.body,
             self.arm_joints,
             pb.POSITION_CONTROL,
-            targetPositions=self._q_target.tolist(),
-            targetVelocities=self._qd_target.tolist(),
+            targetPositions=q.tolist(),
+            targetVelocities=qd.tolist(),
             forces=self.limits.effort.tolist(),
             positionGains=self._gains[0],
             velocityGains=self._gains[1],

@@ -15,6 +15,10 @@ the latched ``cell/bins`` (static configuration, published once at start).
 ``/events`` carries every event the twin logs, in the order of :attr:`twin.sim.Twin.events`:
 the monitor's, rejected commands, controller timeouts and injected faults alike.
 
+Claims: the node keeps the line's claims board (one entry per station and track, from each
+station's ``line/claim``) and relays it on ``/line/claims`` after every step in which it
+changed, a counted topic of the tick; it allocates nothing.
+
 Modes: ``realtime`` paces the physics to the wall clock; ``lockstep`` steps tick k+1 only when
 every station's controller has acknowledged tick k (see the LockstepTick/StepAck handshake in
 the docs).
@@ -33,6 +37,8 @@ from typing import Any
 
 from cdw_interfaces.msg import (
     BeltState,
+    Claim,
+    ClaimArray,
     Detection,
     DetectionArray,
     LockstepTick,
@@ -137,6 +143,10 @@ class StationLink:
             del self.acks[old]
 
 
+CLAIMS_REFRESH_S = 1.0
+"""Longest sim time between two relays of the claims board once one was relayed."""
+
+
 class TwinNode(Node):
     """Publishes the twin's state and takes commands; :func:`run_loop` drives it."""
 
@@ -164,6 +174,9 @@ class TwinNode(Node):
         self._tick_counts: Counter[str] = Counter()  # by contract name (joint_states, ...)
         self._last_stamp_ns: dict[str, int] = {}
         self._events_sent = 0
+        self._board: dict[tuple[int, int], Any] = {}  # (station index, track id) -> Claim
+        self._board_changed = False
+        self._board_sent = False
         self.pub_clock = self._publisher(c.CLOCK_TOPIC)
         self.pub_belt = self._publisher(c.BELT_STATE)
         self.pub_det = self._publisher(c.DETECTIONS)
@@ -172,6 +185,7 @@ class TwinNode(Node):
         self.pub_echo = self._publisher(c.PING_ECHO)
         self.pub_tick = self._publisher(c.LOCKSTEP_TICK)
         self.pub_faults = self._publisher(c.FAULTS)
+        self.pub_claims = self._publisher(c.CLAIMS)
         self.links = [self._station_link(station) for station in twin.stations]
         self._cell_command_subs = [self._subscribe(c.BELT_SETPOINT, self._on_setpoint)]
         self._subscribe(c.PRIORITIES, self._on_priorities)
@@ -195,6 +209,7 @@ class TwinNode(Node):
             self._subscribe(c.ARM_TRAJECTORY, partial(self._on_trajectory, link), ns),
             self._subscribe(c.GRIPPER_COMMAND, partial(self._on_gripper, link), ns),
             self._subscribe(c.PICK_TARGET, partial(self._on_target, link), ns),
+            self._subscribe(c.CLAIM, partial(self._on_claim, link), ns),
         ]
         link.sub_ack = self._subscribe(c.LOCKSTEP_ACK, partial(self._on_ack, link), ns)
         return link
@@ -283,6 +298,39 @@ class TwinNode(Node):
         p = msg.grasp_point
         self.twin.announce_target(int(msg.track_id), (p.x, p.y, p.z), msg.phase, link.station.index)
 
+    def _on_claim(self, link: StationLink, msg: Claim) -> None:
+        """A station's claim goes on the board (one entry per station and track); the board is
+        relayed on ``/line/claims`` after the next step. The twin only relays: it allocates
+        nothing."""
+        self._received(link)
+        if msg.state not in c.CLAIM_STATES:
+            text = f"state {msg.state!r} is not one of {', '.join(c.CLAIM_STATES)}"
+            self._reject(link.wire(c.CLAIM), Rejected("bad_claim", text), link)
+            return
+        msg.station = link.name
+        self._board[(link.station.index, int(msg.track_id))] = msg
+        self._board_changed = True
+
+    def publish_claims(self, stamp: Any, step: int) -> None:
+        """``/line/claims``: the whole board, ordered by station then track, when it changed
+        since the last relay, and once a board was relayed at least every
+        :data:`CLAIMS_REFRESH_S` (a restarted controller, which missed the earlier boards, then
+        gets one to wait for); ``released`` and ``picked`` entries are relayed once and
+        dropped."""
+        refresh_steps = max(1, round(CLAIMS_REFRESH_S / self.twin.dt_s))
+        refresh = self._board_sent and step % refresh_steps == 0
+        if not (self._board_changed or refresh):
+            return
+        self._board_sent = True
+        msg = ClaimArray()
+        msg.header.stamp = stamp
+        msg.header.frame_id = "world"
+        msg.claims = [self._board[key] for key in sorted(self._board)]
+        self._send(self.pub_claims, msg)
+        self._count(c.CLAIMS, c.CLAIMS.name, msg_stamp_ns(stamp))
+        self._board = {k: v for k, v in self._board.items() if v.state == "claimed"}
+        self._board_changed = False
+
     def _on_ack(self, link: StationLink, msg: StepAck) -> None:
         tick = int(msg.tick)
         link.acks[tick] = int(msg.n_commands)
@@ -342,7 +390,9 @@ class TwinNode(Node):
         subs = (*link.command_subs, *self._cell_command_subs)
         if any(s.get_publisher_count() < self.count_publishers(s.topic_name) for s in subs):
             return False
-        pubs = (self.pub_tick, link.pub_joints, self.pub_belt, self.pub_det)
+        pubs = [self.pub_tick, link.pub_joints, self.pub_belt, self.pub_det]
+        if len(self.links) > 1:  # a single station's controller need not read the board
+            pubs.append(self.pub_claims)
         return all(
             p.get_subscription_count() >= max(1, self.count_subscribers(p.topic_name)) for p in pubs
         )
@@ -381,6 +431,7 @@ class TwinNode(Node):
         ):
             self.publish_ground_truth(stamp)
         self.publish_new_events()
+        self.publish_claims(stamp, step)
         if self.lockstep:
             self._publish_tick(step, stamp)
         self._tick_counts = Counter()
@@ -408,7 +459,7 @@ class TwinNode(Node):
 
     def _publish_tick(self, step: int, stamp: Any) -> None:
         counts, last = self._tick_counts, self._last_stamp_ns
-        joints, belt, detections = (t.name for t in c.COUNTED)
+        joints, belt, detections, claims = (t.name for t in c.COUNTED)
         self._send(
             self.pub_tick,
             LockstepTick(
@@ -417,9 +468,11 @@ class TwinNode(Node):
                 n_joint_states=counts[joints],
                 n_belt_states=counts[belt],
                 n_detections=counts[detections],
+                n_claims=counts[claims],
                 last_joint_state_ns=last.get(joints, -1),
                 last_belt_state_ns=last.get(belt, -1),
                 last_detections_ns=last.get(detections, -1),
+                last_claims_ns=last.get(claims, -1),
             ),
         )
 

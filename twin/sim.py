@@ -269,7 +269,10 @@ class Twin:
         )
         self._world = World(c, self.cell, self._cache_dir)
         self._world.prepare([spec for layout in self.layouts for spec in layout.objects])
-        self.stations = tuple(Station.load(c, i, spec) for i, spec in enumerate(self.cell.stations))
+        self.stations = tuple(
+            Station.load(c, i, spec, dt_s=self.dt_s, gravity_mps2=physics.gravity_mps2)
+            for i, spec in enumerate(self.cell.stations)
+        )
         self._monitor = Monitor(c, self.cell, self._world, self.stations)
         stream = Stream(self.layouts, self.scenario, self.cell.belt, seeds)
         self._batches = iter(stream)
@@ -382,7 +385,8 @@ class Twin:
         return new
 
     def _command_or_hold(self, action: ArmCommand | Sequence[ArmCommand] | None) -> None:
-        """Apply this step's commands; a station without one follows its last command."""
+        """Apply this step's commands (a station without one follows its last command), and
+        hand every arm's targets to its motors through its joint limiter."""
         if action is None:
             commanded: tuple[int, ...] = ()
         elif isinstance(action, ArmCommand):
@@ -395,6 +399,7 @@ class Twin:
         for station in self.stations:
             if station.index not in commanded:
                 station.robot.extrapolate(self.dt_s)
+            station.drive()
 
     def _track(self, station: Station, monitor: Monitor, new: list[Event]) -> None:
         """The station's tracking-time measurement for this step."""

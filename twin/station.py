@@ -22,7 +22,8 @@ from twin.tools import Tool, make_tool
 @dataclass(frozen=True)
 class ArmCommand:
     """A command for one station's arm: joint targets ``(n,)``, optional velocities ``(n,)``,
-    the tool's command (a gripper's opening in m); ``station`` is the station's index."""
+    the tool's command (a gripper's opening in m, a suction cup's vacuum 1 or 0); ``station``
+    is the station's index."""
 
     joint_positions: tuple[float, ...]
     joint_velocities: tuple[float, ...] | None = None
@@ -41,8 +42,18 @@ class Station:
     targets: TargetTracker = field(default_factory=TargetTracker)
 
     @classmethod
-    def load(cls, client: int, index: int, spec: StationSpec) -> Station:
-        """Load the station's robot and build its tool; the arm at home, the tool open."""
+    def load(
+        cls,
+        client: int,
+        index: int,
+        spec: StationSpec,
+        *,
+        dt_s: float = 1.0 / 240.0,
+        gravity_mps2: float = 9.81,
+    ) -> Station:
+        """Load the station's robot and build its tool; the arm at home, the tool open.
+        ``dt_s`` is the physics step (the arm's joint limiter runs at that rate),
+        ``gravity_mps2`` loads what the tool carries."""
         try:
             urdf = station_urdf(spec.robot, spec.tool)
         except ConfigError as exc:
@@ -53,8 +64,10 @@ class Station:
             base_position_m=spec.base_position_m,
             base_yaw_rad=spec.base_yaw_rad,
             urdf=urdf,
+            dt_s=dt_s,
         )
-        station = cls(index=index, spec=spec, robot=robot, tool=make_tool(spec.tool, robot))
+        tool = make_tool(spec.tool, robot, gravity_mps2=gravity_mps2)
+        station = cls(index=index, spec=spec, robot=robot, tool=tool)
         station.reset()
         return station
 
@@ -75,7 +88,8 @@ class Station:
         self.tool.apply()
 
     def command(self, action: ArmCommand) -> None:
-        """Set the arm (and tool) targets; they hold until the next command."""
+        """Set the arm (and tool) targets; they hold until the next command. The tool's motors
+        get its target at once, the arm's at the next :meth:`drive`."""
         n = len(self.robot.arm_joints)
         if len(action.joint_positions) != n:
             msg = (
@@ -87,9 +101,14 @@ class Station:
         self.robot.command(np.asarray(action.joint_positions, dtype=float), qd)
         if action.gripper_width_m is not None:
             self.tool.command(action.gripper_width_m)
-        self.apply()
+            self.tool.apply()
+
+    def drive(self) -> None:
+        """Once per physics step: the arm's targets (limited) to its motors."""
+        self.robot.drive()
 
     def command_tool(self, value: float) -> None:
-        """Set the tool's target (a gripper's opening in m); it holds until the next command."""
+        """Set the tool's target (a gripper's opening in m, a suction cup's vacuum 1 or 0); it
+        holds until the next command."""
         self.tool.command(value)
-        self.apply()
+        self.tool.apply()

@@ -3,71 +3,103 @@
 The cell file describes the tool (:mod:`interfaces.tools`); :func:`make_tool` gives the
 controller's side of it, a :class:`ControllerTool`. The pick sequence, the scheduler and the
 node ask the tool what they need (its command values, whether it holds something, whether an
-object fits, the footprint that must be free around a grasp, its grasp symmetry) and nothing
-else in the controller knows what kind of tool it is.
+object fits, where on the object it grasps, the footprint that must be free around a grasp, its
+grasp symmetry, how long the sequence waits for it) and nothing else in the controller knows
+what kind of tool it is.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from control.errors import ControlConfigError
-from interfaces.tools import ToolSpec
+from interfaces.tools import ParallelJawSpec, SuctionCupSpec, ToolSpec
+
+if TYPE_CHECKING:
+    from control.config import PickConfig
 
 
 @dataclass(frozen=True, kw_only=True)
 class Footprint:
-    """A rectangle about the grasp point that must be free of other objects.
+    """An area about the grasp point that must be free of other objects.
 
-    Aligned with the target: ``half_along_m`` along its long side, ``half_across_m`` across it
-    (the grasp yaw's direction). An object blocks the grasp when its footprint overlaps the
-    rectangle and, with ``clear_above_tcp_m`` given, its top reaches that high above the grasp
-    point (less the clearance); None: every object in the rectangle blocks.
+    A rectangle aligned with the target: ``half_along_m`` along its long side, ``half_across_m``
+    across it (the grasp yaw's direction); with ``disc`` a disc of radius ``half_along_m``
+    (the same as ``half_across_m``). An object blocks the grasp when its footprint overlaps the
+    area and, with ``clear_above_tcp_m`` given, its top reaches that high above the grasp point
+    (less the clearance); None: every object in the area blocks.
     """
 
     half_along_m: float
     half_across_m: float
     clear_above_tcp_m: float | None = None
+    disc: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class GraspTiming:
+    """How long the pick sequence waits for the tool, s.
+
+    At the grasp point the TCP follows the object for ``dwell_s`` (0: none), then the tool
+    acts (closes, or seals) for ``close_s`` while following, the last ``close_overlap_s`` of
+    the dwell overlapping the start of that; over the bin it releases for ``release_s``. With
+    ``grasp_on_descent`` the tool is commanded to grasp from the start of the descent (a
+    suction cup's vacuum is on before the lip touches, so it seals as it does).
+    """
+
+    dwell_s: float
+    close_s: float
+    close_overlap_s: float
+    release_s: float
+    grasp_on_descent: bool = False
 
 
 class ControllerTool(Protocol):
     """What the controller knows about its tool.
 
-    The command is one number (``/gripper/command``): for a gripper the opening in metres.
+    The command is one number (``gripper/command``): a gripper's opening in metres, a suction
+    cup's vacuum (1 on, 0 off). The measured value is in the same unit.
     """
 
     @property
     def grasp_yaw_period_rad(self) -> float:
-        """Grasp yaws ``yaw + k * period`` are the same grasp (pi for a parallel gripper)."""
+        """Grasp yaws ``yaw + k * period`` are the same grasp (pi for a parallel gripper); 0:
+        the grasp does not depend on the object's yaw (any yaw of the tool will do)."""
         ...
 
     @property
     def joint_names(self) -> tuple[str, ...]:
-        """The tool's joints in ``/joint_states`` (empty when it reports none)."""
+        """The tool's joints in ``joint_states`` (empty when it reports none)."""
         ...
 
     @property
-    def open_command_m(self) -> float:
+    def urdf_joint_names(self) -> tuple[str, ...]:
+        """Those of :attr:`joint_names` that are joints of the station's URDF (a gripper's
+        fingers; a suction cup's vacuum reading is not a joint of any model)."""
+        ...
+
+    @property
+    def open_command(self) -> float:
         """The command that releases (and keeps the tool ready for the next grasp)."""
         ...
 
-    def measured_m(self, positions_rad: Mapping[str, float]) -> float:
+    def measured(self, positions: Mapping[str, float]) -> float:
         """The measured command value from the tool's joint positions; NaN when not measured."""
         ...
 
-    def grasp_command_m(self, width_m: float, squeeze_m: float) -> float:
+    def grasp_command(self, width_m: float, squeeze_m: float) -> float:
         """The command that grasps an object ``width_m`` across (``squeeze_m`` into it)."""
         ...
 
-    def clip_command_m(self, value_m: float) -> float:
-        """``value_m`` limited to the tool's command range (NaN stays NaN)."""
+    def clip_command(self, value: float) -> float:
+        """``value`` limited to the tool's command range (NaN stays NaN)."""
         ...
 
-    def holds_nothing(self, measured_m: float, commanded_m: float, margin_m: float) -> bool:
-        """Whether the tool, commanded to grasp, reached the command within ``margin_m``:
-        nothing held it back (False when ``measured_m`` is NaN: not measured)."""
+    def holds_nothing(self, measured: float, commanded: float, margin_m: float) -> bool:
+        """Whether the tool, commanded to grasp, holds nothing by its measurement (False when
+        ``measured`` is NaN: not measured). ``margin_m``: a gripper's closing margin."""
         ...
 
     def misfit(
@@ -77,21 +109,39 @@ class ControllerTool(Protocol):
         :data:`control.scheduler.UNTARGETED_REASONS`), or None."""
         ...
 
+    def fit_margin_m(
+        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+    ) -> float:
+        """How much room the tool has on the object's tightest dimension, m (negative: it does
+        not fit); comparable between tools, for leaving an object to the one that fits it
+        better."""
+        ...
+
+    def grasp_height_m(self, height_m: float, pick: PickConfig) -> float:
+        """Height of the grasp point (the TCP at the grasp) above the underside of an object
+        ``height_m`` tall."""
+        ...
+
     def footprints(self, clearance_m: float) -> tuple[Footprint, ...]:
         """The areas about a grasp point the tool comes down on, each grown by ``clearance_m``."""
         ...
 
+    def timing(self, pick: PickConfig) -> GraspTiming:
+        """The pick sequence's waits for this tool."""
+        ...
+
 
 def make_tool(spec: ToolSpec) -> ControllerTool:
-    """The controller's side of the tool ``spec`` describes."""
+    """The controller's side of the tool ``spec`` describes (by its ``kind``)."""
     from control.tools.parallel_jaw import ParallelJaw
+    from control.tools.suction_cup import SuctionCup
 
-    kinds: dict[str, Callable[[ToolSpec], ControllerTool]] = {"parallel_jaw": ParallelJaw}
-    factory = kinds.get(spec.kind)
-    if factory is None:
-        msg = f"tool.kind = {spec.kind!r}: the controller has no model of this tool kind"
-        raise ControlConfigError(msg)
-    return factory(spec)
+    if spec.kind == "parallel_jaw" and isinstance(spec, ParallelJawSpec):
+        return ParallelJaw(spec)
+    if spec.kind == "suction_cup" and isinstance(spec, SuctionCupSpec):
+        return SuctionCup(spec)
+    msg = f"tool.kind = {spec.kind!r}: the controller has no model of this tool kind"
+    raise ControlConfigError(msg)
 
 
-__all__ = ["ControllerTool", "Footprint", "make_tool"]
+__all__ = ["ControllerTool", "Footprint", "GraspTiming", "make_tool"]

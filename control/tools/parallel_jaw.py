@@ -1,11 +1,14 @@
-"""The parallel-jaw gripper as the controller plans with it (the Panda hand, the xArm gripper).
+"""The parallel-jaw gripper as the controller plans with it (the Panda hand, the xArm gripper,
+the wide flange gripper).
 
 Its command is the opening between the fingers in metres, from 0 to ``max_opening_m``. The
 twin reports each finger joint as half the opening, whatever the gripper's own joint map, so
 the measured opening is twice the mean of the finger joints. A grasp closes to the object's
 width less a squeeze; fingers that close to within a margin of that command met nothing. An
 object fits when its narrow side is narrower than the opening (less a margin) and it stands as
-tall as the finger pads. The open fingers and the hand need room around the grasp point.
+tall as the finger pads. The open fingers and the hand need room around the grasp point. The
+fingers grasp below the object's top (``pick.grasp_below_top_m``), and the sequence dwells
+there before closing (the reference's grasp rule), with the pick configuration's timing.
 """
 
 from __future__ import annotations
@@ -13,12 +16,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from control.tools import Footprint
+from control.tools import Footprint, GraspTiming
 from interfaces.tools import ParallelJawSpec
+
+if TYPE_CHECKING:
+    from control.config import PickConfig
 
 
 @dataclass(frozen=True)
@@ -36,35 +42,40 @@ class ParallelJaw:
         return self.spec.joints
 
     @property
-    def open_command_m(self) -> float:
-        """Fully open."""
+    def urdf_joint_names(self) -> tuple[str, ...]:
+        """The finger joints: they are the station URDF's."""
+        return self.spec.joints
+
+    @property
+    def open_command(self) -> float:
+        """Fully open (m)."""
         return self.spec.max_opening_m
 
-    def measured_m(self, positions_rad: Mapping[str, float]) -> float:
-        """The opening: twice the mean of the finger joints (each reports half the opening).
+    def measured(self, positions: Mapping[str, float]) -> float:
+        """The opening (m): twice the mean of the finger joints (each reports half of it).
 
         NaN when a finger joint is missing or not finite.
         """
         names = self.spec.joints
-        fingers = [positions_rad[n] for n in names if n in positions_rad]
+        fingers = [positions[n] for n in names if n in positions]
         if not fingers or len(fingers) != len(names):
             return math.nan
         opening = 2.0 * sum(fingers) / len(fingers)
         return opening if math.isfinite(opening) else math.nan
 
-    def grasp_command_m(self, width_m: float, squeeze_m: float) -> float:
-        """The object's width less ``squeeze_m``, within the opening range."""
+    def grasp_command(self, width_m: float, squeeze_m: float) -> float:
+        """The object's width less ``squeeze_m``, within the opening range (m)."""
         return float(np.clip(width_m - squeeze_m, 0.0, self.spec.max_opening_m))
 
-    def clip_command_m(self, value_m: float) -> float:
-        """``value_m`` within ``[0, max_opening_m]``."""
-        return float(np.clip(value_m, 0.0, self.spec.max_opening_m))
+    def clip_command(self, value: float) -> float:
+        """``value`` within ``[0, max_opening_m]``."""
+        return float(np.clip(value, 0.0, self.spec.max_opening_m))
 
-    def holds_nothing(self, measured_m: float, commanded_m: float, margin_m: float) -> bool:
+    def holds_nothing(self, measured: float, commanded: float, margin_m: float) -> bool:
         """Closed to within ``margin_m`` of the command: no object holds the fingers apart."""
-        if not math.isfinite(measured_m):
+        if not math.isfinite(measured):
             return False
-        return measured_m - commanded_m < margin_m
+        return measured - commanded < margin_m
 
     def misfit(
         self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
@@ -76,6 +87,23 @@ class ParallelJaw:
         if height_m < self.spec.pad_height_m:
             return "too_flat"
         return None
+
+    def fit_margin_m(
+        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+    ) -> float:
+        """The lesser of the opening's room around the narrow side (less ``width_margin_m``)
+        and the object's height above the finger pads."""
+        room = self.spec.max_opening_m - width_margin_m - min(width_m, length_m)
+        return min(room, height_m - self.spec.pad_height_m)
+
+    def grasp_height_m(self, height_m: float, pick: PickConfig) -> float:
+        """``pick.grasp_below_top_m`` below the top, but not below
+        ``pick.grasp_height_fraction`` of the height nor ``pick.min_grasp_height_m``."""
+        return max(
+            height_m - pick.grasp_below_top_m,
+            height_m * pick.grasp_height_fraction,
+            pick.min_grasp_height_m,
+        )
 
     def footprints(self, clearance_m: float) -> tuple[Footprint, Footprint]:
         """The open fingers' rectangle (any object in it blocks) and the hand's (objects whose
@@ -96,3 +124,12 @@ class ParallelJaw:
             clear_above_tcp_m=s.palm_above_tcp_m,
         )
         return fingers, hand
+
+    def timing(self, pick: PickConfig) -> GraspTiming:
+        """The pick configuration's dwell, close, overlap and release."""
+        return GraspTiming(
+            dwell_s=pick.dwell_s,
+            close_s=pick.close_s,
+            close_overlap_s=pick.close_overlap_s,
+            release_s=pick.release_s,
+        )

@@ -1,7 +1,9 @@
-/* BeltDrive: a conveyor belt driven by a PI speed-controlled motor through a gearbox. */
+/* BeltDrive: a conveyor belt driven by a PI speed-controlled motor through a gearbox, with a
+ * setpoint ramp and a holding brake (a non-reversing conveyor drive). */
 #ifndef BELT_DRIVE_CONFIG_H
 #define BELT_DRIVE_CONFIG_H
 
+#include <stdbool.h>
 #include <stdint.h>
 
 #define MODEL_IDENTIFIER BeltDrive
@@ -31,6 +33,8 @@ typedef enum {
     vr_perturbation_seed = 17,
     vr_setpoint_ramp_limit_mps2 = 18,
     vr_internal_step_s = 19,
+    vr_setpoint_weight = 20,
+    vr_standstill_speed_mps = 21,
     vr_speed_setpoint_mps = 30,
     vr_load_mass_kg = 31,
     vr_belt_speed_mps = 40,
@@ -61,6 +65,8 @@ typedef struct {
     int32_t perturbation_seed;
     double setpoint_ramp_limit_mps2;
     double internal_step_s;
+    double setpoint_weight;
+    double standstill_speed_mps;
     double speed_setpoint_mps;
     double load_mass_kg;
     double motor_current_A;
@@ -68,6 +74,9 @@ typedef struct {
     double reference_mps;
     double reference_hold_mps;
     double perturbation_N;
+    bool brake_closed;                /* brake state at the last grid point */
+    bool brake_hold;                  /* brake state over the current grid interval */
+    double interval_start_position_m; /* belt position at the start of that interval */
     double ou_decay;
     double ou_diffusion_N;
     uint64_t rng[4];

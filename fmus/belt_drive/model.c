@@ -7,7 +7,7 @@
 #define GRAVITY_MPS2 9.80665
 #define MAX_INTERNAL_STEP_S 1e-3
 
-typedef enum { Positive, NonNegative, Finite, StepSize } Rule;
+typedef enum { Positive, NonNegative, UnitInterval, StepSize } Rule;
 
 typedef struct {
     const char *name;
@@ -41,9 +41,11 @@ static bool float64Variable(ModelInstance *comp, ValueReference vr, Float64Varia
         PARAMETER(vr_perturbation_correlation_time_s, perturbation_correlation_time_s, Positive)
         PARAMETER(vr_setpoint_ramp_limit_mps2, setpoint_ramp_limit_mps2, NonNegative)
         PARAMETER(vr_internal_step_s, internal_step_s, StepSize)
+        PARAMETER(vr_setpoint_weight, setpoint_weight, UnitInterval)
+        PARAMETER(vr_standstill_speed_mps, standstill_speed_mps, Positive)
 #undef PARAMETER
     case vr_speed_setpoint_mps:
-        *out = (Float64Variable){"speed_setpoint_mps", &d->speed_setpoint_mps, Finite, false};
+        *out = (Float64Variable){"speed_setpoint_mps", &d->speed_setpoint_mps, NonNegative, false};
         return true;
     case vr_load_mass_kg:
         *out = (Float64Variable){"load_mass_kg", &d->load_mass_kg, NonNegative, false};
@@ -62,8 +64,8 @@ static Status checkValue(const ModelInstance *comp, const Float64Variable *v, do
     case NonNegative:
         if (!(isfinite(value) && value >= 0.0)) requirement = "a finite value >= 0";
         break;
-    case Finite:
-        if (!isfinite(value)) requirement = "a finite value";
+    case UnitInterval:
+        if (!(isfinite(value) && value >= 0.0 && value <= 1.0)) requirement = "a value in [0, 1]";
         break;
     case StepSize:
         if (!(isfinite(value) && value > 0.0 && value <= MAX_INTERNAL_STEP_S)) {
@@ -82,8 +84,8 @@ void setStartValues(ModelInstance *comp) {
     ModelData *d = &comp->data;
     d->torque_constant_NmpA = 0.7;
     d->current_limit_A = 9.0;
-    d->speed_gain_Aspm = 8.0;
-    d->integral_gain_Apm = 90.0;
+    d->speed_gain_Aspm = 24.0;
+    d->integral_gain_Apm = 168.0;
     d->antiwindup_time_s = 0.05;
     d->gear_ratio = 40.0;
     d->drum_radius_m = 0.1;
@@ -97,8 +99,10 @@ void setStartValues(ModelInstance *comp) {
     d->perturbation_std_N = 0.0;
     d->perturbation_correlation_time_s = 0.5;
     d->perturbation_seed = 1;
-    d->setpoint_ramp_limit_mps2 = 0.0;
+    d->setpoint_ramp_limit_mps2 = 0.5;
     d->internal_step_s = 1e-3;
+    d->setpoint_weight = 0.7;
+    d->standstill_speed_mps = 0.005;
     d->speed_setpoint_mps = 0.0;
     d->load_mass_kg = 0.0;
 }
@@ -110,7 +114,7 @@ Status validateParameters(ModelInstance *comp) {
         vr_drum_inertia_kgm2, vr_belt_mass_kg, vr_viscous_friction_Nspm, vr_coulomb_friction_N,
         vr_load_friction_coefficient, vr_coulomb_smoothing_speed_mps, vr_perturbation_std_N,
         vr_perturbation_correlation_time_s, vr_setpoint_ramp_limit_mps2, vr_internal_step_s,
-        vr_speed_setpoint_mps, vr_load_mass_kg};
+        vr_setpoint_weight, vr_standstill_speed_mps, vr_speed_setpoint_mps, vr_load_mass_kg};
     for (size_t i = 0; i < sizeof(all) / sizeof(all[0]); i++) {
         Float64Variable v;
         float64Variable(comp, all[i], &v);
@@ -159,6 +163,9 @@ Status initializeModel(ModelInstance *comp) {
         d->perturbation_std_N > 0.0 ? d->perturbation_std_N * standardNormal(d->rng) : 0.0;
     d->reference_mps = 0.0;
     d->reference_hold_mps = 0.0;
+    d->brake_closed = true;
+    d->brake_hold = true;
+    d->interval_start_position_m = 0.0;
     comp->x[0] = 0.0;
     comp->x[1] = 0.0;
     comp->x[2] = 0.0;
@@ -166,6 +173,44 @@ Status initializeModel(ModelInstance *comp) {
 }
 
 double internalStepSize(const ModelInstance *comp) { return comp->data.internal_step_s; }
+
+/* The drive is enabled while the belt runs and, with the brake closed, while a speed is commanded;
+ * a disabled drive (stopped, brake closed, setpoint 0) carries no current. */
+static bool driveEnabled(const ModelData *d) {
+    return !d->brake_hold || d->speed_setpoint_mps > 0.0;
+}
+
+/* Motor current (A) of the PI with setpoint weight b; *command is the unlimited command u. */
+static double motorCurrent(const ModelData *d, const double x[NX], double *command) {
+    if (!driveEnabled(d)) {
+        *command = 0.0;
+        return 0.0;
+    }
+    const double weighted_mps = d->setpoint_weight * d->reference_hold_mps;
+    const double u = d->speed_gain_Aspm * (weighted_mps - x[0]) + x[2];
+    *command = u;
+    return fmin(fmax(u, -d->current_limit_A), d->current_limit_A);
+}
+
+/* Drive force at the belt per ampere of motor current (N/A). */
+static double forcePerAmpere(const ModelData *d) {
+    return d->torque_constant_NmpA * d->gear_ratio / d->drum_radius_m;
+}
+
+/* Whether the drive closes the brake on a belt that ran over this interval and ends it at
+ * state x: it would turn backwards, or a stop is commanded and its speed is within the
+ * standstill threshold. */
+static bool closesBrake(const ModelData *d, const double x[NX]) {
+    return !d->brake_hold &&
+           (x[0] <= 0.0 || (d->speed_setpoint_mps == 0.0 && x[0] <= d->standstill_speed_mps));
+}
+
+/* The closing brake stops the belt where it is: speed 0, position not behind the interval's
+ * start. */
+static void holdBelt(const ModelData *d, double x[NX]) {
+    x[0] = 0.0;
+    x[1] = fmax(x[1], d->interval_start_position_m);
+}
 
 void prepareInterval(ModelInstance *comp, double h) {
     ModelData *d = &comp->data;
@@ -177,47 +222,69 @@ void prepareInterval(ModelInstance *comp, double h) {
     } else {
         d->reference_hold_mps = d->speed_setpoint_mps;
     }
+    d->brake_hold = d->brake_closed;
+    if (d->brake_closed && d->speed_setpoint_mps > 0.0) {
+        /* The brake opens once the drive's force, with the perturbation, pushes forward. */
+        double command_A;
+        const double force_N = forcePerAmpere(d) * motorCurrent(d, comp->x, &command_A);
+        d->brake_hold = !(force_N + d->perturbation_N > 0.0);
+    }
+    d->interval_start_position_m = comp->x[1];
 }
 
 void commitInterval(ModelInstance *comp, double h) {
     (void)h;
     ModelData *d = &comp->data;
     d->reference_mps = d->reference_hold_mps;
+    d->brake_closed = d->brake_hold;
+    if (closesBrake(d, comp->x)) {
+        d->brake_closed = true;
+        holdBelt(d, comp->x);
+        if (d->speed_setpoint_mps == 0.0) {
+            comp->x[2] = 0.0; /* stopped: drive disabled, integrator and ramp reset */
+            d->reference_mps = 0.0;
+        }
+    }
     if (d->perturbation_std_N > 0.0) {
         d->perturbation_N = d->ou_decay * d->perturbation_N +
                             d->ou_diffusion_N * standardNormal(d->rng);
     }
 }
 
-static double motorCurrent(const ModelData *d, const double x[NX], double *command) {
-    const double u = d->speed_gain_Aspm * (d->reference_hold_mps - x[0]) + x[2];
-    *command = u;
-    return fmin(fmax(u, -d->current_limit_A), d->current_limit_A);
-}
-
 void getDerivatives(const ModelInstance *comp, const double x[NX], double dx[NX]) {
     const ModelData *d = &comp->data;
+    double command_A;
+    const double current_A = motorCurrent(d, x, &command_A);
+    dx[2] = driveEnabled(d) ? d->integral_gain_Apm * (d->reference_hold_mps - x[0]) +
+                                  (current_A - command_A) / d->antiwindup_time_s
+                            : 0.0;
+    if (d->brake_hold) {
+        dx[0] = 0.0;
+        dx[1] = 0.0;
+        return;
+    }
     const double n_over_r = d->gear_ratio / d->drum_radius_m;
     const double mass_kg = d->motor_inertia_kgm2 * n_over_r * n_over_r +
                            d->drum_inertia_kgm2 / (d->drum_radius_m * d->drum_radius_m) +
                            d->belt_mass_kg + d->load_mass_kg;
     const double coulomb_N =
         d->coulomb_friction_N + d->load_friction_coefficient * GRAVITY_MPS2 * d->load_mass_kg;
-    double command_A;
-    const double current_A = motorCurrent(d, x, &command_A);
-    const double drive_N = d->torque_constant_NmpA * current_A * n_over_r;
+    const double drive_N = forcePerAmpere(d) * current_A;
     const double friction_N = d->viscous_friction_Nspm * x[0] +
                               coulomb_N * tanh(x[0] / d->coulomb_smoothing_speed_mps);
     dx[0] = (drive_N - friction_N + d->perturbation_N) / mass_kg;
     dx[1] = x[0];
-    dx[2] = d->integral_gain_Apm * (d->reference_hold_mps - x[0]) +
-            (current_A - command_A) / d->antiwindup_time_s;
 }
 
 void calculateValues(ModelInstance *comp) {
     ModelData *d = &comp->data;
+    bool stopped = false;
+    if (closesBrake(d, comp->y)) { /* an output between grid points obeys the grid's rule */
+        holdBelt(d, comp->y);
+        stopped = d->speed_setpoint_mps == 0.0;
+    }
     double command_A;
-    d->motor_current_A = motorCurrent(d, comp->y, &command_A);
+    d->motor_current_A = stopped ? 0.0 : motorCurrent(d, comp->y, &command_A);
     d->motor_torque_Nm = d->torque_constant_NmpA * d->motor_current_A;
 }
 

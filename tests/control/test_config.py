@@ -27,7 +27,7 @@ def _write(tmp_path: Path, body: str) -> Path:
 def test_default_yaml_matches_dataclass_defaults() -> None:
     config = load_config(DEFAULT_YAML)
     assert config == ControllerConfig()
-    assert config.tool.open_command_m == 0.08
+    assert config.tool.open_command == 0.08
     assert config.bins["rubber"] == (0.60, 0.07, 0.15)
     assert config.classes == ("concrete", "brick", "wood", "rubber")
     assert config.steps_per_update == 2

@@ -1,8 +1,9 @@
 """The controller node against a tiny fake cell in another process (real rclpy, real DDS).
 
-The fake cell is an ideal arm: every joint command becomes the measured joint state of the next
-step. It publishes joint states, belt state and detections (with NaN and unknown-class
-detections and one out-of-order frame mixed in) and runs the lockstep handshake.
+The fake cell (``fake_cell.py``) is an ideal arm per station: every joint command becomes the
+measured joint state of the next step. It publishes joint states, belt state and detections
+(with NaN and unknown-class detections and one out-of-order frame mixed in), relays the
+stations' claims as the twin does, and runs the lockstep handshake.
 """
 
 from __future__ import annotations
@@ -32,174 +33,28 @@ X0_M = -0.6
 OBJECT_Y_M = 0.5
 HEIGHT_M = 0.04
 
-FAKE_CELL = r"""
-import json, math, sys, time
-import rclpy
-from rclpy.experimental.events_executor import EventsExecutor
-from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from builtin_interfaces.msg import Time
-from cdw_interfaces.msg import (BeltState, Detection, DetectionArray, LockstepTick, PickTarget,
-                                SortingPriorities, StepAck)
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
-from trajectory_msgs.msg import JointTrajectory
-
-out, n_ticks, speed, x0, y0, height = sys.argv[1], int(sys.argv[2]), *map(float, sys.argv[3:7])
-ns = sys.argv[7] if len(sys.argv) > 7 else ""
-
-def st(name):  # a station topic under the station's namespace
-    return f"/{ns}{name}" if ns else name
-arm = [f"panda_joint{i}" for i in range(1, 8)]
-q = [math.pi / 2, -0.3, 0.0, -2.2, 0.0, 1.9, math.pi / 4]
-dt = 1.0 / 240.0
-
-def qos(depth, latched=False):
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
-                      else DurabilityPolicy.VOLATILE)
-
-def stamp(t):
-    sec = int(t)
-    return Time(sec=sec, nanosec=round((t - sec) * 1e9) % 1_000_000_000)
-
-def seconds(s):
-    return s.sec + 1e-9 * s.nanosec
-
-rclpy.init()
-node = Node("fake_cell")
-rec = {"traj": [], "gripper": [], "target": [], "acks": [], "timeouts": 0}
-state = {"ack": -1, "n_cmd": 0, "received": 0}
-
-def on_traj(msg):
-    state["received"] += 1
-    p = msg.points[0]
-    rec["traj"].append({"t": seconds(msg.header.stamp), "names": list(msg.joint_names),
-                        "q": list(p.positions), "dq": list(p.velocities)})
-    q[:] = [p.positions[list(msg.joint_names).index(n)] for n in arm]
-
-def on_gripper(msg):
-    state["received"] += 1
-    rec["gripper"].append(msg.data)
-
-def on_target(msg):
-    state["received"] += 1
-    g = msg.grasp_point
-    rec["target"].append({"t": seconds(msg.header.stamp), "id": msg.track_id,
-                          "cls": msg.class_name, "phase": msg.phase, "p": [g.x, g.y, g.z]})
-
-def on_ack(msg):
-    state["ack"] = max(state["ack"], msg.tick)
-    state["n_cmd"] += msg.n_commands
-    rec["acks"].append([msg.tick, msg.n_commands])
-
-node.create_subscription(JointTrajectory, st("/arm_controller/joint_trajectory"), on_traj, qos(10))
-node.create_subscription(Float64, st("/gripper/command"), on_gripper, qos(10))
-node.create_subscription(PickTarget, st("/controller/target"), on_target, qos(10))
-ack_sub = node.create_subscription(StepAck, st("/lockstep/ack"), on_ack, qos(100))
-pubs = {
-    "/joint_states": node.create_publisher(JointState, st("/joint_states"), qos(10)),
-    "/conveyor/state": node.create_publisher(BeltState, "/conveyor/state", qos(10)),
-    "/objects/detections": node.create_publisher(DetectionArray, "/objects/detections", qos(10)),
-    "/lockstep/tick": node.create_publisher(LockstepTick, "/lockstep/tick", qos(100)),
-}
-clock = node.create_publisher(Clock, "/clock", qos(1))
-prio = node.create_publisher(SortingPriorities, "/sorting/priorities", qos(1, latched=True))
-prio.publish(SortingPriorities(classes=["brick", "wood", "concrete", "rubber", "gypsum"]))
-count = dict.fromkeys(pubs, 0)
-last_ns = dict.fromkeys(pubs, -1)  # newest stamp published per topic, as the twin tells it
-
-def sent(topic, msg):
-    pubs[topic].publish(msg)
-    count[topic] += 1
-    s = msg.header.stamp
-    last_ns[topic] = max(last_ns[topic], s.sec * 1_000_000_000 + s.nanosec)
-executor = EventsExecutor()
-executor.add_node(node)
-
-def det(cls, x, y):
-    d = Detection(class_name=cls, confidence=0.9, yaw_rad=0.3, length_m=0.12, width_m=0.05,
-                  height_m=height)
-    d.position.x, d.position.y = x, y
-    return d
-
-def publish(k):
-    t = k * dt
-    before = dict(count)
-    clock.publish(Clock(clock=stamp(t)))
-    js = JointState(name=arm + ["panda_finger_joint1", "panda_finger_joint2"],
-                    position=list(q) + [0.04, 0.04], velocity=[0.0] * 9)
-    js.header.stamp = stamp(t)
-    sent("/joint_states", js)
-    if k % 4 == 0:
-        belt = BeltState(setpoint_mps=speed, speed_mps=speed, position_m=speed * t)
-        belt.header.stamp = stamp(t)
-        sent("/conveyor/state", belt)
-    if k > 0 and k % 8 == 0:
-        capture = t - 0.03 if k != 240 else 0.05  # the frame at k = 240 is out of order
-        frame = DetectionArray()
-        frame.header.stamp = stamp(capture)
-        frame.detections = [det("brick", x0 + speed * capture, y0),
-                            det("brick", float("nan"), 0.4),
-                            det("gypsum", x0 + speed * capture - 0.2, 0.6)]
-        sent("/objects/detections", frame)
-    per_tick = {topic: count[topic] - before[topic] for topic in count}
-    pubs["/lockstep/tick"].publish(LockstepTick(
-        tick=k, stamp=stamp(t), n_joint_states=per_tick["/joint_states"],
-        n_belt_states=per_tick["/conveyor/state"], n_detections=per_tick["/objects/detections"],
-        last_joint_state_ns=last_ns["/joint_states"], last_belt_state_ns=last_ns["/conveyor/state"],
-        last_detections_ns=last_ns["/objects/detections"]))
-
-deadline = time.monotonic() + 30.0
-# like the twin: wait until both sides have matched (the controller's ack publisher appears once
-# its readers have matched), then publish tick 0 once and wait for it
-def matched():
-    writers = all(p.get_subscription_count() > 0 for p in pubs.values())
-    return writers and ack_sub.get_publisher_count() > 0
-
-while not matched() and time.monotonic() < deadline:
-    executor.spin_once(timeout_sec=0.05)
-publish(0)
-while state["ack"] < 0 and time.monotonic() < deadline:
-    executor.spin_once(timeout_sec=0.05)
-for k in range(1, n_ticks):
-    publish(k)
-    end = time.monotonic() + 5.0
-    while not (state["ack"] >= k and state["received"] >= state["n_cmd"]):
-        if time.monotonic() > end:
-            rec["timeouts"] += 1
-            print(f"tick {k}: ack {state['ack']}, commands {state['received']} of"
-                  f" {state['n_cmd']}", file=sys.stderr, flush=True)
-            break
-        executor.spin_once(timeout_sec=0.05)
-    if rec["timeouts"] >= 3:
-        break
-rec["published"] = count
-rec["received_commands"] = state["received"]
-with open(out, "w") as f:
-    json.dump(rec, f)
-node.destroy_node()
-rclpy.shutdown()
-"""
+FAKE_CELL = Path(__file__).resolve().parent / "fake_cell.py"
 
 
-def _against_controller(
-    controller_args: list[str], peer_args: list[str], *, timeout_s: float
+def _against_controllers(
+    controllers: list[list[str]], peer_args: list[str], *, timeout_s: float
 ) -> subprocess.CompletedProcess[str]:
-    """Run the Python script ``peer_args`` against a lockstep controller on a domain of their own.
+    """Run the Python script ``peer_args`` against lockstep controllers (one per argument list)
+    on a domain of their own.
 
-    Asserts that both exit cleanly (the controller on SIGINT once the peer is done).
+    Asserts that all exit cleanly (the controllers on SIGINT once the peer is done).
     """
     with ros_domain() as domain:
-        controller = subprocess.Popen(
-            [sys.executable, "-m", "control", "--lockstep", *controller_args],
-            env=domain.env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
+        procs = [
+            subprocess.Popen(
+                [sys.executable, "-m", "control", "--lockstep", *args],
+                env=domain.env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+            )
+            for args in controllers
+        ]
         try:
             peer = subprocess.run(
                 [sys.executable, *peer_args],
@@ -211,10 +66,19 @@ def _against_controller(
             )
             assert peer.returncode == 0, peer.stderr
         finally:
-            controller.send_signal(signal.SIGINT)
-            log, _ = controller.communicate(timeout=20)
-    assert controller.returncode == 0, log
+            for proc in procs:
+                proc.send_signal(signal.SIGINT)
+            logs = [proc.communicate(timeout=20)[0] for proc in procs]
+    for proc, log in zip(procs, logs, strict=True):
+        assert proc.returncode == 0, log
     return peer
+
+
+def _against_controller(
+    controller_args: list[str], peer_args: list[str], *, timeout_s: float
+) -> subprocess.CompletedProcess[str]:
+    """:func:`_against_controllers` with one controller."""
+    return _against_controllers([controller_args], peer_args, timeout_s=timeout_s)
 
 
 def _commands_are_safe(record: dict[str, Any], config: ControllerConfig, kin: Kinematics) -> None:
@@ -230,24 +94,24 @@ def _commands_are_safe(record: dict[str, Any], config: ControllerConfig, kin: Ki
 
 
 def test_lockstep_node_against_fake_cell(tmp_path: Path) -> None:
-    """Acks every tick with exact counts, commands stay in limits, bad detections are counted."""
-    cell_py = tmp_path / "fake_cell.py"
-    cell_py.write_text(FAKE_CELL, encoding="utf-8")
+    """Acks every tick with exact counts (its claims among the commands), commands stay in
+    limits, bad detections are counted; it claims its target, and says when it holds it."""
     record_path = tmp_path / "cell.json"
     stats_path = tmp_path / "stats.json"
     cell = _against_controller(
         ["--stats-out", str(stats_path)],
         [
-            str(cell_py),
+            str(FAKE_CELL),
             str(record_path),
             *map(str, (N_TICKS, SPEED_MPS, X0_M, OBJECT_Y_M, HEIGHT_M)),
         ],
         timeout_s=60,
     )
-    record = json.loads(record_path.read_text(encoding="utf-8"))
+    whole = json.loads(record_path.read_text(encoding="utf-8"))
+    record = whole["stations"][""]
     stats = json.loads(stats_path.read_text(encoding="utf-8"))
 
-    assert record["timeouts"] == 0, cell.stderr
+    assert whole["timeouts"] == 0, cell.stderr
     assert {tick for tick, _ in record["acks"]} >= set(range(N_TICKS))
     per_tick = [n for _, n in record["acks"]]
     assert sum(per_tick) == record["received_commands"] == stats["n_commands"]
@@ -257,7 +121,16 @@ def test_lockstep_node_against_fake_cell(tmp_path: Path) -> None:
     kin = Kinematics.of_station(config.station, config.ik)
     _commands_are_safe(record, config, kin)
 
-    frames = record["published"]["/objects/detections"]
+    claims = record["claims"]
+    assert [c["state"] for c in claims] == ["claimed", "picked"]
+    assert stats["published"]["/line/claim"] == len(claims)
+    assert all(c["station"] == "panda" for c in claims)
+    for claim in claims:  # the brick, where it was at the claim's stamp
+        assert math.dist(claim["p"], (X0_M + SPEED_MPS * claim["t"], OBJECT_Y_M)) < 0.01
+    assert [entry["claims"][0][2] for entry in whole["board"]] == ["claimed", "picked"]
+    assert stats["received"]["/line/claims"] == len(whole["board"])
+
+    frames = whole["published"]["/objects/detections"]
     assert stats["received"]["/objects/detections"] == frames
     rejected = stats["rejected_detections"]
     assert rejected["non_finite"] == frames
@@ -285,7 +158,7 @@ import json, sys, time
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from cdw_interfaces.msg import BeltState, DetectionArray, LockstepTick
+from cdw_interfaces.msg import BeltState, ClaimArray, DetectionArray, LockstepTick
 from sensor_msgs.msg import JointState
 
 qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
@@ -304,6 +177,9 @@ rec["controller_seen"] = spin_until(lambda: node.count_subscribers("/lockstep/ti
 node.create_publisher(JointState, "/joint_states", qos)
 node.create_publisher(BeltState, "/conveyor/state", qos)
 node.create_publisher(DetectionArray, "/objects/detections", qos)
+spin_until(lambda: False, 1.5)
+rec["ack_publishers_without_claims"] = node.count_publishers("/lockstep/ack")
+node.create_publisher(ClaimArray, "/line/claims", qos)
 spin_until(lambda: False, 1.5)
 rec["ack_publishers_without_tick"] = node.count_publishers("/lockstep/ack")
 tick = node.create_publisher(LockstepTick, "/lockstep/tick", qos)
@@ -325,6 +201,7 @@ def test_ack_publisher_waits_for_the_readers_to_match(tmp_path: Path) -> None:
     record = json.loads(probe.stdout.strip().splitlines()[-1])
     assert record == {
         "controller_seen": True,
+        "ack_publishers_without_claims": 0,
         "ack_publishers_without_tick": 0,
         "ack_publisher_appeared": True,
         "tick_matched": True,
@@ -336,23 +213,22 @@ def test_a_controller_on_a_namespaced_station_speaks_under_its_namespace(tmp_pat
     joint states, commands and acks are ``/s1/...``, the belt, detections and the lockstep tick
     the cell's; it acks every tick and goes for an object in its own window, in world
     coordinates (the bare-name topics of a one-station cell carry nothing here)."""
-    cell_py = tmp_path / "fake_cell.py"
-    cell_py.write_text(FAKE_CELL, encoding="utf-8")
     record_path = tmp_path / "cell.json"
     stats_path = tmp_path / "stats.json"
     n_ticks, x0 = 360, -2.1
     cell = _against_controller(
         ["--cell", "two_pandas", "--station", "upstream", "--stats-out", str(stats_path)],
         [
-            str(cell_py),
+            str(FAKE_CELL),
             str(record_path),
             *map(str, (n_ticks, SPEED_MPS, x0, OBJECT_Y_M, HEIGHT_M, "s1")),
         ],
         timeout_s=60,
     )
-    record = json.loads(record_path.read_text(encoding="utf-8"))
+    whole = json.loads(record_path.read_text(encoding="utf-8"))
+    record = whole["stations"]["s1"]
     stats = json.loads(stats_path.read_text(encoding="utf-8"))
-    assert record["timeouts"] == 0, cell.stderr
+    assert whole["timeouts"] == 0, cell.stderr
     assert {tick for tick, _ in record["acks"]} >= set(range(n_ticks))
     assert sum(n for _, n in record["acks"]) == record["received_commands"] == stats["n_commands"]
     assert stats["station"] == "upstream"
@@ -360,6 +236,7 @@ def test_a_controller_on_a_namespaced_station_speaks_under_its_namespace(tmp_pat
         "/s1/arm_controller/joint_trajectory",
         "/s1/gripper/command",
         "/s1/controller/target",
+        "/s1/line/claim",
     }
     assert stats["received"]["/s1/joint_states"] == n_ticks
 
@@ -393,15 +270,75 @@ def test_joint_sample_reads_the_gripper_opening_from_the_finger_joints() -> None
     sample = joint_sample(msg, arm, tool)
     assert sample is not None
     assert sample.positions_rad.tolist() == pytest.approx([0.1 * i for i in range(1, 8)])
-    assert sample.tool_measured_m == pytest.approx(0.04)
+    assert sample.tool_measured == pytest.approx(0.04)
     no_tool = joint_sample(msg, arm)
     assert no_tool is not None
-    assert math.isnan(no_tool.tool_measured_m)
+    assert math.isnan(no_tool.tool_measured)
     msg.position = [math.nan, 0.019] + [0.1 * i for i in range(7, 0, -1)]
     nan_finger = joint_sample(msg, arm, tool)
     assert nan_finger is not None
-    assert math.isnan(nan_finger.tool_measured_m)
+    assert math.isnan(nan_finger.tool_measured)
     msg.name, msg.position = arm, [0.1 * i for i in range(1, 8)]
     missing = joint_sample(msg, arm, tool)
     assert missing is not None
-    assert math.isnan(missing.tool_measured_m)
+    assert math.isnan(missing.tool_measured)
+
+
+OVERLAP_CELL = """
+name: overlap
+stations:
+  - name: a
+    namespace: s1
+    robot: panda
+    tool: panda_hand
+    base_position_m: [-0.6, 0.0, 0.0]
+    pick_window_x_m: [-0.8, -0.1]
+    bins: [{class_name: brick, centre_x_m: -0.9, centre_y_m: 0.07}]
+  - name: b
+    namespace: s2
+    robot: panda
+    tool: panda_hand
+    pick_window_x_m: [-0.35, 0.35]
+    bins: [{class_name: brick, centre_x_m: 0.33, centre_y_m: 0.07}]
+"""
+
+
+def test_two_controllers_share_a_brick_through_the_relayed_claims(tmp_path: Path) -> None:
+    """Two stations whose windows overlap, each its own controller process, the claims relayed
+    by a peer as the twin relays them: the upstream station claims the brick and picks it, the
+    downstream one leaves it as ``claimed_by_other`` and never targets it; every claim is a
+    command of its tick, counted in the ack."""
+    cell_path = tmp_path / "overlap.yaml"
+    cell_path.write_text(OVERLAP_CELL, encoding="utf-8")
+    record_path = tmp_path / "cell.json"
+    n_ticks, x0 = 840, -1.2  # the brick enters after the arms reached their ready poses
+    stats = {name: tmp_path / f"{name}.json" for name in ("a", "b")}
+    peer = _against_controllers(
+        [
+            ["--cell", str(cell_path), "--station", name, "--stats-out", str(path)]
+            for name, path in stats.items()
+        ],
+        [
+            str(FAKE_CELL),
+            str(record_path),
+            *map(str, (n_ticks, SPEED_MPS, x0, OBJECT_Y_M, HEIGHT_M, "s1,s2", "one")),
+        ],
+        timeout_s=90,
+    )
+    whole = json.loads(record_path.read_text(encoding="utf-8"))
+    assert whole["timeouts"] == 0, peer.stderr
+    a, b = (json.loads(path.read_text(encoding="utf-8")) for path in stats.values())
+    for ns, summary in (("s1", a), ("s2", b)):
+        record = whole["stations"][ns]
+        assert sum(n for _, n in record["acks"]) == record["received_commands"]
+        assert record["received_commands"] == summary["n_commands"]
+        assert summary["received"]["/line/claims"] == len(whole["board"])
+    assert [c["state"] for c in whole["stations"]["s1"]["claims"]] == ["claimed", "picked"]
+    assert whole["stations"]["s2"]["claims"] == []
+    assert a["pick"]["targeted"] == 1
+    assert b["pick"]["targeted"] == 0
+    assert b["pick"]["untargeted"] == {"claimed_by_other": 1}
+    assert [entry["claims"] for entry in whole["board"]] == [
+        [["a", whole["stations"]["s1"]["claims"][0]["id"], state]]
+        for state in ("claimed", "picked")
+    ]

@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import yaml
 
 from control.config import ControllerConfig
 from control.ik import yaw_of
@@ -16,7 +17,7 @@ from control.pick import Command, Phase, PickController, TcpMeasurement
 from control.poses import drop_point
 from control.scheduler import nearest_grasp_yaw
 from control.tracking import Track
-from interfaces.cell import load_cell
+from interfaces.cell import cell_from_data, load_cell, resolve_cell_path
 
 FOLLOW_SEQUENCE = [Phase.IDLE, Phase.APPROACH, Phase.DESCEND, Phase.DWELL, Phase.CLOSE, Phase.LIFT]
 
@@ -26,8 +27,13 @@ def test_closed_loop_reaches_and_dwells_within_4mm(speed_mps: float) -> None:
     config = ControllerConfig()
     result = run_episode(speed_mps, seed=1, duration_s=4.0)
     assert [phase for _, phase in result.phases][: len(FOLLOW_SEQUENCE)] == FOLLOW_SEQUENCE
-    # Kinematic arm: within 4 mm in under 1 s, and it stays there through dwell and close.
-    assert 0.0 < result.tracking_time_4mm_s < 1.0
+    # Kinematic arm: within 4 mm in under 1.2 s, and it stays there through dwell and close.
+    # The bound is what the datasheet allows: from the ready pose the TCP goes down 0.12 m to
+    # the approach point and 0.06 m more to the grasp point; the Panda's joints 2 and 4 (7.5
+    # and 12.5 rad/s^2) allow only 3.1-4.4 m/s^2 vertically there, so the controller plans at
+    # 2.5 m/s^2 (motion.max_acceleration) and the two moves alone take
+    # 2 sqrt(0.12 / 2.5) + 2 sqrt(0.06 / 2.5) + 2 a / j = 0.83 s, before the catch-up along x.
+    assert 0.0 < result.tracking_time_4mm_s < 1.2
     assert result.max_follow_error_m < 0.004
     starts = {phase: t for t, phase in reversed(result.phases)}
     assert starts[Phase.CLOSE] - starts[Phase.DWELL] >= config.pick.dwell_s - 1e-9
@@ -86,8 +92,13 @@ def test_full_pick_drops_into_the_class_bin() -> None:
 
 def test_a_grip_on_nothing_aborts_is_retried_once_and_never_carried() -> None:
     """Fingers that close past the object (nothing holds them apart) abort the pick as
-    ``grip_missed`` without carrying; the object is targeted once more, then given up."""
-    result = run_episode(0.2, seed=2, duration_s=9.0, gripper=GripperSpec(grippable=False))
+    ``grip_missed`` without carrying; the object is targeted once more, then given up.
+
+    At 0.15 m/s: within the datasheet joint limits a missed grasp and its retry (lift, return,
+    approach, descent, dwell, close) take about 3.2 s after the first close, and the first
+    close ends about 1.3 s after the object entered the 0.7 m window; at 0.2 m/s the object
+    leaves the window (3.5 s) before the retry could close on it."""
+    result = run_episode(0.15, seed=2, duration_s=9.0, gripper=GripperSpec(grippable=False))
     phases = [phase for _, phase in result.phases]
     assert result.stats.aborted == {"grip_missed": 2}
     assert result.stats.targeted == 1  # a retry is not a new target
@@ -197,8 +208,9 @@ def test_ruckig_error_aborts_and_keeps_joint_commands_in_limits() -> None:
     assert commands[-1].target_id is None
 
 
-def test_ik_failure_aborts_and_holds_a_valid_command() -> None:
-    controller = PickController(ControllerConfig())
+def test_ik_failure_aborts_and_brakes_within_the_limits() -> None:
+    config = ControllerConfig()
+    controller = PickController(config)
 
     def tracks_at(t_s: float) -> tuple[Track, ...]:
         # The estimate jumps far beyond the arm's reach after the target was chosen.
@@ -210,8 +222,14 @@ def test_ik_failure_aborts_and_holds_a_valid_command() -> None:
     assert stats.aborted.get("ik_failure", 0) >= 1
     assert stats.errors["ik_failure"] >= 1
     failed = next(i for i, c in enumerate(commands) if c.target_id is None and i > 0)
-    # The joint command is held (never extrapolated) when the IK fails.
-    assert commands[failed].joint_positions_rad == commands[failed - 1].joint_positions_rad
+    # Through the IK failures the joints slow down within their datasheet acceleration (the
+    # arm cannot stop dead) and stay inside their limits.
+    kin = controller.kinematics
+    q = np.array([c.joint_positions_rad for c in commands[failed - 5 : failed + 5]])
+    dt_s = config.motion.control_period_s
+    accel = np.asarray(config.robot.joint_max_acceleration_rps2)
+    assert np.all(np.abs(np.diff(q, 2, axis=0)) <= accel * dt_s * dt_s * (1 + 1e-9))
+    assert all(kin.within_limits(row) for row in q)
 
 
 def test_lost_target_aborts_the_approach() -> None:
@@ -285,3 +303,50 @@ def test_a_controller_on_another_station_picks_in_its_window_and_drops_in_its_bi
     assert abs(x - bx) <= config.pick.drop_tolerance_m + 1e-3
     assert abs(y - by) <= config.pick.drop_tolerance_m + 1e-3
     assert result.max_joint_limit_violation_rad == 0.0
+
+
+def _station_config(robot: str, tool: str) -> ControllerConfig:
+    """The reference cell with its station's robot and tool replaced by catalog names."""
+    path = resolve_cell_path("default")
+    data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    data["stations"][0].update(robot=robot, tool=tool)
+    return ControllerConfig(cell=cell_from_data(data, str(path), base_dir=path.parent))
+
+
+@pytest.mark.parametrize(
+    ("robot", "tool"),
+    [
+        ("panda", "suction_cup"),
+        ("panda", "wide_gripper"),
+        ("ur10", "suction_cup"),
+        ("ur10", "wide_gripper"),
+    ],
+)
+def test_the_controller_picks_with_flange_tools_on_the_panda_and_the_ur10(
+    robot: str, tool: str
+) -> None:
+    """The station URDF's tool frame and the tool's own grasp (a cup seals on the top, a wide
+    gripper closes around a 10 cm block the Panda hand cannot take) pick the object and drop
+    it in its bin, within the joint limits."""
+    config = _station_config(robot, tool)
+    obj = ObjectSpec(width_m=0.1, length_m=0.16, height_m=0.05)
+    result = run_episode(0.4, seed=2, duration_s=7.0, config=config, obj=obj, gripper=GripperSpec())
+    assert result.stats.completed_by_class == {"brick": 1}
+    assert result.stats.aborted == {}
+    assert result.stats.errors == {}
+    assert result.max_joint_limit_violation_rad == 0.0
+    assert result.release_tcp_m is not None
+    bx, by, _ = config.bins["brick"]
+    assert abs(result.release_tcp_m[0] - bx) <= config.pick.drop_tolerance_m + 1e-3
+    assert abs(result.release_tcp_m[1] - by) <= config.pick.drop_tolerance_m + 1e-3
+
+
+def test_a_suction_cup_that_does_not_seal_aborts_and_carries_nothing() -> None:
+    config = _station_config("panda", "suction_cup")
+    obj = ObjectSpec(width_m=0.1, length_m=0.16, height_m=0.05)
+    result = run_episode(
+        0.4, seed=2, duration_s=7.0, config=config, obj=obj, gripper=GripperSpec(grippable=False)
+    )
+    assert result.stats.completed_by_class == {}
+    assert result.stats.aborted.get("grip_missed", 0) >= 1
+    assert Phase.CARRY not in [phase for _, phase in result.phases]

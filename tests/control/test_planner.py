@@ -287,3 +287,30 @@ def test_a_move_whose_time_synchronisation_fails_is_planned_without_it() -> None
         _, v, a = trajectory.at_time(float(t_s))
         assert np.all(np.abs(v) <= np.asarray(_STUCK_CARRY["max_velocity"]) + 1e-9)
         assert np.all(np.abs(a) <= np.asarray(_STUCK_CARRY["max_acceleration"]) + 1e-9)
+
+
+def test_joint_commands_stay_within_the_datasheet_acceleration() -> None:
+    """A Cartesian setpoint that jumps (a new target, a feedback step) and then moves on is
+    followed by joint commands whose velocity changes by at most the robot's datasheet
+    acceleration per control period (what the arm, and the twin, can follow), and that land on
+    the IK solution once the limits allow."""
+    config = ControllerConfig()
+    kin = Kinematics.of_station(config.station, config.ik)
+    dt_s = config.motion.control_period_s
+    accel = np.asarray(config.robot.joint_max_acceleration_rps2)
+    commander = JointCommander(
+        kin, config.motion, np.asarray(config.robot.ready_joint_positions_rad)
+    )
+    x0, y0, z0 = config.ready_tcp_position_m
+    qs = [commander.q]
+    for tick in range(120):
+        # 10 cm away from the ready pose, then following a belt at 0.2 m/s
+        goal = (x0 - 0.1 + 0.2 * tick * dt_s, y0, z0 - 0.1)
+        commander.command(goal, config.ready_yaw_rad)
+        qs.append(commander.q)
+    q = np.array(qs)
+    second = np.abs(np.diff(q, 2, axis=0))
+    assert np.all(second <= accel * dt_s * dt_s * (1 + 1e-9)), np.max(second / (accel * dt_s**2))
+    assert all(kin.within_limits(row) for row in q)
+    assert commander.on_goal
+    assert np.linalg.norm(kin.fk(commander.q).translation - np.asarray(goal)) < 1e-6

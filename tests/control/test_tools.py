@@ -49,21 +49,21 @@ def test_the_measured_opening_is_twice_the_mean_of_the_finger_joints() -> None:
     tool = make_tool(XARM)
     assert tool.joint_names == XARM.joints
     a, b = XARM.joints
-    assert tool.measured_m({a: 0.02, b: 0.03}) == pytest.approx(0.05)
-    assert math.isnan(tool.measured_m({a: 0.02}))  # a finger missing
-    assert math.isnan(tool.measured_m({a: 0.02, b: math.nan}))
-    assert math.isnan(tool.measured_m({}))
+    assert tool.measured({a: 0.02, b: 0.03}) == pytest.approx(0.05)
+    assert math.isnan(tool.measured({a: 0.02}))  # a finger missing
+    assert math.isnan(tool.measured({a: 0.02, b: math.nan}))
+    assert math.isnan(tool.measured({}))
 
 
 def test_the_grasp_command_is_the_width_less_the_squeeze_within_the_opening() -> None:
     tool = make_tool(XARM)
-    assert tool.open_command_m == XARM.max_opening_m == 0.085
-    assert tool.grasp_command_m(0.05, 0.01) == pytest.approx(0.04)
-    assert tool.grasp_command_m(0.2, 0.01) == 0.085  # no wider than the opening
-    assert tool.grasp_command_m(0.004, 0.01) == 0.0  # no narrower than closed
-    assert tool.clip_command_m(0.09) == 0.085
-    assert tool.clip_command_m(-0.01) == 0.0
-    assert math.isnan(tool.clip_command_m(math.nan))
+    assert tool.open_command == XARM.max_opening_m == 0.085
+    assert tool.grasp_command(0.05, 0.01) == pytest.approx(0.04)
+    assert tool.grasp_command(0.2, 0.01) == 0.085  # no wider than the opening
+    assert tool.grasp_command(0.004, 0.01) == 0.0  # no narrower than closed
+    assert tool.clip_command(0.09) == 0.085
+    assert tool.clip_command(-0.01) == 0.0
+    assert math.isnan(tool.clip_command(math.nan))
 
 
 def test_fingers_closed_to_the_command_hold_nothing() -> None:

@@ -229,3 +229,98 @@ def test_the_report_counts_as_the_run_does_and_adds_a_table_per_station(tmp_path
     page = write_report([run], tmp_path / "report").read_text(encoding="utf-8")
     assert 'id="per-station"' in page
     assert "<td>downstream</td>" in page
+
+
+def _line_sweep(root: Path) -> Path:
+    """A sweep folder written by hand: the first 1 and 2 stations of a line at 0.2 and
+    0.4 m/s, two seeds each. Episode (k stations, speed, seed): 10 bricks and 1 wood enter;
+    ``k + seed`` bricks come to rest in the last station's brick bin (recovery (k + seed) / 11)
+    and the wood in the first station's brick bin."""
+    from experiments.sweep import first_stations
+    from interfaces.cell import load_cell
+
+    line = load_cell(Path(__file__).resolve().parent / "cells" / "line_standin.yaml")
+    for k in (1, 2):
+        cell = first_stations(line, k, "grid")
+        names = [s.name for s in cell.stations]
+        for speed in (0.2, 0.4):
+            run = root / f"line-speed{speed}-stations{k}"
+            run.mkdir(parents=True)
+            cell.save(run / "cell.yaml")
+            info = {"dataset": str(root / "none"), "cell": cell.name, "stations": names}
+            (run / "run.json").write_text(json.dumps(info))
+            for seed in (1, 2):
+                events = [_event("spawned", i) for i in range(1, 11)]
+                events.append(_event("spawned", 11).replace('"brick"', '"wood"'))
+                for oid in range(1, k + seed + 1):
+                    events.append(_event("pick_success", oid, station=names[-1]))
+                    events.append(
+                        _event("placed_in_bin", oid, bin="brick", correct=True, station=names[-1])
+                    )
+                wrong = _event("placed_in_bin", 11, bin="brick", correct=False, station=names[0])
+                events.append(wrong.replace('"brick", "data"', '"wood", "data"'))
+                episode = run / f"ep{seed - 1:03d}"
+                (episode / "twin").mkdir(parents=True)
+                summary = {"belt_speed_mps": speed, "seed": seed, "sim_seconds": 60.0}
+                summary |= {"complete": True, "real_time_factor": 0.5, "landing_in_bins": []}
+                (episode / "twin" / "summary.json").write_text(json.dumps(summary))
+                (episode / "twin" / "events.jsonl").write_text("\n".join(events) + "\n")
+                for name in names:
+                    pick = {"completed": k + seed, "aborted": {}, "untargeted": {}}
+                    stem = "controller" if len(names) == 1 else f"controller-{name}"
+                    (episode / f"{stem}.json").write_text(json.dumps({"pick": pick}))
+    return root
+
+
+def test_the_report_of_a_line_sweep_draws_recovery_against_stations_and_purity_tables(
+    tmp_path: Path,
+) -> None:
+    """``cdw-twin report`` on a sweep over ``stations`` x speed: a table and a figure of the
+    mean recovery over the seeds with its 95 % t interval per number of stations, one line per
+    speed; recovery and purity per class and purity per bin."""
+    from scipy import stats as scipy_stats
+
+    from experiments.report import bin_rows, class_rows, recovery_by_stations, speed_rows
+
+    sweep = _line_sweep(tmp_path / "sweep")
+    data = load_runs([sweep])
+    rows = recovery_by_stations(data)
+    assert [(r["stations"], r["speed_mps"], r["episodes"]) for r in rows] == [
+        (1, 0.2, 2),
+        (1, 0.4, 2),
+        (2, 0.2, 2),
+        (2, 0.4, 2),
+    ]
+    for row in rows:
+        k = row["stations"]
+        values = [(k + 1) / 11, (k + 2) / 11]
+        half = scipy_stats.t.ppf(0.975, 1) * scipy_stats.tstd(values) / 2**0.5
+        assert row["recovery_mean"] == pytest.approx((2 * k + 3) / 22)
+        assert row["recovery_ci95"] == pytest.approx(
+            (row["recovery_mean"] - half, row["recovery_mean"] + half)
+        )
+        assert row["recovery_pooled"] == pytest.approx((2 * k + 3) / 22)
+    assert [(r["cell"], r["stations"]) for r in speed_rows(data)] == [
+        ("line_standin_first1", 1),
+        ("line_standin_first1", 1),
+        ("line_standin_first2", 2),
+        ("line_standin_first2", 2),
+    ]
+    by_class = {(r["cell"], r["speed_mps"], r["class"]): r for r in class_rows(data)}
+    brick = by_class[("line_standin_first2", 0.4, "brick")]
+    assert (brick["spawned"], brick["placed_correct"], brick["binned"]) == (20, 7, 9)
+    assert brick["recovery_rate"] == pytest.approx(7 / 20)
+    assert brick["purity"] == pytest.approx(7 / 9)
+    assert by_class[("line_standin_first2", 0.4, "wood")]["recovery_rate"] == 0.0
+    bins = {(r["cell"], r["speed_mps"], r["station"], r["bin"]): r for r in bin_rows(data)}
+    first = bins[("line_standin_first2", 0.4, "first", "brick")]
+    second = bins[("line_standin_first2", 0.4, "second", "brick")]
+    assert (first["binned"], first["placed_correct"], first["purity"]) == (2, 0, 0.0)
+    assert (second["binned"], second["purity"]) == (7, 1.0)
+    out = tmp_path / "report"
+    page = write_report([sweep], out).read_text(encoding="utf-8")
+    assert 'id="fig-recovery_stations"' in page
+    assert (out / "recovery_stations.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for anchor in ("recovery-stations", "per-class", "per-bin", "per-station"):
+        assert f'id="{anchor}"' in page
+    assert "<td>line_standin_first2</td>" in page

@@ -120,6 +120,7 @@ def _check_recordings(out: Path, rows: list[dict[str, Any]]) -> None:
     last, and the scores recomputed from each recording are the twin's and the run's."""
     from experiments.offline import offline_metrics
     from interfaces.cell import default_cell
+    from interfaces.contract import COMMANDS
 
     (station,) = (s.name for s in default_cell().stations)
     for i in range(2):
@@ -138,7 +139,7 @@ def _check_recordings(out: Path, rows: list[dict[str, Any]]) -> None:
         for topic, n in summary["published"].items():
             assert counts[topic] == n, topic
         assert counts["/lockstep/tick"] == counts["/clock"] == counts["/joint_states"]
-        commands = ("/arm_controller/joint_trajectory", "/gripper/command", "/controller/target")
+        commands = [t.resolve("") for t in COMMANDS]  # the station's commands, claims included
         assert sum(counts.get(t, 0) for t in commands) == summary["received_commands"] > 0
 
 
@@ -316,7 +317,8 @@ def _episode_folder(run: Path, cell: str, events: list[str], landing: list[int])
 
 
 def _stats(completed: int, **untargeted: int) -> str:
-    return json.dumps({"pick": {"completed": completed, "aborted": {}, "untargeted": untargeted}})
+    pick = {"targeted": completed, "completed": completed, "aborted": {}}
+    return json.dumps({"pick": {**pick, "untargeted": untargeted}})
 
 
 def test_an_object_still_falling_into_its_bin_at_the_end_is_not_counted_targeted(
@@ -374,10 +376,58 @@ def test_each_station_is_credited_its_own_targets_less_its_own_landing_objects(
     assert down_row["picked"] == 1
 
 
+def test_an_episode_row_gives_bin_purity_drops_and_allocation_per_station(
+    tmp_path: Path,
+) -> None:
+    """The line scores of a run row: each station's bins and their purity, drops by reason, the
+    controllers' untargeted objects by reason (new reasons too) and their share of the window's
+    objects, per class purity over the line."""
+    from experiments.run import episode_metrics
+
+    up, down = {"station": "upstream"}, {"station": "downstream"}
+    events = [_event("spawned", i) for i in range(1, 5)]
+    events += [_event("entered_workspace", i, **up) for i in range(1, 5)]
+    events += [
+        _event("pick_success", 1, **up),
+        _event("placed_in_bin", 1, bin="brick", correct=True, **up),
+        _event("pick_success", 2, **up),
+        _event("pick_dropped", 2, reason="suction_overload", **up),
+        _event("entered_workspace", 2, **down),
+        _event("pick_success", 2, **down),
+        _event("placed_in_bin", 2, bin="wood", correct=False, **down),
+        _event("pick_success", 3, **up),
+        _event("pick_dropped", 3, reason="seal_lost", **up),
+    ]
+    folder = _episode_folder(tmp_path / "run", "two_pandas", events, landing=[])
+    (folder / "controller-upstream.json").write_text(
+        _stats(3, too_wide=1, claimed_by_other=1), encoding="utf-8"
+    )
+    (folder / "controller-downstream.json").write_text(
+        _stats(1, too_small=1, left_for_downstream=2), encoding="utf-8"
+    )
+    row = episode_metrics(folder, "lockstep")
+    up_row, down_row = row["stations"]["upstream"], row["stations"]["downstream"]
+    assert up_row["bins"] == {"brick": {"binned": 1, "placed_correct": 1, "purity": 1.0}}
+    assert down_row["bins"] == {"wood": {"binned": 1, "placed_correct": 0, "purity": 0.0}}
+    assert row["dropped_by_reason"] == {"seal_lost": 1, "suction_overload": 1}
+    assert (row["dropped"], up_row["dropped"], down_row["dropped"]) == (2, 2, 0)
+    # the upstream controller targeted 3 objects and left 2; the downstream one 1 and 3
+    assert up_row["untargeted"] == {"too_wide": 1, "claimed_by_other": 1}
+    assert up_row["considered"] == 5
+    assert up_row["untargeted_share"] == {"claimed_by_other": 0.2, "too_wide": 0.2}
+    assert (up_row["untargeted_unfit"], up_row["unfit_share"]) == (1, 0.2)
+    assert (down_row["untargeted_unfit"], down_row["unfit_share"]) == (1, 0.25)
+    assert row["untargeted"]["left_for_downstream"] == 2
+    assert "unfit_share" not in row  # a station's figure: a line counts an object per station
+    assert (row["binned"], row["purity"]) == (2, 0.5)
+    assert row["classes"]["brick"]["purity"] == 1.0
+    assert row["classes"]["brick"]["recovery_rate"] == 0.25
+
+
 TWO_STATIONS = """\
 name: two
 cell: two_pandas
-duration_s: 10.0
+duration_s: 30.0
 objects: {max_width_m: 0.065, min_height_m: 0.02}
 system: {belt_speed_mps: 0.3, object_order: shuffled, image_gap_m: 0.0, prefill_m: 2.5}
 faults: {controller_restart_at_s: [3.0]}
@@ -437,6 +487,8 @@ def test_a_cell_of_two_stations_runs_a_controller_per_station_and_scores_each(
     for key in ("spawned", "picked", "missed", "processed", "lost", "placed_correct"):
         assert row[key] == offline["scores"][key] == summary["scores"][key], key
     assert offline["stations"] == {n: summary["stations"][n]["scores"] for n in stations}
+    assert offline["classes"] == row["classes"]
+    assert offline["bins"] == {n: b["bins"] for n, b in stations.items() if b["bins"]}
     run = _json(out / "run.json")
     assert run["stations"] == ["upstream", "downstream"]
     assert run["mean_by_station"]["downstream"]["picked"] == stations["downstream"]["picked"]
@@ -447,7 +499,7 @@ def test_a_cell_of_two_stations_runs_a_controller_per_station_and_scores_each(
 TWO_STATIONS_REALTIME = """\
 name: two_realtime
 cell: two_pandas
-duration_s: 12.0
+duration_s: 30.0
 objects: {max_width_m: 0.065, min_height_m: 0.02}
 system: {belt_speed_mps: 0.3, object_order: shuffled, image_gap_m: 0.0, prefill_m: 2.5}
 """

@@ -140,9 +140,15 @@ def test_a_cell_of_two_stations_gets_intervals_and_csv_rows_per_station() -> Non
     assert float(table[1]["picked_mean"]) == pytest.approx(2.5)
     assert table[1]["real_time_factor_mean"] == ""
     assert float(table[2]["pick_success_rate_pooled"]) == pytest.approx(0.25)
-    # a cell of one station has its line row only
+    # a cell of one station has its line row only, which also gives the per-station metrics
     agg["stations"] = {"upstream": up}
-    assert len(list(csv.DictReader(io.StringIO(sweep_csv([{**cell, "aggregate": agg}]))))) == 1
+    (line,) = csv.DictReader(io.StringIO(sweep_csv([{**cell, "aggregate": agg}])))
+    assert float(line["picked_mean"]) == pytest.approx(3.0)  # the line's own
+    assert "unfit_share_mean" in line
+    assert line["unfit_share_mean"] == ""  # these rows have no unfit share
+    up["metrics"]["unfit_share"] = {"mean": 0.04, "ci95_low": 0.01, "ci95_high": 0.07, "n": 2}
+    (line,) = csv.DictReader(io.StringIO(sweep_csv([{**cell, "aggregate": agg}])))
+    assert float(line["unfit_share_mean"]) == pytest.approx(0.04)
 
 
 def test_every_grid_cell_folder_keeps_its_resolved_cell_before_anything_runs(
@@ -257,3 +263,174 @@ def test_a_grid_with_a_repeated_seed_is_refused_before_anything_runs(
     assert err.startswith(f"cdw-twin: error: {grid}: seeds = [1, 1, 2]: seed(s) 1 repeated")
     assert err.count("\n") == 1
     assert not out.exists()
+
+
+LINE_STANDIN = Path(__file__).resolve().parent / "cells" / "line_standin.yaml"
+
+
+def test_a_stations_override_runs_the_first_k_stations_of_the_scenarios_cell(
+    tmp_path: Path, builtin_meshes: Path
+) -> None:
+    """One grid gives recovery against the number of stations: each grid cell's run folder
+    keeps the truncated cell; the scenario's own cell file is untouched."""
+    from interfaces.cell import load_cell
+
+    (tmp_path / "line.yaml").write_text(
+        f"name: line\ncell: {LINE_STANDIN}\nduration_s: 2.0\n", encoding="utf-8"
+    )
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(
+        "scenarios: [line.yaml]\nseeds: [1, 2]\n"
+        "overrides: {stations: [1, 2, 3], speed: [0.2, 0.6]}\n",
+        encoding="utf-8",
+    )
+    before = LINE_STANDIN.read_bytes()
+    runs = prepare_sweep(grid, tmp_path / "sweep", dataset=builtin_meshes)
+    assert LINE_STANDIN.read_bytes() == before
+    assert [
+        (r.cell.overrides["stations"], r.cell.scenario.system.belt_speed_mps) for r in runs
+    ] == [
+        (1, 0.2),
+        (2, 0.2),
+        (3, 0.2),
+        (1, 0.6),
+        (2, 0.6),
+        (3, 0.6),
+    ]
+    full = load_cell(LINE_STANDIN)
+    for run in runs:
+        k = run.cell.overrides["stations"]
+        written = load_cell(run.folder / "cell.yaml")
+        assert written.stations == full.stations[:k]
+        assert run.options.stations == tuple(s.name for s in full.stations[:k])
+        assert run.options.dataset == builtin_meshes.resolve()
+        assert run.folder.name == f"line-speed{run.cell.scenario.system.belt_speed_mps}-stations{k}"
+    assert load_cell(runs[0].folder / "cell.yaml").name == "line_standin_first1"
+    assert load_cell(runs[2].folder / "cell.yaml").name == "line_standin"
+
+
+def test_more_stations_than_the_cell_has_is_refused_before_anything_is_written(
+    tmp_path: Path, builtin_meshes: Path
+) -> None:
+    (tmp_path / "line.yaml").write_text(f"name: line\ncell: {LINE_STANDIN}\n", encoding="utf-8")
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(
+        f"scenarios: [line.yaml]\ndataset: {builtin_meshes}\noverrides: {{stations: [2, 4]}}\n",
+        encoding="utf-8",
+    )
+    pattern = rf"{grid}: overrides\.stations = 4: the cell {LINE_STANDIN} has 3 station\(s\)"
+    with pytest.raises(ConfigError, match=pattern):
+        prepare_sweep(grid, tmp_path / "sweep")
+    assert not (tmp_path / "sweep").exists()
+    grid.write_text("scenarios: [line.yaml]\noverrides: {stations: [0]}\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"overrides\.stations\[0\] = 0: must be >= 1"):
+        Grid.load(grid)
+
+
+def test_a_cell_override_runs_a_scenario_on_another_cell(
+    tmp_path: Path, builtin_meshes: Path
+) -> None:
+    """E.g. the throughput scenario on the suction cup's station: a shipped name, or a cell
+    file relative to the grid file."""
+    from interfaces.cell import load_cell
+
+    (tmp_path / "cells").mkdir()
+    (tmp_path / "cells" / "mine.yaml").write_bytes(LINE_STANDIN.read_bytes())
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(
+        f"scenarios: [{SCENARIOS / 'throughput.yaml'}]\nseeds: [1]\n"
+        f"dataset: {builtin_meshes}\noverrides: {{cell: [two_pandas, cells/mine.yaml]}}\n",
+        encoding="utf-8",
+    )
+    runs = prepare_sweep(grid, tmp_path / "sweep")
+    assert [r.folder.name for r in runs] == ["throughput-celltwo_pandas", "throughput-cellmine"]
+    assert [len(r.options.stations) for r in runs] == [2, 3]
+    assert load_cell(runs[1].folder / "cell.yaml").stations == load_cell(LINE_STANDIN).stations
+    assert runs[0].cell.scenario.controller == "throughput"
+
+
+def _reason_row(untargeted: dict, drops: dict, spawned: int) -> dict:
+    share = {k: v / spawned for k, v in untargeted.items()}
+    station = {"considered": spawned, "untargeted": untargeted, "untargeted_share": share}
+    station |= {"untargeted_unfit": untargeted.get("too_wide", 0), "dropped_by_reason": drops}
+    classes = {
+        "brick": {
+            "spawned": spawned,
+            "placed_correct": 2,
+            "binned": 4,
+            "recovery_rate": 2 / spawned,
+        },
+        "wood": {"spawned": 1, "placed_correct": 1, "binned": 1, "recovery_rate": 1.0},
+    }
+    return {
+        "untargeted": untargeted,
+        "dropped_by_reason": drops,
+        "stations": {"s": station},
+        "classes": classes,
+    }
+
+
+def test_the_sweep_gives_each_reason_and_each_class_a_mean_and_interval() -> None:
+    """The untargeted objects and drops by reason (a reason an episode lacks counts 0 there),
+    each reason's share of a station's window, and the class scores (recovery, purity)."""
+    from experiments.sweep import aggregate_classes, aggregate_reasons
+
+    rows = [
+        _reason_row({"too_wide": 2, "claimed_by_other": 4}, {"slipped": 1}, 10),
+        _reason_row({"too_wide": 0}, {}, 10),
+        _reason_row({"too_wide": 1, "too_flat": 3}, {"slipped": 2, "seal_lost": 1}, 20),
+        {"failed": True, "untargeted": {"too_wide": 99}},
+    ]
+    agg = aggregate_cell(rows)
+    assert list(agg["untargeted"]) == ["claimed_by_other", "too_flat", "too_wide"]
+    assert agg["untargeted"]["too_wide"]["mean"] == pytest.approx(1.0)
+    assert agg["untargeted"]["claimed_by_other"]["mean"] == pytest.approx(4 / 3)
+    assert agg["untargeted"]["claimed_by_other"]["n"] == 3
+    assert agg["dropped_by_reason"]["slipped"]["mean"] == pytest.approx(1.0)
+    assert agg["dropped_by_reason"]["seal_lost"]["mean"] == pytest.approx(1 / 3)
+    assert "untargeted_share" not in agg  # per station only
+    station = aggregate_stations(rows)["s"]
+    share = station["untargeted_share"]["too_wide"]
+    assert share["mean"] == pytest.approx((0.2 + 0.0 + 0.05) / 3)
+    assert share["ci95_low"] < share["mean"] < share["ci95_high"]
+    unfit = station["wilson"]["unfit_share"]
+    assert (unfit["successes"], unfit["trials"]) == (3, 40)
+    assert aggregate_reasons([], "untargeted") == {}
+    classes = aggregate_classes(rows)
+    assert list(classes) == ["brick", "wood"]
+    assert classes["brick"]["wilson"]["purity"]["pooled"] == pytest.approx(6 / 12)
+    assert classes["brick"]["wilson"]["recovery_rate"]["pooled"] == pytest.approx(6 / 40)
+    assert classes["wood"]["metrics"]["recovery_rate"]["mean"] == 1.0
+
+
+def test_the_headline_lists_the_grids_figures_first(tmp_path: Path) -> None:
+    """A grid names the metrics it exists to measure; ``sweep.json`` lists them per grid cell
+    with their intervals: the line's, or each station's for a per-station metric."""
+    from experiments.sweep import headline
+
+    rows = [_row(4, 5, 1, 6), _row(3, 5, 2, 6), _row(5, 5, 0, 6)]
+    for row, share in zip(rows, (0.1, 0.2, 0.3), strict=True):
+        row["stations"] = {"s1": {"untargeted_unfit": round(share * 10), "considered": 10}}
+        row["stations"]["s1"]["unfit_share"] = share
+    agg = aggregate_cell(rows)
+    agg["stations"] = aggregate_stations(rows)
+    cell = {"cell": "c", "stations": ["s1"], "speed_mps": 0.4, "aggregate": agg}
+    success, unfit = headline(cell, ["success_rate", "unfit_share"])
+    assert (success["metric"], success["scope"], success["stations"]) == ("success_rate", "line", 1)
+    assert success["mean"] == pytest.approx(0.8)
+    assert success["ci95_low"] < 0.8 < success["ci95_high"]
+    assert success["pooled"] == pytest.approx(12 / 15)
+    assert (unfit["scope"], unfit["mean"], unfit["n"]) == ("station s1", pytest.approx(0.2), 3)
+    assert unfit["pooled"] == pytest.approx(6 / 30)
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("scenarios: [a.yaml]\nheadline: [recovery]\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"headline\[0\] = 'recovery': not a metric"):
+        Grid.load(grid)
+
+
+def test_wilson_bounds_are_exactly_0_and_1_at_none_and_all() -> None:
+    """Tables print the bounds: none of n is [0, ...], not [5.6e-17, ...]."""
+    for n in range(1, 200):
+        assert wilson_interval(0, n)[0] == 0.0, n
+        assert wilson_interval(n, n)[1] == 1.0, n
+    assert wilson_interval(3, 2) == (None, None)  # more successes than trials: no proportion

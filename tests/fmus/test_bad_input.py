@@ -64,7 +64,8 @@ BAD_PARAMETERS = [
     ("drum_radius_m", 0.0), ("drum_radius_m", -0.1), ("motor_inertia_kgm2", 0.0),
     ("drum_inertia_kgm2", -1.0), ("belt_mass_kg", 0.0), ("speed_gain_Aspm", -1.0),
     ("integral_gain_Apm", -5.0), ("current_limit_A", math.nan), ("internal_step_s", 0.002),
-    ("perturbation_std_N", -1.0), ("perturbation_seed", -3),
+    ("perturbation_std_N", -1.0), ("perturbation_seed", -3), ("setpoint_weight", 1.5),
+    ("setpoint_weight", -0.1), ("standstill_speed_mps", 0.0),
 ]  # fmt: skip
 
 
@@ -86,7 +87,8 @@ def test_invalid_parameter_is_rejected_and_logged(
 @pytest.mark.parametrize("version", [3, 2])
 @pytest.mark.parametrize(("name", "value"),
                          [("speed_setpoint_mps", math.nan), ("speed_setpoint_mps", math.inf),
-                          ("load_mass_kg", -math.inf), ("load_mass_kg", -2.0)])  # fmt: skip
+                          ("speed_setpoint_mps", -0.2), ("load_mass_kg", -math.inf),
+                          ("load_mass_kg", -2.0)])  # fmt: skip
 def test_invalid_input_is_rejected_and_logged(
     fmus: dict[int, Path], version: int, name: str, value: float
 ) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import re
 from pathlib import Path
 
@@ -62,6 +63,39 @@ def test_the_default_cell_is_the_reference_cell() -> None:
     ]
     assert cell.drive.builtin
     assert resolve_cell_path(None) == resolve_cell_path("default")
+
+
+@pytest.mark.parametrize(
+    ("name", "tool"), [("suction", "suction_cup"), ("wide_gripper", "wide_gripper")]
+)
+def test_each_tool_has_a_shipped_cell_of_one_station_that_sorts_every_class(
+    name: str, tool: str
+) -> None:
+    """The reference cell's layout with the tool on the flange: one station, one bin per
+    class of the reference cell."""
+    cell = load_cell(name)
+    (station,) = cell.stations
+    assert station.tool.name == tool
+    assert station.tool.mount == "flange"
+    assert cell.classes == default_cell().classes
+    assert cell.belt == default_cell().belt
+
+
+def test_the_shipped_line_lists_its_stations_upstream_first_in_view_of_the_camera() -> None:
+    """Several stations along one belt, upstream first (a sweep's ``stations: k`` runs the
+    first k), windows and bins apart, each sorting every class, every window seen by the
+    camera and on the belt downstream of the infeed."""
+    cell = load_cell("line")
+    assert len(cell.stations) >= 2
+    windows = [s.pick_window_x_m for s in cell.stations]
+    assert all(a[1] < b[0] for a, b in itertools.pairwise(windows))
+    assert cell.camera.fov_min_x_m < windows[0][0]
+    assert cell.camera.fov_max_x_m >= windows[-1][1]
+    assert cell.belt.infeed_x_m < cell.camera.fov_min_x_m
+    assert windows[-1][1] < cell.belt.end_x_m
+    for station in cell.stations:
+        assert {b.class_name for b in station.bins} == set(default_cell().classes)
+        assert station.namespace
 
 
 def test_an_unknown_robot_names_the_file_the_station_and_the_catalogue(tmp_path: Path) -> None:

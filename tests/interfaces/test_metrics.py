@@ -242,3 +242,139 @@ def test_targeted_subtracts_the_landing_objects_per_station() -> None:
         "success_rate": pytest.approx(2 / 4),
         "throughput_per_min": pytest.approx(2.0),
     }
+
+
+def _sorting_line() -> list[Event]:
+    """Two stations; what came to rest in which bin: upstream's brick bin holds bricks 1 and 2
+    and wood 3, its wood bin nothing; downstream's brick bin holds concrete 4, its concrete bin
+    concrete 5 and brick 6; brick 7 was dropped twice (slipped, then released without a
+    reason, as events before drops carried one): lost; brick 8 was missed by both stations."""
+    up, down = {"station": "upstream"}, {"station": "downstream"}
+    classes = {1: "brick", 2: "brick", 3: "wood", 4: "concrete", 5: "concrete", 6: "brick"}
+    classes[7] = classes[8] = "brick"
+    events = [_e(E.SPAWNED, oid, cls) for oid, cls in classes.items()]
+    for oid, station, bin_name in (
+        (1, up, "brick"),
+        (2, up, "brick"),
+        (3, up, "brick"),
+        (4, down, "brick"),
+        (5, down, "concrete"),
+        (6, down, "concrete"),
+    ):
+        cls = classes[oid]
+        events.append(_e(E.ENTERED_WORKSPACE, oid, cls, **station))
+        events.append(_e(E.PICK_SUCCESS, oid, cls, **station))
+        events.append(
+            _e(E.PLACED_IN_BIN, oid, cls, bin=bin_name, correct=cls == bin_name, **station)
+        )
+    events += [
+        _e(E.ENTERED_WORKSPACE, 7, **up),
+        _e(E.PICK_SUCCESS, 7, **up),
+        _e(E.PICK_DROPPED, 7, reason="slipped", **up),
+        _e(E.PICK_SUCCESS, 7, **up),
+        _e(E.PICK_DROPPED, 7, **up),
+        _e(E.MISSED, 7, **up),
+        _e(E.ENTERED_WORKSPACE, 7, **down),
+        _e(E.MISSED, 7, **down),
+        _e(E.ENTERED_WORKSPACE, 8, **up),
+        _e(E.MISSED, 8, **up),
+        _e(E.ENTERED_WORKSPACE, 8, **down),
+        _e(E.MISSED, 8, **down),
+    ]
+    return events
+
+
+def test_purity_of_each_bin_and_of_each_class_over_the_line() -> None:
+    from interfaces.metrics import bin_scores
+
+    events = _sorting_line()
+    bins = bin_scores(events)
+    assert list(bins) == ["upstream", "downstream"]
+    assert bins["upstream"] == {
+        "brick": {"binned": 3, "placed_correct": 2, "purity": pytest.approx(2 / 3)}
+    }
+    assert bins["downstream"]["brick"] == {"binned": 1, "placed_correct": 0, "purity": 0.0}
+    assert bins["downstream"]["concrete"]["purity"] == pytest.approx(1 / 2)
+    assert list(bin_scores(events, station="downstream")) == ["downstream"]
+    assert set(in_scope("bin")) == set(bins["upstream"]["brick"])
+    # per class over the line: the class's own objects among everything in the bins sorting it
+    per_class = class_scores(events, 60.0, line_exit="downstream")
+    assert (per_class["brick"]["binned"], per_class["brick"]["placed_correct"]) == (4, 2)
+    assert per_class["brick"]["purity"] == pytest.approx(2 / 4)
+    assert per_class["concrete"]["purity"] == pytest.approx(1 / 2)
+    assert per_class["wood"]["binned"] == 0
+    assert per_class["wood"]["purity"] == 0.0
+    # the line's and a station's purity: every one of their bins together
+    assert event_scores(count_events(events, 60.0))["purity"] == pytest.approx(3 / 6)
+    assert count_events(events, 60.0, station="downstream").binned == 2 + 1
+
+
+def test_drops_are_counted_by_reason_per_station_and_class() -> None:
+    events = _sorting_line()
+    line = event_scores(count_events(events, 60.0, line_exit="downstream"))
+    assert line["dropped"] == 2
+    assert line["dropped_by_reason"] == {"released": 1, "slipped": 1}
+    up = count_events(events, 60.0, station="upstream")
+    assert (up.dropped, dict(up.dropped_by_reason)) == (2, {"released": 1, "slipped": 1})
+    assert count_events(events, 60.0, station="downstream").dropped == 0
+    assert class_scores(events, 60.0)["brick"]["dropped"] == 2
+    assert class_scores(events, 60.0)["concrete"]["dropped"] == 0
+
+
+def test_line_scores_recovery_per_class_line_miss_rate_and_picks_per_minute() -> None:
+    """The line's scores of the issue: recovery per class, the most downstream station's misses
+    as the line's, picks per minute and the reference's equations per station."""
+    events = _sorting_line()
+    line = event_scores(count_events(events, 120.0, line_exit="downstream"))
+    assert line["recovery_by_class"] == {
+        "brick": pytest.approx(2 / 5),
+        "concrete": pytest.approx(1 / 2),
+        "wood": 0.0,
+    }
+    per_class = class_scores(events, 120.0, line_exit="downstream")
+    assert {k: v["recovery_rate"] for k, v in per_class.items()} == line["recovery_by_class"]
+    # 8: missed upstream (still on its way), then downstream: missed by the line, once;
+    # 7: dropped on the belt before its misses: lost
+    assert (line["missed"], line["lost"], line["processed"]) == (1, 1, 8)
+    assert line["miss_rate"] == pytest.approx(1 / 8)
+    assert line["pick_throughput_per_min"] == pytest.approx(6 / 2)
+    up = event_scores(count_events(events, 120.0, station="upstream"))
+    down = event_scores(count_events(events, 120.0, station="downstream"))
+    assert (up["picked"], up["processed"], up["missed"], up["lost"]) == (3, 5, 1, 1)
+    assert up["pick_success_rate"] == pytest.approx(3 / 5)  # eq. 1
+    assert up["miss_rate"] == pytest.approx(1 / 5)  # eq. 2
+    assert up["pick_throughput_per_min"] == pytest.approx(1.5)  # eq. 3
+    assert (down["picked"], down["missed"], down["pick_throughput_per_min"]) == (3, 2, 1.5)
+    for name in ("pick_success_rate", "miss_rate", "pick_throughput_per_min"):
+        assert "station" in BY_NAME[name].scopes
+
+
+def test_allocation_decisions_and_the_unfit_share_per_station() -> None:
+    """Every reason a controller gives (new ones such as ``claimed_by_other`` included) is
+    counted; the unfit share counts only the reasons that say the tool cannot take the object,
+    of every object the station's controllers decided about (targeted or not)."""
+    from interfaces.metrics import UNFIT_REASONS, considered_objects, untargeted_scores
+
+    stats = [
+        {"pick": {"targeted": 4, "untargeted": {"too_wide": 3, "claimed_by_other": 5}}},
+        {"pick": {"untargeted": {"too_flat": 1, "too_small": 2, "left_for_downstream": 4}}},
+        {"pick": {"targeted": 1}},
+    ]
+    untargeted = untargeted_objects(stats)
+    assert untargeted == {
+        "too_wide": 3,
+        "claimed_by_other": 5,
+        "too_flat": 1,
+        "too_small": 2,
+        "left_for_downstream": 4,
+    }
+    assert considered_objects(stats) == 5 + 15
+    scores = untargeted_scores(untargeted, considered_objects(stats))
+    assert set(UNFIT_REASONS) == {"too_wide", "too_flat", "too_small"}
+    assert (scores["untargeted_total"], scores["untargeted_unfit"]) == (15, 6)
+    assert scores["considered"] == 20
+    assert scores["unfit_share"] == pytest.approx(6 / 20)
+    assert scores["untargeted_share"]["claimed_by_other"] == pytest.approx(5 / 20)
+    assert list(scores["untargeted_share"]) == sorted(untargeted)
+    assert sum(scores["untargeted_share"].values()) <= 1.0
+    assert untargeted_scores({}, considered=0)["unfit_share"] == 0.0

@@ -36,3 +36,18 @@ def meshed(sample_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Datase
     """The sample meshed with the default configuration."""
     out = tmp_path_factory.mktemp("meshed") / "out"
     return mesh_dataset(sample_dir, out, MeshgenConfig(seed=7))
+
+
+@pytest.fixture(scope="session")
+def default_sample_meshed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The default built-in sample (``cdw-twin sample``'s defaults), meshed by default."""
+    root = tmp_path_factory.mktemp("default_sample")
+    write_sample(root / "sample")
+    return mesh_dataset(root / "sample", root / "meshes", MeshgenConfig()).out
+
+
+@pytest.fixture(scope="session")
+def real_meshed(real_sample: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The real sample meshed by default (skipped when the real sample is not present)."""
+    out = tmp_path_factory.mktemp("real_meshed") / "out"
+    return mesh_dataset(real_sample, out, MeshgenConfig()).out

@@ -28,6 +28,8 @@ def build_script() -> ModuleType:
 def test_every_message_of_the_contract_is_defined(build_script: ModuleType) -> None:
     assert build_script.message_names() == [
         "BeltState",
+        "Claim",
+        "ClaimArray",
         "Detection",
         "DetectionArray",
         "LockstepTick",

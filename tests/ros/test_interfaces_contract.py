@@ -176,9 +176,11 @@ def test_the_controller_uses_the_contracts_qos_on_every_topic(ros: Any, twin: Tw
         "/gripper/command",
         "/controller/target",
         "/lockstep/ack",
+        "/line/claim",
     }
     assert published == {topic: cell_in[topic] for topic in published}
     assert "/sorting/priorities" in subscribed
+    assert "/line/claims" in subscribed  # the board, counted by the tick
     every = {**cell_out, **cell_in}  # /sorting/priorities: the controller reads it too
     assert subscribed == {topic: every[topic] for topic in subscribed}
 

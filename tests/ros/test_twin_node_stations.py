@@ -190,3 +190,47 @@ def test_lockstep_waits_for_every_station_and_loses_one_controller_alone(
     }
     assert counts["/s1/joint_states"] == counts["/s2/joint_states"] == 481
     assert counts["/s2/lockstep/ack"] >= 480  # every tick stepped on (480's may come too late)
+
+
+def test_the_claims_board_is_relayed_with_the_station_and_counted_in_the_tick(
+    ros_env: dict[str, str], mesh_polygons: Callable[..., Path], tmp_path: Path
+) -> None:
+    """The upstream station's controller sends the claims of ``twin_peer.CLAIMS`` on
+    ``/s1/line/claim``; both controllers get the same boards on ``/line/claims``, each in the
+    tick after the claim (the claims of tick k are commands of tick k: they change the board
+    relayed after step k + 1), named ``upstream`` whatever the controller wrote, a released or
+    picked entry relayed once and then gone, each board counted by its tick. The bad state is
+    a ``bad_claim`` fault and changes nothing."""
+    out = tmp_path / "run"
+    cmd = [
+        *(sys.executable, "-m", "twin.cli", "twin-node", "--cell", "two_pandas"),
+        *("--dataset", str(mesh_polygons(ONE_BOX)), "--out", str(out), "--mode", "lockstep"),
+        *("--duration", "0.3", "--speed", "0.4", "--seed", "3", "--ack-timeout", "5.0"),
+    ]
+    twin = subprocess.Popen(cmd, env=ros_env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    up = _peer(ros_env, tmp_path / "s1.json", "s1", "--claims")
+    down = _peer(ros_env, tmp_path / "s2.json", "s2")
+    assert _finish(twin) == 0, twin.stderr.read().decode()[-3000:] if twin.stderr else ""
+    assert (_finish(up), _finish(down)) == (0, 0)
+    upstream, downstream = (
+        json.loads((tmp_path / f"{ns}.json").read_text(encoding="utf-8")) for ns in ("s1", "s2")
+    )
+    assert upstream["handled"] == downstream["handled"] == 73  # ticks 0..72, none lost
+    stamp_ns = [round(tick * 1e9 / 240.0) for tick in (11, 12, 31, 61)]
+    up7, up8 = ["upstream", 7, "claimed"], ["upstream", 8, "claimed"]
+    expected = [
+        {"stamp_ns": stamp_ns[0], "claims": [up7]},
+        {"stamp_ns": stamp_ns[1], "claims": [up7, up8]},
+        {"stamp_ns": stamp_ns[2], "claims": [["upstream", 7, "released"], up8]},
+        {"stamp_ns": stamp_ns[3], "claims": [["upstream", 8, "picked"]]},
+    ]
+    assert upstream["boards"] == downstream["boards"] == expected
+    # the tick counts each board: n_claims 1 in its tick, last_claims_ns its stamp
+    counted = [[tick, 1, ns] for tick, ns in zip((11, 12, 31, 61), stamp_ns, strict=True)]
+    assert upstream["counted"] == downstream["counted"] == counted
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    assert summary["published"]["/line/claims"] == 4
+    events = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()]
+    faults = [e["data"] for e in events if e["type"] == "fault"]
+    assert [(f["kind"], f["station"]) for f in faults] == [("bad_claim", "upstream")]
+    assert faults[0]["detail"].startswith("/s1/line/claim: rejected (bad_claim): state 'grabbed'")

@@ -1,9 +1,11 @@
 """Peers for the twin node in the tests, run as separate processes.
 
-python twin_peer.py lockstep OUT.json [--die-after TICKS] [--namespace NS]
+python twin_peer.py lockstep OUT.json [--die-after TICKS] [--namespace NS] [--claims]
     a scripted lockstep controller of the station with namespace NS (default: the empty one):
-    waits for each tick's messages, sends a deterministic arm command every 24 ticks,
-    acknowledges every tick; optionally dies (exit 3) after a tick
+    waits for each tick's messages (the claims board on /line/claims too), sends a
+    deterministic arm command every 24 ticks, with --claims the claims of :data:`CLAIMS` on its
+    line/claim, acknowledges every tick; optionally dies (exit 3) after a tick. OUT.json has
+    the boards it received and the ticks that counted one
 python twin_peer.py listen OUT.json SECONDS  (counted from the first message)
     records what arrives on /conveyor/state (setpoints) and how many messages per topic
 """
@@ -20,7 +22,14 @@ from collections import Counter
 from typing import Any
 
 import rclpy
-from cdw_interfaces.msg import BeltState, DetectionArray, LockstepTick, StepAck
+from cdw_interfaces.msg import (
+    BeltState,
+    Claim,
+    ClaimArray,
+    DetectionArray,
+    LockstepTick,
+    StepAck,
+)
 from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -31,15 +40,37 @@ RELIABLE = QoSProfile(
 )
 HOME = (0.0, -0.35, 0.0, -2.3, 0.0, 1.95, 0.785)
 ARM = [f"panda_joint{i}" for i in range(1, 8)]
+CLAIMS: dict[int, tuple[int, str]] = {
+    10: (7, "claimed"),
+    11: (8, "claimed"),
+    30: (7, "released"),
+    50: (9, "grabbed"),  # not a claim state: rejected, the board unchanged
+    60: (8, "picked"),
+}
+"""With --claims: tick -> (track id, state) of the claim sent while handling that tick."""
 
 
-def _answer(k: int, arm: Any, ack: Any) -> None:
-    """Tick k: an arm command every 24 ticks, then the ack counting it."""
+def _claim(track_id: int, state: str) -> Claim:
+    """A claim as a controller sends it; ``station`` is deliberately wrong (the twin sets it)."""
+    msg = Claim(station="not_my_name", track_id=track_id, class_name="brick", state=state)
+    msg.header.frame_id = "world"
+    msg.position.x, msg.position.y = -1.5 + 0.01 * track_id, 0.5
+    msg.velocity.x = 0.4
+    msg.radius_m = 0.05
+    return msg
+
+
+def _answer(k: int, arm: Any, ack: Any, claim: Any = None) -> None:
+    """Tick k: an arm command every 24 ticks (and the scripted claim, with ``claim``), then the
+    ack counting them."""
     sent = 0
     if k % 24 == 0:
         t = k / 240.0
         q = [h + 0.3 * math.sin(t + i) for i, h in enumerate(HOME)]
         arm.publish(JointTrajectory(joint_names=ARM, points=[JointTrajectoryPoint(positions=q)]))
+        sent += 1
+    if claim is not None and k in CLAIMS:
+        claim.publish(_claim(*CLAIMS[k]))
         sent += 1
     ack.publish(StepAck(tick=k, n_commands=sent))
 
@@ -51,13 +82,19 @@ def _stuck(ticks: list[LockstepTick], pending: Counter[str]) -> dict[str, Any] |
     t0 = ticks[0]
     return {
         "tick": int(t0.tick),
-        "need": [t0.n_joint_states, t0.n_belt_states, t0.n_detections],
+        "need": [t0.n_joint_states, t0.n_belt_states, t0.n_detections, t0.n_claims],
         "pending": dict(pending),
     }
 
 
-def lockstep(out: str, die_after: int | None, namespace: str = "") -> int:
-    from interfaces.contract import ARM_TRAJECTORY, JOINT_STATES, LOCKSTEP_ACK
+def _board(msg: ClaimArray) -> dict[str, Any]:
+    stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+    claims = [[c.station, int(c.track_id), c.state] for c in msg.claims]
+    return {"stamp_ns": stamp_ns, "claims": claims}
+
+
+def lockstep(out: str, die_after: int | None, namespace: str = "", claims: bool = False) -> int:
+    from interfaces.contract import ARM_TRAJECTORY, CLAIM, CLAIMS, JOINT_STATES, LOCKSTEP_ACK
 
     rclpy.init()
     node = rclpy.create_node("peer_controller")
@@ -77,12 +114,22 @@ def lockstep(out: str, die_after: int | None, namespace: str = "") -> int:
     node.create_subscription(
         DetectionArray, "/objects/detections", lambda _m: pending.update(["det"]), RELIABLE
     )
+    boards: list[dict[str, Any]] = []
+
+    def on_claims(msg: ClaimArray) -> None:
+        pending.update(["claims"])
+        boards.append(_board(msg))
+
+    node.create_subscription(ClaimArray, CLAIMS.name, on_claims, RELIABLE)
     node.create_subscription(LockstepTick, "/lockstep/tick", ticks.append, RELIABLE)
     arm = node.create_publisher(JointTrajectory, ARM_TRAJECTORY.resolve(namespace), RELIABLE)
+    claim = node.create_publisher(Claim, CLAIM.resolve(namespace), RELIABLE) if claims else None
+    counted: list[list[int]] = []  # [tick, n_claims, last_claims_ns] of ticks counting a board
     ack = node.create_publisher(StepAck, LOCKSTEP_ACK.resolve(namespace), RELIABLE)
     handled = 0
     deadline = time.monotonic() + 60.0
-    while arm.get_subscription_count() == 0 or ack.get_subscription_count() == 0:
+    outputs = [p for p in (arm, ack, claim) if p is not None]
+    while any(p.get_subscription_count() == 0 for p in outputs):
         executor.spin_once(timeout_sec=0.05)
         if time.monotonic() > deadline:
             return 2
@@ -95,13 +142,16 @@ def lockstep(out: str, die_after: int | None, namespace: str = "") -> int:
                 "joints": tick.n_joint_states,
                 "belt": tick.n_belt_states,
                 "det": tick.n_detections,
+                "claims": tick.n_claims,
             }
             if any(pending[k] < n for k, n in need.items()):
                 break
             ticks.pop(0)
             for k, n in need.items():
                 pending[k] -= n
-            _answer(int(tick.tick), arm, ack)
+            if tick.n_claims:
+                counted.append([int(tick.tick), int(tick.n_claims), int(tick.last_claims_ns)])
+            _answer(int(tick.tick), arm, ack, claim)
             handled += 1
             idle_since = time.monotonic()
             if die_after is not None and handled >= die_after:
@@ -109,7 +159,16 @@ def lockstep(out: str, die_after: int | None, namespace: str = "") -> int:
                     json.dump({"handled": handled, "died": True}, handle)
                 os._exit(3)
     with open(out, "w", encoding="utf-8") as handle:
-        json.dump({"handled": handled, "died": False, "stuck": _stuck(ticks, pending)}, handle)
+        json.dump(
+            {
+                "handled": handled,
+                "died": False,
+                "stuck": _stuck(ticks, pending),
+                "boards": boards,
+                "counted": counted,
+            },
+            handle,
+        )
     node.destroy_node()
     rclpy.shutdown()
     return 0
@@ -149,6 +208,7 @@ if __name__ == "__main__":
         parser.add_argument("out")
         parser.add_argument("--die-after", type=int, default=None)
         parser.add_argument("--namespace", default="")
+        parser.add_argument("--claims", action="store_true")
         args = parser.parse_args()
-        sys.exit(lockstep(args.out, args.die_after, args.namespace))
+        sys.exit(lockstep(args.out, args.die_after, args.namespace, args.claims))
     sys.exit(listen(sys.argv[2], float(sys.argv[3])))

@@ -7,10 +7,8 @@ import re
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-import pybullet as pb
 import pytest
-from twin_helpers import box_px
+from twin_helpers import box_px, tcp_ik
 
 from interfaces.cell import BinSpec, default_cell
 from interfaces.events import EventType
@@ -98,22 +96,8 @@ def test_the_default_cell_refuses_classes_it_has_no_bin_for(
         check_scenario(default, dataset, where=where)
 
 
-def _ik(twin: Twin, position: tuple[float, float, float]) -> tuple[float, ...]:
-    robot, tool = twin.stations[0].robot, twin.stations[0].tool
-    q = pb.calculateInverseKinematics(
-        robot.body,
-        tool.tcp_link,
-        position,
-        pb.getQuaternionFromEuler([np.pi, 0.0, 0.0]),
-        maxNumIterations=200,
-        residualThreshold=1e-6,
-        physicsClientId=twin.client,
-    )
-    return tuple(q[: len(robot.arm_joints)])
-
-
 def _hold(twin: Twin, position: tuple[float, float, float], width_m: float, s: float) -> None:
-    twin.command(ArmCommand(_ik(twin, position), gripper_width_m=width_m))
+    twin.command(ArmCommand(tcp_ik(twin, position), gripper_width_m=width_m))
     end = twin.time_s + s
     while twin.time_s < end - 1e-9:
         twin.advance()

@@ -21,6 +21,7 @@ import pytest
 from interfaces import contract
 from interfaces.cell import CELLS_DIR, DEFAULT_CELL, Cell, StationSpec, default_cell, load_cell
 from interfaces.events import EventType
+from interfaces.urdf import station_urdf
 from twin.perception import PerceptionConfig
 from twin.robot import HOLD_S, Robot
 
@@ -65,7 +66,8 @@ def _station() -> StationSpec:
 
 @pytest.fixture(scope="module")
 def robot() -> Iterator[Robot]:
-    """The reference cell's Panda as the twin loads it (PyBullet, from the URDF)."""
+    """The reference cell's Panda as the twin loads it (PyBullet, from the station's URDF,
+    which carries the datasheet's joint limits)."""
     client = pb.connect(pb.DIRECT)
     try:
         station = _station()
@@ -74,6 +76,7 @@ def robot() -> Iterator[Robot]:
             station.robot,
             base_position_m=station.base_position_m,
             base_yaw_rad=station.base_yaw_rad,
+            urdf=station_urdf(station.robot, station.tool),
         )
     finally:
         pb.disconnect(physicsClientId=client)
@@ -137,14 +140,17 @@ def robot_rows(robot: Robot) -> list[str]:
 
 
 def limit_rows(robot: Robot) -> list[str]:
-    """The page's joint-limit table, as the twin loads the limits from the URDF."""
+    """The page's joint-limit table, as the twin loads the limits from the station's URDF (and
+    the acceleration limits its joint limiter applies, from the robot's spec)."""
     lim = robot.limits
+    accel = robot.spec.joint_max_acceleration_rps2
     return [
         _row(
             f"`{name}`",
             _num(lim.lower[i]),
             _num(lim.upper[i]),
             _num(lim.velocity[i]),
+            f"{accel[i]:g}",
             f"{lim.effort[i]:g}",
         )
         for i, name in enumerate(robot.spec.arm_joints)

@@ -5,37 +5,15 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
 import pybullet as pb
 import pytest
-from twin_helpers import box_px
+from twin_helpers import box_px, hold, tcp_ik
 
 from interfaces.events import EventType
 from twin.scenario import Scenario, SystemLevel
 from twin.sim import ArmCommand, Twin
 
 ONE_BOX = {"img": [(1, box_px(500, 500, 100, 50))]}  # brick, 60 x 30 mm footprint
-
-
-def _ik(twin: Twin, position: tuple[float, float, float]) -> tuple[float, ...]:
-    robot, tool = twin.stations[0].robot, twin.stations[0].tool
-    q = pb.calculateInverseKinematics(
-        robot.body,
-        tool.tcp_link,
-        position,
-        pb.getQuaternionFromEuler([np.pi, 0.0, 0.0]),
-        maxNumIterations=200,
-        residualThreshold=1e-6,
-        physicsClientId=twin.client,
-    )
-    return tuple(q[: len(robot.arm_joints)])
-
-
-def _hold(twin: Twin, command: ArmCommand, seconds: float) -> None:
-    end = twin.time_s + seconds
-    twin.command(command)
-    while twin.time_s < end - 1e-9:
-        twin.advance()
 
 
 @pytest.mark.parametrize(
@@ -68,16 +46,16 @@ def test_a_grasp_is_credited_only_inside_the_pick_window(
             pb.resetBasePositionAndOrientation(
                 body, (x_m, y, z + 0.001), orientation, physicsClientId=twin.client
             )
-            _hold(twin, ArmCommand(home), 0.5)
+            hold(twin, ArmCommand(home), 0.5)
 
         park(end_m - 0.024)  # inside: it enters the window
         x = end_m + beyond_end_m
         park(x)
         grasp_z = z + 0.5 * obj.height_m - 0.02  # 2 cm below the top: the palm stays clear
-        _hold(twin, ArmCommand(_ik(twin, (x, y, grasp_z + 0.3)), gripper_width_m=0.08), 2.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, grasp_z + 0.1)), gripper_width_m=0.08), 1.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, grasp_z)), gripper_width_m=0.08), 1.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, grasp_z)), gripper_width_m=0.0), 0.5)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, grasp_z + 0.3)), gripper_width_m=0.08), 2.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, grasp_z + 0.1)), gripper_width_m=0.08), 1.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, grasp_z)), gripper_width_m=0.08), 1.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, grasp_z)), gripper_width_m=0.0), 0.5)
         (gt,) = twin.observe_objects()
         events = [e for e in twin.events if e.object_id == obj.id]
         counts = twin.counts()

@@ -18,7 +18,7 @@ import pytest
 from conftest import write_yolo
 from twin_helpers import M_PER_PX, box_px
 
-from interfaces.cell import default_cell
+from interfaces.cell import CELLS_DIR, default_cell
 from meshgen.outdir import MARKER_NAME as MESHGEN_MARKER
 from meshgen.outdir import marker_text
 from twin.errors import ConfigError
@@ -31,7 +31,9 @@ SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "scenarios"
 RULES = [
     pytest.param(
         "cell: two_pandaz",
-        r"cell = 'two_pandaz': no shipped cell of that name \(shipped: default, two_pandas\)",
+        r"cell = 'two_pandaz': no shipped cell of that name \(shipped: "
+        + re.escape(", ".join(sorted(p.stem for p in CELLS_DIR.glob("*.yaml"))))
+        + r"\)",
         id="cell_name",
     ),
     pytest.param(

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 import pytest
-from twin_helpers import box_px
+from twin_helpers import box_px, tcp_ik
 
 from interfaces.cell import BinSpec, load_cell
 from interfaces.events import EventType
@@ -29,27 +29,15 @@ TWO_BOXES = {
 OPEN_M = 0.08
 
 
-def _ik(twin: Twin, station: int, position: tuple[float, float, float]) -> tuple[float, ...]:
-    robot, tool = twin.stations[station].robot, twin.stations[station].tool
-    q = pb.calculateInverseKinematics(
-        robot.body,
-        tool.tcp_link,
-        position,
-        pb.getQuaternionFromEuler([np.pi, 0.0, 0.0]),
-        maxNumIterations=200,
-        residualThreshold=1e-6,
-        physicsClientId=twin.client,
-    )
-    return tuple(q[: len(robot.arm_joints)])
-
-
 def _hold(
     twin: Twin, targets: dict[int, tuple[tuple[float, float, float], float]], s: float
 ) -> None:
     """Command every station's TCP position and gripper opening, then step ``s`` seconds."""
     for station, (position, width) in targets.items():
         twin.command(
-            ArmCommand(_ik(twin, station, position), gripper_width_m=width, station=station)
+            ArmCommand(
+                tcp_ik(twin, position, station=station), gripper_width_m=width, station=station
+            )
         )
     end = twin.time_s + s
     while twin.time_s < end - 1e-9:

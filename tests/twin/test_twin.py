@@ -12,7 +12,7 @@ import numpy as np
 import pybullet as pb
 import pytest
 import trimesh
-from twin_helpers import box_px
+from twin_helpers import box_px, hold, tcp_ik
 
 from interfaces.catalog import entry
 from interfaces.cell import default_cell
@@ -36,28 +36,6 @@ def _still(prefill_m: float = 1.7) -> Scenario:
     )
 
 
-def _ik(twin: Twin, position: tuple[float, float, float], yaw: float = 0.0) -> tuple[float, ...]:
-    robot, tool = twin.stations[0].robot, twin.stations[0].tool
-    orn = pb.getQuaternionFromEuler([np.pi, 0.0, yaw])
-    q = pb.calculateInverseKinematics(
-        robot.body,
-        tool.tcp_link,
-        position,
-        orn,
-        maxNumIterations=200,
-        residualThreshold=1e-6,
-        physicsClientId=twin.client,
-    )
-    return tuple(q[: len(robot.arm_joints)])
-
-
-def _hold(twin: Twin, command: ArmCommand, seconds: float) -> None:
-    end = twin.time_s + seconds
-    twin.command(command)
-    while twin.time_s < end - 1e-9:
-        twin.advance()
-
-
 @pytest.mark.parametrize(
     ("polygons", "closed_w"),
     [
@@ -79,19 +57,19 @@ def test_scripted_pick_yields_overlap_contact_pick_and_correct_bin(
         x, y, z = obj.position_m
         z = z + 0.5 * obj.height_m - 0.02  # grasp 2 cm below the top: the palm stays clear
         open_w = 0.08
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.3)), gripper_width_m=open_w), 2.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.1)), gripper_width_m=open_w), 1.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=open_w), 1.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=closed_w), 0.5)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, 0.3)), gripper_width_m=closed_w), 1.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z + 0.3)), gripper_width_m=open_w), 2.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z + 0.1)), gripper_width_m=open_w), 1.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z)), gripper_width_m=open_w), 1.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z)), gripper_width_m=closed_w), 0.5)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, 0.3)), gripper_width_m=closed_w), 1.0)
         bin_cfg = twin.cell.stations[0].bin_for("brick")
         assert bin_cfg is not None
         over = (bin_cfg.centre_x_m, bin_cfg.centre_y_m, 0.2)
         waypoint = (bin_cfg.centre_x_m, 0.35, 0.3)
-        _hold(twin, ArmCommand(_ik(twin, waypoint), gripper_width_m=closed_w), 1.0)
-        _hold(twin, ArmCommand(_ik(twin, over), gripper_width_m=closed_w), 1.5)
+        hold(twin, ArmCommand(tcp_ik(twin, waypoint), gripper_width_m=closed_w), 1.0)
+        hold(twin, ArmCommand(tcp_ik(twin, over), gripper_width_m=closed_w), 1.5)
         held_over_bin = twin.landing_in_bins()
-        twin.command(ArmCommand(_ik(twin, over), gripper_width_m=open_w))
+        twin.command(ArmCommand(tcp_ik(twin, over), gripper_width_m=open_w))
         landing = []
         for _ in range(int(1.5 / twin.dt_s)):
             twin.advance()
@@ -147,15 +125,15 @@ def test_opening_fully_lets_go_of_an_object_that_fills_the_jaw(
         (obj,) = obs.objects
         x, y, z = obj.position_m
         z = z + 0.5 * obj.height_m - 0.02
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.3)), gripper_width_m=0.08), 2.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.1)), gripper_width_m=0.08), 1.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=0.08), 1.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=0.07), 0.5)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z + 0.3)), gripper_width_m=0.08), 2.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z + 0.1)), gripper_width_m=0.08), 1.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z)), gripper_width_m=0.08), 1.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z)), gripper_width_m=0.07), 0.5)
         assert twin.stations[0].tool.measured() > 0.0795  # the object keeps the jaw open
-        _hold(twin, ArmCommand(_ik(twin, (x, y, 0.3)), gripper_width_m=0.07), 1.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, 0.3)), gripper_width_m=0.07), 1.0)
         held = [g.id for g in twin.observe_objects() if g.held]
         assert held == [obj.id]
-        _hold(twin, ArmCommand(_ik(twin, (x, y, 0.3)), gripper_width_m=0.08), 0.5)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, 0.3)), gripper_width_m=0.08), 0.5)
         assert not [g.id for g in twin.observe_objects() if g.held]
     kinds = [e.type for e in twin.events if e.object_id == obj.id]
     assert EventType.PICK_SUCCESS in kinds
@@ -207,9 +185,9 @@ def test_closing_without_dwell_does_not_pick(mesh_polygons: Callable[..., Path])
     with Twin(_still(), dataset_dir=meshes) as twin:
         obs, _ = twin.reset(seed=0)
         x, y, z = obs.objects[0].position_m
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.3)), gripper_width_m=0.08), 2.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z + 0.1)), gripper_width_m=0.08), 1.0)
-        _hold(twin, ArmCommand(_ik(twin, (x, y, z)), gripper_width_m=0.0), 0.3)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z + 0.3)), gripper_width_m=0.08), 2.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z + 0.1)), gripper_width_m=0.08), 1.0)
+        hold(twin, ArmCommand(tcp_ik(twin, (x, y, z)), gripper_width_m=0.0), 0.3)
         assert EventType.PICK_SUCCESS not in [e.type for e in twin.events]
 
 
@@ -267,7 +245,8 @@ def test_the_arm_follows_a_wrist_flip_at_the_datasheet_limits(
     real arm's joint controller): here the base turns 1.6 rad while the wrist (joints 5 and 7)
     turns 1.2 and 1.6 rad at 15 and 20 rad/s^2, as in a grasp-yaw flip. pybullet_data's Panda URDF
     carries placeholder inertias (0.1 kg m^2 on every link); read from the file, they made the
-    12 N m wrist joints lag such a command by 0.35-0.7 rad."""
+    12 N m wrist joints lag such a command by 0.35-0.7 rad. Planned within the limits, the
+    command passes the twin's joint limiter unchanged: the motors get it as sent."""
     meshes = mesh_polygons(ONE_BOX)
     with Twin(_still(), dataset_dir=meshes) as twin:
         twin.reset(seed=0)
@@ -278,6 +257,7 @@ def test_the_arm_follows_a_wrist_flip_at_the_datasheet_limits(
         vmax = np.array([2.175, 2.61, 2.61])  # datasheet velocity and acceleration limits
         accel = np.array([15.0, 15.0, 20.0])
         worst = np.zeros(start.size)
+        limited = 0
         period_s = 1.0 / 120.0  # a controller's command period
         steps = round(period_s / twin.dt_s)
         for k in range(150):  # 1.25 s of commands; the moves take at most 0.88 s
@@ -288,9 +268,11 @@ def test_the_arm_follows_a_wrist_flip_at_the_datasheet_limits(
             twin.command(ArmCommand(tuple(q_cmd), tuple(qd_cmd)))
             for _ in range(steps):
                 twin.advance()
+                limited += robot.limiter.any_limited
             q, _ = robot.joint_state()
             worst = np.maximum(worst, np.abs(q - q_cmd))
         assert worst.max() < 0.05, np.round(worst, 3)
+        assert limited == 0
 
 
 def test_masses_and_inertias_match_the_metadata(builtin_meshes: Path) -> None:
@@ -380,7 +362,7 @@ def test_second_robot_loads_and_follows_joint_targets(
         home = entry("xarm6", "robots", "robot")
         assert isinstance(home, dict)
         target = np.array(home["home_joint_positions"]) + 0.3
-        _hold(twin, ArmCommand(tuple(target), gripper_width_m=0.0), 2.0)
+        hold(twin, ArmCommand(tuple(target), gripper_width_m=0.0), 2.0)
         obs = twin.observe()
         assert np.allclose(obs.joint_positions, target, atol=0.02)
         assert obs.gripper_width_m < 0.01  # the gripper closed on nothing

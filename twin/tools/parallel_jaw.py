@@ -14,8 +14,18 @@ than :data:`GRIP_TOLERANCE_M` (the fingers stop on the object while the target l
 whatever the object's width). A held object is let go once the gripper no longer presses:
 commanded no narrower than measured, within half the tolerance (:data:`RELEASE_GAP_M`; so a
 jaw-wide object, which holds the fingers at full opening where commanding "open" cannot exceed
-the measured opening, is let go too). An object whose centre of mass is within the full opening
-of the TCP horizontally is being handled: touching it is no unintended contact.
+the measured opening, is let go too; ``pick_dropped`` reason ``released`` if away from the bins).
+An object whose centre of mass is within the full opening of the TCP horizontally is being
+handled: touching it is no unintended contact.
+
+Slip (a jaw with ``grip_force_N``): every physics step of the carry, the friction the two pads
+can carry, ``2 mu grip_force_N`` (``mu`` the held object's friction coefficient, as spawned), is
+checked against ``mass (g + |a|)`` (``a`` the TCP's measured acceleration,
+:class:`twin.tools.TcpAccelerometer`): exceeded, the object slips out (reason ``slipped``). The
+finger links of such a jaw get a lateral friction of 1, so the contact's friction in PyBullet
+(the product of both bodies') is the object's, as the rule assumes; once an object slipped, the
+pads have no friction (it slides out, whatever PyBullet's friction would still carry) and the
+jaw grasps nothing until it has opened (no longer presses).
 """
 
 from __future__ import annotations
@@ -28,11 +38,25 @@ import pybullet as pb
 
 from interfaces.tools import ParallelJawSpec
 from twin.robot import Robot
-from twin.tools import Normal, Pose
+from twin.tools import (
+    RELEASED,
+    SLIPPED,
+    Candidate,
+    HeldObject,
+    Normal,
+    Pose,
+    TcpAccelerometer,
+    link_pose,
+    offset_pose,
+)
 
 GRIP_TOLERANCE_M = 0.0005
 """How much narrower than the measured opening the gripper must be commanded to count as
 pressing (a grip starts)."""
+
+PAD_FRICTION = 1.0
+"""Lateral friction of the finger pads of a jaw with a grip force (the contact's is then the
+object's)."""
 
 RELEASE_GAP_M = -0.5 * GRIP_TOLERANCE_M
 """Commanded minus measured opening above which a held object is let go: the gripper no longer
@@ -42,7 +66,7 @@ presses. Between this and ``-GRIP_TOLERANCE_M`` a grip neither starts nor ends (
 class ParallelJaw:
     """A parallel-jaw gripper on ``robot``'s body (see the module docstring)."""
 
-    def __init__(self, spec: ParallelJawSpec, robot: Robot) -> None:
+    def __init__(self, spec: ParallelJawSpec, robot: Robot, *, gravity_mps2: float = 9.81) -> None:
         self.spec = spec
         self.body = robot.body
         self.client = robot.client
@@ -60,6 +84,13 @@ class ParallelJaw:
         self._offset = None if not any(spec.tcp_offset_m) else spec.tcp_offset_m
         self._target_m = spec.max_opening_m
         self._applied_m = math.nan
+        self._gravity_mps2 = gravity_mps2
+        self._accelerometer = TcpAccelerometer(self.body, self.tcp_link, self.client)
+        self._held: HeldObject | None = None
+        self._capacity_N: float | None = None
+        self._pads = links if spec.grip_force_N is not None else []
+        self._slipped = False
+        self._pad_friction(PAD_FRICTION)
 
     def reset_state(self) -> None:
         """Open the fingers at rest; the finger motors are set by the next :meth:`apply`."""
@@ -67,6 +98,17 @@ class ParallelJaw:
             pb.resetJointState(self.body, j, q, 0.0, physicsClientId=self.client)
         self._target_m = self.spec.max_opening_m
         self._applied_m = math.nan
+        self.release()
+        if self._slipped:
+            self._slipped = False
+            self._pad_friction(PAD_FRICTION)
+
+    def _pad_friction(self, friction: float) -> None:
+        """The lateral friction of the finger pads of a jaw with a grip force."""
+        for link in self._pads:
+            pb.changeDynamics(
+                self.body, link, lateralFriction=friction, physicsClientId=self.client
+            )
 
     def command(self, value: float) -> None:
         """Set the opening target in metres (0 = closed, ``max_opening_m`` = open)."""
@@ -111,18 +153,11 @@ class ParallelJaw:
 
     def link_pose(self) -> Pose:
         """Pose of the TCP link's frame, world."""
-        state = pb.getLinkState(
-            self.body, self.tcp_link, computeForwardKinematics=True, physicsClientId=self.client
-        )
-        return state[4], state[5]
+        return link_pose(self.body, self.tcp_link, self.client)
 
     def tcp_pose(self) -> Pose:
         """Pose of the TCP (the TCP link's frame moved by ``tcp_offset_m``), world."""
-        pos, orn = self.link_pose()
-        if self._offset is None:
-            return pos, orn
-        moved, _ = pb.multiplyTransforms(pos, orn, self._offset, (0.0, 0.0, 0.0, 1.0))
-        return (moved[0], moved[1], moved[2]), orn
+        return offset_pose(self.link_pose(), self._offset)
 
     def contact_name(self, index: int) -> str:
         """The finger link's name."""
@@ -134,13 +169,52 @@ class ParallelJaw:
         they let go."""
         return self._target_m - self.measured()
 
-    def grasps(self, touching: Mapping[int, Normal]) -> bool:
-        """Both fingers touch from opposite sides and the gripper presses."""
-        return self._opposite(touching) and self.gap_m() < -GRIP_TOLERANCE_M
+    def tick(self, time_s: float) -> None:
+        """After a slip: the pads get their friction back once the jaw has opened."""
+        if self._slipped and self.releases():
+            self._slipped = False
+            self._pad_friction(PAD_FRICTION)
+
+    def grasps(self, candidate: Candidate) -> bool:
+        """The TCP box has overlapped the object for the dwell, both fingers touch it from
+        opposite sides and the gripper presses (and has opened since a slip)."""
+        return (
+            not self._slipped
+            and candidate.overlap_s >= self.spec.dwell_s - 1e-9
+            and self._opposite(candidate.touching)
+            and self.gap_m() < -GRIP_TOLERANCE_M
+        )
 
     def releases(self) -> bool:
         """The gripper no longer presses."""
         return self.gap_m() > RELEASE_GAP_M
+
+    def hold(self, held: HeldObject, time_s: float) -> None:
+        """Start carrying ``held``: its friction capacity, if the jaw has a grip force."""
+        self._held = held
+        force = self.spec.grip_force_N
+        self._capacity_N = None if force is None else 2.0 * held.friction * force
+        if self._capacity_N is not None:
+            self._accelerometer.reset()
+            self._accelerometer.magnitude(time_s)
+
+    def carry(self, time_s: float) -> str | None:
+        """``released`` once the gripper no longer presses; ``slipped`` once the load exceeds
+        the friction capacity; None while it holds."""
+        if self.releases():
+            return RELEASED
+        if self._capacity_N is not None and self._held is not None:
+            load = self._held.mass_kg * (self._gravity_mps2 + self._accelerometer.magnitude(time_s))
+            if self._capacity_N < load:
+                self._slipped = True
+                self._pad_friction(0.0)
+                return SLIPPED
+        return None
+
+    def release(self) -> None:
+        """Forget the held object."""
+        self._held = None
+        self._capacity_N = None
 
     def _opposite(self, touching: Mapping[int, Normal]) -> bool:
         n = len(self.contact_links)

@@ -1,0 +1,127 @@
+"""The suction cup as the controller plans with it.
+
+Its command is the vacuum: 1 on, 0 off. The twin reports the vacuum reached, as a fraction of
+the nominal vacuum, as the joint ``<name>_vacuum`` of ``joint_states``; a sealed cup reads at
+least the seal efficiency of the leakiest surface once the vacuum has built up, an unsealed one
+about 0, so a cup that reads less than half of that least efficiency after the build-up (and
+through the lift) holds nothing. The cup grasps an object on its top face: the TCP is the
+centre of the lip, lowered ``pick.top_press_m`` into the top so that the soft lip seals. An
+object fits when its narrow side holds the lip's disc with ``width_margin_m`` to spare (less
+is ``too_small``); nothing is too flat or too wide for it. Only the stem's disc comes down
+around the grasp point. The sequence does not dwell: the vacuum goes on as the descent to the
+top starts (the cup seals as the lip touches), the TCP waits at the top for the seal (the
+build-up, plus ``pick.seal_margin_s``), then lifts; over the bin it vents for ``vent_s`` plus
+``pick.vent_margin_s``. The cup is round: any yaw grasps the same.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from control.tools import Footprint, GraspTiming
+from interfaces.tools import SuctionCupSpec
+
+if TYPE_CHECKING:
+    from control.config import PickConfig
+
+VACUUM_ON = 1.0
+"""The command that turns the vacuum on."""
+VACUUM_OFF = 0.0
+"""The command that turns it off (and vents the cup)."""
+
+
+@dataclass(frozen=True)
+class SuctionCup:
+    """Controller side of a :class:`~interfaces.tools.SuctionCupSpec`."""
+
+    spec: SuctionCupSpec
+
+    grasp_yaw_period_rad: ClassVar[float] = 0.0
+    """A round cup: the grasp does not depend on the object's yaw."""
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The vacuum reading, ``<name>_vacuum``."""
+        return (self.spec.vacuum_joint,)
+
+    @property
+    def urdf_joint_names(self) -> tuple[str, ...]:
+        """None: the vacuum reading is no joint of the station's URDF."""
+        return ()
+
+    @property
+    def open_command(self) -> float:
+        """Vacuum off."""
+        return VACUUM_OFF
+
+    @property
+    def seal_threshold(self) -> float:
+        """The vacuum fraction below which the cup holds nothing: half the seal efficiency of
+        the leakiest surface the spec names."""
+        spec = self.spec
+        return 0.5 * min(spec.default_seal_efficiency, *spec.seal_efficiency.values())
+
+    def measured(self, positions: Mapping[str, float]) -> float:
+        """The vacuum fraction reached (0 to 1); NaN when not reported or not finite."""
+        value = positions.get(self.spec.vacuum_joint, math.nan)
+        return float(value) if math.isfinite(value) else math.nan
+
+    def grasp_command(self, width_m: float, squeeze_m: float) -> float:
+        """Vacuum on, whatever the object's width."""
+        del width_m, squeeze_m
+        return VACUUM_ON
+
+    def clip_command(self, value: float) -> float:
+        """``value`` within ``[0, 1]``."""
+        return float(np.clip(value, VACUUM_OFF, VACUUM_ON))
+
+    def holds_nothing(self, measured: float, commanded: float, margin_m: float) -> bool:
+        """The vacuum is below :attr:`seal_threshold`: nothing sealed the cup."""
+        del commanded, margin_m
+        if not math.isfinite(measured):
+            return False
+        return measured < self.seal_threshold
+
+    def misfit(
+        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+    ) -> str | None:
+        """``too_small`` when the narrow side is less than the cup's diameter plus
+        ``width_margin_m``; else None."""
+        del height_m
+        if min(width_m, length_m) < self.spec.cup_diameter_m + width_margin_m:
+            return "too_small"
+        return None
+
+    def fit_margin_m(
+        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+    ) -> float:
+        """The narrow side's room around the lip (less ``width_margin_m``)."""
+        del height_m
+        return min(width_m, length_m) - self.spec.cup_diameter_m - width_margin_m
+
+    def grasp_height_m(self, height_m: float, pick: PickConfig) -> float:
+        """``pick.top_press_m`` below the top (not below the underside)."""
+        return max(height_m - pick.top_press_m, 0.0)
+
+    def footprints(self, clearance_m: float) -> tuple[Footprint]:
+        """The stem's disc (``body_radius_m``, grown by ``clearance_m``): an object in it whose
+        top reaches the lip blocks."""
+        radius = self.spec.body_radius_m + clearance_m
+        return (
+            Footprint(half_along_m=radius, half_across_m=radius, clear_above_tcp_m=0.0, disc=True),
+        )
+
+    def timing(self, pick: PickConfig) -> GraspTiming:
+        """No dwell; the seal waits for the build-up, the release for the vent."""
+        return GraspTiming(
+            dwell_s=0.0,
+            close_s=self.spec.build_up_s + pick.seal_margin_s,
+            close_overlap_s=0.0,
+            release_s=self.spec.vent_s + pick.vent_margin_s,
+            grasp_on_descent=True,
+        )
