@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from control.allocation import Claim
 from control.config import ControllerConfig, TrackingConfig
 from control.ik import Kinematics, yaw_of
+from control.kinematic_sim import CameraSpec
 from control.pick import PickController, PickStats, TcpMeasurement
 from control.tracking import Detection, Tracker
 from interfaces.cell import Cell
@@ -116,16 +117,6 @@ def random_stream(
 
 
 @dataclass(frozen=True, kw_only=True)
-class LineCamera:
-    """Detection rate, latency and noise of the simulated camera."""
-
-    rate_hz: float = 30.0
-    latency_s: float = 0.03
-    position_std_m: float = 0.002
-    yaw_std_rad: float = 0.02
-
-
-@dataclass(frozen=True, kw_only=True)
 class LineResult:
     """Outcome of a line episode.
 
@@ -190,7 +181,7 @@ class _Body:
 class _Camera:
     """Frames of every object on the belt inside the field of view, delivered late."""
 
-    def __init__(self, camera: LineCamera, cell: Cell, speed_mps: float, seed: int) -> None:
+    def __init__(self, camera: CameraSpec, cell: Cell, speed_mps: float, seed: int) -> None:
         self._camera, self._cell, self._speed_mps = camera, cell, speed_mps
         self._rng = np.random.default_rng(seed)
         self._pending: deque[tuple[float, float, list[Detection]]] = deque()
@@ -420,7 +411,7 @@ def run_line(
     speed_mps: float,
     duration_s: float,
     seed: int = 0,
-    camera: LineCamera | None = None,
+    camera: CameraSpec | None = None,
 ) -> LineResult:
     """Run the stations of ``configs`` (one per station of one cell) on ``objects`` at belt
     speed ``speed_mps`` for ``duration_s``."""
@@ -436,7 +427,7 @@ def run_line(
     for config in configs:
         trackers.setdefault(config.tracking, Tracker(config.tracking, classes=config.classes))
     tracker_of = [trackers[config.tracking] for config in configs]
-    sim_camera = _Camera(camera or LineCamera(), cell, speed_mps, seed)
+    sim_camera = _Camera(camera or CameraSpec(), cell, speed_mps, seed)
     board = _Board()
     outbox: list[Claim] = []
     for tick in range(round(duration_s / dt_s)):

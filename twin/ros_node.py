@@ -177,6 +177,7 @@ class TwinNode(Node):
         self._board: dict[tuple[int, int], Any] = {}  # (station index, track id) -> Claim
         self._board_changed = False
         self._board_sent = False
+        self._claims_refresh_steps = max(1, round(CLAIMS_REFRESH_S / twin.dt_s))
         self.pub_clock = self._publisher(c.CLOCK_TOPIC)
         self.pub_belt = self._publisher(c.BELT_STATE)
         self.pub_det = self._publisher(c.DETECTIONS)
@@ -317,8 +318,7 @@ class TwinNode(Node):
         :data:`CLAIMS_REFRESH_S` (a restarted controller, which missed the earlier boards, then
         gets one to wait for); ``released`` and ``picked`` entries are relayed once and
         dropped."""
-        refresh_steps = max(1, round(CLAIMS_REFRESH_S / self.twin.dt_s))
-        refresh = self._board_sent and step % refresh_steps == 0
+        refresh = self._board_sent and step % self._claims_refresh_steps == 0
         if not (self._board_changed or refresh):
             return
         self._board_sent = True

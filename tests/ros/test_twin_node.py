@@ -6,48 +6,27 @@ import json
 import math
 import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import pytest
+from process_helpers import finish, start, start_twin_node
 
 PEER = Path(__file__).with_name("twin_peer.py")
 HOME = (0.0, -0.35, 0.0, -2.3, 0.0, 1.95, 0.785)
 
 
 def _twin(env: dict[str, str], dataset: Path, out: Path, *args: str) -> subprocess.Popen[bytes]:
-    cmd = [
-        sys.executable,
-        "-m",
-        "twin.cli",
-        "twin-node",
-        "--dataset",
-        str(dataset),
-        "--out",
-        str(out),
-        *args,
-    ]
-    return subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    return start_twin_node(env, ["--dataset", str(dataset), "--out", str(out), *args])
 
 
 def _peer(env: dict[str, str], *args: str) -> subprocess.Popen[bytes]:
-    return subprocess.Popen(
-        [sys.executable, str(PEER), *args],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
+    return start(env, str(PEER), *args)
 
 
 def _finish(proc: subprocess.Popen[bytes], timeout_s: float = 90.0) -> int:
-    try:
-        proc.wait(timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        raise
-    return proc.returncode
+    return finish(proc, timeout_s)
 
 
 def _summary(out: Path) -> dict[str, Any]:

@@ -9,13 +9,13 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
+from process_helpers import finish, start, start_twin_node
 from twin_helpers import box_px
 
 from interfaces import contract
@@ -125,32 +125,21 @@ def _check_streams(got: dict[str, list[Any]], cell: Cell) -> None:
 
 
 def _twin_node(env: dict[str, str], dataset: Path, out: Path) -> subprocess.Popen[bytes]:
-    cmd = [
-        *(sys.executable, "-m", "twin.cli", "twin-node", "--cell", "two_pandas"),
-        *("--dataset", str(dataset), "--out", str(out), "--mode", "lockstep"),
-        *("--record", str(out / "recording.mcap")),
+    args = [
+        *("--cell", "two_pandas", "--dataset", str(dataset), "--out", str(out)),
+        *("--mode", "lockstep", "--record", str(out / "recording.mcap")),
         *("--duration", "2.0", "--speed", "0.4", "--prefill", "2.5", "--objects", "20"),
         *("--seed", "3", "--ack-timeout", "1.0"),
     ]
-    return subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    return start_twin_node(env, args)
 
 
 def _peer(env: dict[str, str], out: Path, ns: str, *args: str) -> subprocess.Popen[bytes]:
-    return subprocess.Popen(
-        [sys.executable, str(PEER), "lockstep", str(out), "--namespace", ns, *args],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
+    return start(env, str(PEER), "lockstep", str(out), "--namespace", ns, *args)
 
 
 def _finish(proc: subprocess.Popen[bytes], timeout_s: float = 120.0) -> int:
-    try:
-        proc.wait(timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        raise
-    return proc.returncode
+    return finish(proc, timeout_s)
 
 
 def test_lockstep_waits_for_every_station_and_loses_one_controller_alone(
@@ -202,12 +191,12 @@ def test_the_claims_board_is_relayed_with_the_station_and_counted_in_the_tick(
     picked entry relayed once and then gone, each board counted by its tick. The bad state is
     a ``bad_claim`` fault and changes nothing."""
     out = tmp_path / "run"
-    cmd = [
-        *(sys.executable, "-m", "twin.cli", "twin-node", "--cell", "two_pandas"),
-        *("--dataset", str(mesh_polygons(ONE_BOX)), "--out", str(out), "--mode", "lockstep"),
-        *("--duration", "0.3", "--speed", "0.4", "--seed", "3", "--ack-timeout", "5.0"),
+    args = [
+        *("--cell", "two_pandas", "--dataset", str(mesh_polygons(ONE_BOX)), "--out", str(out)),
+        *("--mode", "lockstep", "--duration", "0.3", "--speed", "0.4", "--seed", "3"),
+        *("--ack-timeout", "5.0"),
     ]
-    twin = subprocess.Popen(cmd, env=ros_env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    twin = start_twin_node(ros_env, args)
     up = _peer(ros_env, tmp_path / "s1.json", "s1", "--claims")
     down = _peer(ros_env, tmp_path / "s2.json", "s2")
     assert _finish(twin) == 0, twin.stderr.read().decode()[-3000:] if twin.stderr else ""
