@@ -287,7 +287,9 @@ class SchedulerConfig:
     """Target selection: class priorities (larger is picked first) and safety margins.
 
     ``class_priorities`` overrides the priority of some of the cell's classes (the others get
-    1.0). ``max_reach_m`` bounds the distance from the robot base to a grasp point;
+    1.0). ``max_reach_m`` bounds the distance from the robot base to a grasp point, and
+    ``min_reach_m`` from below (a tool on a long stem held vertical near the base needs the
+    arm folded beyond its joint speeds and limits, as it does stretched at full reach);
     ``grasp_width_margin_m`` is the margin of the tool's size check
     (:meth:`~control.tools.ControllerTool.misfit`): what an object's narrow side must leave of a
     gripper's opening, what it must have to spare around a suction cup's lip;
@@ -301,6 +303,7 @@ class SchedulerConfig:
 
     class_priorities: dict[str, float] = field(default_factory=dict)
     max_reach_m: float = 0.8
+    min_reach_m: float = 0.0
     grasp_width_margin_m: float = 0.015
     time_margin_s: float = 0.05
     min_confidence: float = 0.3
@@ -323,6 +326,12 @@ class SchedulerConfig:
                 math.isfinite(value), f"scheduler.class_priorities.{name}", value, "must be finite"
             )
         _require(self.max_reach_m > 0.0, "scheduler.max_reach_m", self.max_reach_m, "must be > 0")
+        _require(
+            0.0 <= self.min_reach_m < self.max_reach_m,
+            "scheduler.min_reach_m",
+            self.min_reach_m,
+            "must be >= 0 and below scheduler.max_reach_m",
+        )
         _require(self.time_margin_s >= 0.0, "scheduler.time_margin_s", self.time_margin_s, ">= 0")
 
 

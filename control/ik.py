@@ -205,7 +205,8 @@ class Kinematics:
     def solve(self, oMtool: pin.SE3, q_init: FloatArray) -> IkResult:  # noqa: N803
         """Damped least squares on the ``log6`` error from the warm start ``q_init``.
 
-        Every iterate is clipped to the joint limits and each step to ``max_joint_step_rad``;
+        Every iterate is clipped to the joint limits and each step to ``max_joint_step_rad``; a
+        joint at a limit that the step would push beyond it is left out of that step's solve;
         iterations stop at ``tolerance``; the result is the last iterate, a ``success`` when its
         error is below ``accept_tolerance`` (near joint limits the last digits converge slowly).
         """
@@ -235,8 +236,7 @@ class Kinematics:
                 break
             jac = pin.computeFrameJacobian(model, data, q, self._tcp_id, pin.LOCAL)
             jac = -pin.Jlog6(tcpMdes.inverse()) @ jac
-            v = -jac.T @ np.linalg.solve(jac @ jac.T + damping, err)
-            dq = cfg.step * v
+            dq = cfg.step * self._step_within_limits(jac, err, damping, q)
             largest = float(np.max(np.abs(dq)))
             if largest > cfg.max_joint_step_rad:
                 dq *= cfg.max_joint_step_rad / largest
@@ -247,6 +247,25 @@ class Kinematics:
             iterations=cfg.max_iterations,
             error_norm=error_norm,
         )
+
+    def _step_within_limits(
+        self, jac: FloatArray, err: FloatArray, damping: FloatArray, q: FloatArray
+    ) -> FloatArray:
+        """The damped least-squares step ``(n_arm,)`` for the error ``err`` ``(6,)``, solved
+        again without the joints it would push beyond a limit they are at (an active set):
+        a clipped step of such a joint is lost, and the others, solved as if it moved, leave
+        the error to shrink only slowly."""
+        free = np.ones(q.shape, dtype=bool)
+        for _ in range(q.size):
+            masked = jac * free
+            dq = np.asarray(-masked.T @ np.linalg.solve(masked @ masked.T + damping, err))
+            blocked = free & (
+                ((q <= self.lower_rad) & (dq < 0.0)) | ((q >= self.upper_rad) & (dq > 0.0))
+            )
+            if not blocked.any():
+                break
+            free &= ~blocked
+        return dq
 
     def _jacobian_xyz_yaw(self, q: FloatArray) -> FloatArray:
         """``(4, n_arm)`` Jacobian of the world ``(x, y, z, yaw)`` of the TCP."""

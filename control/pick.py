@@ -421,16 +421,22 @@ class PickController:
 
     def _check_target(self, now: TickInput) -> bool:
         """In a phase that pursues a target: refresh it, and abort the pick when it is lost
-        (approach) or past the pick window (until the gripper closes); give the target up when
-        a station further upstream claims it too (until the gripper closes). True when the
-        pursuit ended."""
+        (approach) or past the pick window (until the gripper closes; a tool that measures its
+        grasp, until that is complete: the grasp of an object outside the window does not
+        count); give the target up when a station further upstream claims it too (as long as
+        it would abort). A tool that measures its grasp complete while following lifts the
+        object and carries it to its bin: a held object is never let go away from a bin. True
+        when the pursuit ended."""
         phase = self._phase
         if phase not in PURSUIT_PHASES:
             return False
         if not self._track_target(now.t_s, now.tracks) and phase == Phase.APPROACH:
             self._abort("target_lost", now.t_s)
             return True
-        if phase == Phase.CLOSE:
+        if phase in FOLLOWING_PHASES and self._grasp_complete():
+            self._grasped(now.t_s)  # held: carried to its bin, whatever else happens
+            return True
+        if phase == Phase.CLOSE and self._cfg.timing.close_max_s is None:
             return False
         target = self._pursuit.target
         if target is not None and self._allocator.must_yield(target, now.t_s):
@@ -518,15 +524,26 @@ class PickController:
         return Goal(target=target, aim_m=aim)
 
     def _on_close(self, now: TickInput) -> Goal | Transition:
-        """The tool grasps while following; then the grip check and the lift."""
-        if now.t_s - self._phase_start_s >= self._cfg.timing.close_s:
+        """The tool grasps while following; then the grip check and the lift.
+
+        After ``close_s`` a tool that holds nothing aborts (``grip_missed``). A tool that
+        measures when its grasp is complete (``timing.close_max_s``) lifts once it is (the
+        target checks lift it as soon as it is), and keeps following until then, up to
+        ``close_max_s``; a grasp still not complete then is missed. Other tools, and a tool
+        that is not measured, lift after ``close_s``.
+        """
+        timing = self._cfg.timing
+        elapsed_s = now.t_s - self._phase_start_s
+        if elapsed_s >= timing.close_s:
             if self._holds_nothing():
                 self._abort("grip_missed", now.t_s)
                 return Transition(phase=self._phase, tracks=())
-            self._pursuit.carrying = True
-            self._claim("picked", now.t_s)
-            self._start_lift(now.t_s)
-            return Transition(phase=Phase.LIFT, tracks=now.tracks)
+            if timing.close_max_s is None or not math.isfinite(self._measured.tool_measured):
+                self._grasped(now.t_s)
+                return Transition(phase=Phase.LIFT, tracks=now.tracks)
+            if elapsed_s >= timing.close_max_s:
+                self._abort("grip_missed", now.t_s)
+                return Transition(phase=self._phase, tracks=())
         target, aim = self._following_target(now.t_s, now.belt_velocity_mps, 0.0)
         return Goal(target=target, aim_m=aim)
 
@@ -614,6 +631,12 @@ class PickController:
             self._start_lift(t_s)
         else:
             self._set_phase(Phase.RETURN, t_s)
+
+    def _grasped(self, t_s: float) -> None:
+        """The tool holds the target: claim it ``picked`` and lift it (then carry it)."""
+        self._pursuit.carrying = True
+        self._claim("picked", t_s)
+        self._start_lift(t_s)
 
     def _start_lift(self, t_s: float) -> None:
         state = self._planner.state
@@ -898,6 +921,13 @@ class PickController:
             or (self._cfg.timing.grasp_on_descent and phase in (Phase.DESCEND, Phase.DWELL))
         )
         return self._grasp_command() if grasping else self._cfg.tool.open_command
+
+    def _grasp_complete(self) -> bool:
+        """The tool, commanded to grasp, measures its grasp complete
+        (:meth:`~control.tools.ControllerTool.grasp_complete`)."""
+        return self._tool_command() != self._cfg.tool.open_command and (
+            self._cfg.tool.grasp_complete(self._measured.tool_measured)
+        )
 
     def _holds_nothing(self) -> bool:
         """The tool, commanded to grasp, measured within ``pick.grip_check_margin_m`` of its

@@ -273,7 +273,10 @@ class FeedbackTerm:
 
     The measured TCP is compared with the setpoint of ``command_latency_s`` ago (the time the arm
     takes to reach a command and report it), so a pure measurement delay is not mistaken for a
-    tracking error.
+    tracking error. Only x and y are corrected (the belt carries the object along them): the
+    object's height does not change while it is followed, and a z error is the arm's lag in the
+    descent or the tool resting on the object's top; integrating it would drive the tool into
+    the object, then lift it off (a suction cup loses its seal).
     """
 
     def __init__(self, motion: MotionConfig) -> None:
@@ -302,7 +305,8 @@ class FeedbackTerm:
         measured_m: tuple[float, float, float],
         dt_s: float,
     ) -> tuple[float, float, float]:
-        """The ``(3,)`` offset (m) to add to ``setpoint_m`` given the measured TCP position.
+        """The ``(3,)`` offset (m) to add to ``setpoint_m`` given the measured TCP position (its
+        z is 0).
 
         ``setpoint_m`` is the corrected command of the previous ticks' series (the history is
         kept here). Non-finite measurements give no correction; the integral is clamped.
@@ -313,6 +317,7 @@ class FeedbackTerm:
         error = self._history[0] - np.asarray(measured_m, dtype=np.float64)
         if not np.all(np.isfinite(error)):
             return (0.0, 0.0, 0.0)
+        error[2] = 0.0  # along the belt's plane only (see the class docstring)
         if self._ki > 0.0:
             self._integral = np.clip(
                 self._integral + error * dt_s, -self._limit / self._ki, self._limit / self._ki
@@ -431,6 +436,16 @@ class JointCommander:
         self.rate_limited += not self.on_goal
 
     def _move(self, dq: FloatArray) -> None:
+        """One control period at ``dq``, slowed where a joint could not otherwise stop at its
+        position limit within its acceleration limit (an arm cannot stop dead at a limit)."""
+        dv, amax = self._dv, self._amax
+        room_up = np.maximum(self._kin.upper_rad - self._q, 0.0)
+        room_down = np.maximum(self._q - self._kin.lower_rad, 0.0)
+        stop_up = np.sqrt(dv * dv + 2.0 * amax * room_up) - dv
+        stop_down = np.sqrt(dv * dv + 2.0 * amax * room_down) - dv
+        capped = np.clip(dq, -stop_down, stop_up)
+        # the cap changes the velocity by at most the acceleration limit's step
+        dq = np.clip(capped, np.minimum(dq, self._dq - dv), np.maximum(dq, self._dq + dv))
         q = self._q + dq * self._dt_s
         clipped = np.clip(q, self._kin.lower_rad, self._kin.upper_rad)
         self._dq = np.where(clipped == q, dq, (clipped - self._q) / self._dt_s)

@@ -3,8 +3,10 @@
 An object is a candidate when its class has a bin at this station, the tool can grasp an object
 of its size (:meth:`~control.tools.ControllerTool.misfit`), the line's allocation lets this
 station have it (:mod:`control.allocation`), the arm can intercept it inside the station's pick
-window and finish the dwell before it leaves the window, its grasp point stays within reach
-until the tool has closed, and no other object lies in the footprints the tool comes down on
+window and hold it before it leaves the window (:attr:`~control.tools.GraspTiming.held_after_s`:
+a grasp outside the window does not count), its grasp point stays within reach (between
+``scheduler.min_reach_m`` and ``max_reach_m`` from the base) until the tool has closed, and no
+other object lies in the footprints the tool comes down on
 (:meth:`~control.tools.ControllerTool.footprints`). The arm can intercept an
 object when it can be above it inside the window: the earliest such meeting is searched, not
 iterated. Among candidates the highest class priority wins, then the least time left in the
@@ -344,17 +346,17 @@ def _timing_reason(
     x_done, y_done = track.position_at(
         now_s + intercept_s + timing.dwell_s - timing.close_overlap_s + timing.close_s
     )
-    x_dwelt, _ = track.position_at(now_s + intercept_s + timing.dwell_s)
-    if x_dwelt > x_max or track.position_m[0] > x_max:
-        return "too_late"
+    x_held, _ = track.position_at(now_s + intercept_s + timing.held_after_s)
+    if x_held > x_max or track.position_m[0] > x_max:
+        return "too_late"  # the grasp of an object outside the window does not count
     x_above, _ = track.position_at(now_s + approach_s)
     if x_above < x_min:
         return "upstream"
     z = grasp_height_m(track, config)
     base = config.base_position_m
-    reach = max(math.dist(base, (x_meet, y_meet, z)), math.dist(base, (x_done, y_done, z)))
+    reaches = (math.dist(base, (x_meet, y_meet, z)), math.dist(base, (x_done, y_done, z)))
     off_belt = abs(track.position_m[1] - belt.centre_y_m) > belt.width_m / 2
-    if off_belt or reach > sched.max_reach_m:
+    if off_belt or max(reaches) > sched.max_reach_m or min(reaches) < sched.min_reach_m:
         return "out_of_reach"
     if blocked_by(track, others, config) is not None:
         return "blocked"

@@ -46,7 +46,9 @@ class GraspTiming:
     acts (closes, or seals) for ``close_s`` while following, the last ``close_overlap_s`` of
     the dwell overlapping the start of that; over the bin it releases for ``release_s``. With
     ``grasp_on_descent`` the tool is commanded to grasp from the start of the descent (a
-    suction cup's vacuum is on before the lip touches, so it seals as it does).
+    suction cup's vacuum is on before the lip touches, so it seals as it does). A tool that
+    measures when its grasp is complete (:meth:`ControllerTool.grasp_complete`) lifts as soon
+    as it is, and waits for it up to ``close_max_s`` (None: the close ends after ``close_s``).
     """
 
     dwell_s: float
@@ -54,6 +56,17 @@ class GraspTiming:
     close_overlap_s: float
     release_s: float
     grasp_on_descent: bool = False
+    close_max_s: float | None = None
+
+    @property
+    def held_after_s(self) -> float:
+        """Time (s) from the arrival at the grasp point until the tool holds the object: a tool
+        that measures its grasp holds it at the end of its close (a cup: the build-up), a
+        gripper at the end of the dwell (the grasp rule checks its grip then). A grasp counts
+        only inside the station's pick window, so the object must still be in it then."""
+        if self.close_max_s is not None:
+            return self.dwell_s - self.close_overlap_s + self.close_s
+        return self.dwell_s
 
 
 class ControllerTool(Protocol):
@@ -100,6 +113,12 @@ class ControllerTool(Protocol):
     def holds_nothing(self, measured: float, commanded: float, margin_m: float) -> bool:
         """Whether the tool, commanded to grasp, holds nothing by its measurement (False when
         ``measured`` is NaN: not measured). ``margin_m``: a gripper's closing margin."""
+        ...
+
+    def grasp_complete(self, measured: float) -> bool:
+        """Whether the measurement shows the grasp complete, the object held (a cup's vacuum
+        built up); False when the tool cannot tell (a gripper: its close is timed) or
+        ``measured`` is NaN."""
         ...
 
     def misfit(

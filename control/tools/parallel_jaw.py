@@ -77,6 +77,11 @@ class ParallelJaw:
             return False
         return measured - commanded < margin_m
 
+    def grasp_complete(self, measured: float) -> bool:
+        """Never: the fingers' opening does not tell when the grip holds; the close is timed."""
+        del measured
+        return False
+
     def misfit(
         self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
     ) -> str | None:

@@ -10,7 +10,9 @@ object fits when its narrow side holds the lip's disc with ``width_margin_m`` to
 is ``too_small``); nothing is too flat or too wide for it. Only the stem's disc comes down
 around the grasp point. The sequence does not dwell: the vacuum goes on as the descent to the
 top starts (the cup seals as the lip touches), the TCP waits at the top for the seal (the
-build-up, plus ``pick.seal_margin_s``), then lifts; over the bin it vents for ``vent_s`` plus
+build-up, plus ``pick.seal_margin_s``; a seal made late, up to another build-up, once the
+vacuum reads full), then lifts as soon as the vacuum is full (the seal may be complete before
+the TCP reached the top); over the bin it vents for ``vent_s`` plus
 ``pick.vent_margin_s``. The cup is round: any yaw grasps the same.
 """
 
@@ -33,6 +35,9 @@ VACUUM_ON = 1.0
 """The command that turns the vacuum on."""
 VACUUM_OFF = 0.0
 """The command that turns it off (and vents the cup)."""
+VACUUM_FULL = 0.99
+"""The vacuum fraction at which the build-up is complete and the cup holds the object (a
+vacuum switch's "part present")."""
 
 
 @dataclass(frozen=True)
@@ -87,6 +92,10 @@ class SuctionCup:
             return False
         return measured < self.seal_threshold
 
+    def grasp_complete(self, measured: float) -> bool:
+        """The vacuum has built up (:data:`VACUUM_FULL`): the cup holds the object."""
+        return math.isfinite(measured) and measured >= VACUUM_FULL
+
     def misfit(
         self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
     ) -> str | None:
@@ -124,4 +133,5 @@ class SuctionCup:
             close_overlap_s=0.0,
             release_s=self.spec.vent_s + pick.vent_margin_s,
             grasp_on_descent=True,
+            close_max_s=2.0 * self.spec.build_up_s + pick.seal_margin_s,
         )

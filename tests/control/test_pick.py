@@ -18,6 +18,7 @@ from control.poses import drop_point
 from control.scheduler import nearest_grasp_yaw
 from control.tracking import Track
 from interfaces.cell import cell_from_data, load_cell, resolve_cell_path
+from interfaces.tools import SuctionCupSpec
 
 FOLLOW_SEQUENCE = [Phase.IDLE, Phase.APPROACH, Phase.DESCEND, Phase.DWELL, Phase.CLOSE, Phase.LIFT]
 
@@ -350,3 +351,96 @@ def test_a_suction_cup_that_does_not_seal_aborts_and_carries_nothing() -> None:
     assert result.stats.completed_by_class == {}
     assert result.stats.aborted.get("grip_missed", 0) >= 1
     assert Phase.CARRY not in [phase for _, phase in result.phases]
+
+
+def _drive_cup(
+    controller: PickController,
+    tracks_at: Callable[[float], tuple[Track, ...]],
+    ticks: int,
+    vacuum_at: Callable[[float, list[Command]], float],
+    belt: tuple[float, float] = (0.4, 0.0),
+) -> list[Command]:
+    """:func:`_drive` with a suction cup whose measured vacuum is ``vacuum_at(t_s, commands so
+    far)`` while the vacuum is commanded on (0 while it is off)."""
+    kin = controller.kinematics
+    dt_s = 1.0 / 120.0
+    q = controller.q_ready
+    commands: list[Command] = []
+    for k in range(ticks):
+        t_s = k * dt_s
+        pose = kin.fk(q)
+        x, y, z = (float(v) for v in pose.translation)
+        on = bool(commands) and commands[-1].tool_command >= 0.5
+        vacuum = vacuum_at(t_s, commands) if on else 0.0
+        measured = TcpMeasurement(position_m=(x, y, z), yaw_rad=yaw_of(pose), tool_measured=vacuum)
+        command = controller.update(t_s, measured, tracks_at(t_s), belt)
+        q = np.asarray(command.joint_positions_rad)
+        assert kin.within_limits(q)
+        commands.append(command)
+    return commands
+
+
+def _first(commands: list[Command], phase: Phase) -> Command:
+    return next(c for c in commands if c.phase == phase)
+
+
+def _slab(t_s: float) -> Track:
+    """:func:`_track` wide enough for the suction cup's lip (8 cm)."""
+    return replace(_track(-0.45, t_s, y=0.5), width_m=0.08)
+
+
+def test_a_cup_lifts_only_once_its_vacuum_is_full() -> None:
+    """A seal made late in the close: the vacuum is still building up (above the threshold of
+    "holds nothing") when ``close_s`` ends. The twin holds the object only once the vacuum is
+    full; the cup waits for that and then lifts, with no abort."""
+    config = _station_config("panda", "suction_cup")
+    controller = PickController(config)
+    tool = config.station.tool
+    assert isinstance(tool, SuctionCupSpec)
+    late_s = config.timing.close_s + 0.5 * tool.build_up_s  # full this long after the close began
+
+    def vacuum_at(t_s: float, commands: list[Command]) -> float:
+        close = next((c.t_s for c in commands if c.phase == Phase.CLOSE), None)
+        if close is None:
+            return 0.0
+        return 1.0 if t_s >= close + late_s else 0.5
+
+    commands = _drive_cup(controller, lambda t: (_slab(t),), 420, vacuum_at)
+    close, lift = _first(commands, Phase.CLOSE), _first(commands, Phase.LIFT)
+    assert lift.t_s - close.t_s >= late_s
+    assert lift.t_s - close.t_s <= late_s + 2.0 / 120.0
+    assert controller.stats().aborted == {}
+    assert Phase.CARRY in [c.phase for c in commands]
+
+
+def test_a_cup_that_holds_the_object_lifts_it_and_carries_it_to_its_bin_whatever_else() -> None:
+    """The vacuum is full during the descent (the lip sealed as it touched): the cup lifts at
+    once, without waiting for the close; and the object, held, is carried to its bin, never
+    let go away from a bin, even though the target then passes the pick window's end (which
+    aborts a pick that holds nothing)."""
+    config = _station_config("panda", "suction_cup")
+    controller = PickController(config)
+    x_max = config.pick_window_x_m[1]
+    descended: list[float] = []
+
+    def vacuum_at(t_s: float, commands: list[Command]) -> float:
+        if commands[-1].phase == Phase.DESCEND and not descended:
+            descended.append(t_s)
+        return 1.0 if descended and t_s >= descended[0] + 0.05 else 0.0
+
+    def tracks_at(t_s: float) -> tuple[Track, ...]:
+        track = _slab(t_s)
+        if descended and t_s >= descended[0] + 0.05:  # the estimate jumps past the window
+            track = replace(track, position_m=(x_max + 0.1, track.position_m[1]))
+        return (track,)
+
+    commands = _drive_cup(controller, tracks_at, 500, vacuum_at)
+    phases = [c.phase for c in commands]
+    assert Phase.CLOSE not in phases
+    lift = _first(commands, Phase.LIFT)
+    assert lift.t_s - descended[0] <= 0.05 + 2.0 / 120.0
+    assert Phase.CARRY in phases
+    carried = [c for c in commands if lift.t_s <= c.t_s < _first(commands, Phase.RELEASE).t_s]
+    assert all(c.tool_command == 1.0 for c in carried)  # the vacuum stays on to the bin
+    assert controller.stats().aborted == {}
+    assert controller.stats().completed_by_class == {"wood": 1}

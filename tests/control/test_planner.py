@@ -314,3 +314,15 @@ def test_joint_commands_stay_within_the_datasheet_acceleration() -> None:
     assert all(kin.within_limits(row) for row in q)
     assert commander.on_goal
     assert np.linalg.norm(kin.fk(commander.q).translation - np.asarray(goal)) < 1e-6
+
+
+def test_feedback_corrects_along_the_belt_but_never_the_height() -> None:
+    """A TCP that lags 2 mm along x and rests 1 cm above its setpoint (on the object's top, or
+    lagging in the descent): the correction drives x onto the setpoint, and leaves z alone
+    (integrating a z error pushes a suction cup into the object, then off it)."""
+    feedback = FeedbackTerm(MotionConfig(command_latency_s=0.005))
+    corrections = [
+        feedback.correction((0.1, 0.5, 0.05), (0.098, 0.5, 0.06), 0.005) for _ in range(50)
+    ]
+    assert corrections[-1][0] > 0.001  # pushes x on towards the setpoint
+    assert all(c[2] == 0.0 for c in corrections)

@@ -14,6 +14,7 @@ from control.scheduler import (
     UNTARGETED_REASONS,
     approach_time_s,
     blocked_by,
+    descend_after_s,
     grasp_height_m,
     grasp_z_m,
     move_time_s,
@@ -21,6 +22,7 @@ from control.scheduler import (
     yaw_turn_s,
 )
 from control.tracking import Track
+from interfaces.cell import load_cell
 
 TCP = (0.0, 0.45, 0.30)
 
@@ -257,3 +259,43 @@ def test_the_tool_turn_to_the_grasp_yaw_delays_the_meeting() -> None:
     assert turned > aligned
     # the nearer of the two grasp yaws counts: a turn of 0.1 rad either way is the same
     assert yaw_turn_s(track, 0.1, config) == pytest.approx(yaw_turn_s(track, math.pi - 0.1, config))
+
+
+def test_a_suction_cup_targets_only_objects_it_holds_inside_the_window() -> None:
+    """The twin grants a grasp only inside the station's pick window, and a cup holds the
+    object only once its vacuum has built up, ``close_s`` after it reached the top: objects met
+    near the window's end, whose hold would come after they left it, are ``too_late``; every
+    target is held inside the window."""
+    config = ControllerConfig(cell=load_cell("suction"))
+    timing = config.timing
+    assert timing.dwell_s == 0.0
+    held_after_s = timing.close_s  # the build-up and its margin
+    assert held_after_s > 0.0
+    x_max = config.pick_window_x_m[1]
+    met_inside_but_late = 0
+    for x in np.arange(-0.3, x_max, 0.005):
+        track = _track(1, float(x), vx=0.4, width=0.08)
+        result = schedule([track], now_s=0.0, tcp_position_m=TCP, config=config)
+        intercept_s = approach_time_s(track, 0.0, TCP, config) + descend_after_s(config)
+        if result.target is not None:
+            assert track.position_at(result.intercept_s + held_after_s)[0] <= x_max
+        elif track.position_at(intercept_s)[0] <= x_max:
+            assert _reasons(result.untargeted) == {1: "too_late"}
+            met_inside_but_late += 1
+    assert met_inside_but_late > 0
+
+
+def test_an_object_nearer_the_base_than_the_least_reach_is_out_of_reach() -> None:
+    """A suction cup on its 15 cm stem, held vertical, cannot follow the belt at the belt's
+    near edge in front of the base (the arm would fold beyond its joint limits): with
+    ``min_reach_m`` such an object is ``out_of_reach``, one further out still a target."""
+    base = ControllerConfig(cell=load_cell("suction"))
+    config = replace(base, scheduler=replace(base.scheduler, min_reach_m=0.3))
+    near, far = _track(1, -0.1, y=0.22, width=0.08), _track(2, -0.1, y=0.45, width=0.08)
+    assert _reasons(schedule([near], now_s=0.0, tcp_position_m=TCP, config=base).untargeted) == {}
+    result = schedule([near], now_s=0.0, tcp_position_m=TCP, config=config)
+    assert result.target is None
+    assert _reasons(result.untargeted) == {1: "out_of_reach"}
+    target = schedule([far], now_s=0.0, tcp_position_m=TCP, config=config).target
+    assert target is not None
+    assert target.track_id == 2
