@@ -11,7 +11,7 @@ CLI    := $(VENV)/bin/cdw-twin
 STAMPS := $(VENV)/.stamps
 
 FMU_SOURCES := $(wildcard fmus/framework/* fmus/belt_drive/* fmus/build.py)
-MSG_SOURCES := $(wildcard interfaces/cdw_interfaces/msg/*.msg interfaces/cdw_interfaces/CMakeLists.txt interfaces/cdw_interfaces/package.xml interfaces/build_interfaces.py interfaces/cmake/pypi_wheel_fixups.cmake)
+MSG_SOURCES := $(wildcard interfaces/cdw_interfaces/msg/*.msg interfaces/cdw_interfaces/CMakeLists.txt interfaces/cdw_interfaces/package.xml interfaces/tf2_msgs/msg/*.msg interfaces/tf2_msgs/CMakeLists.txt interfaces/tf2_msgs/package.xml interfaces/build_interfaces.py interfaces/cmake/pypi_wheel_fixups.cmake)
 
 .PHONY: setup demo test lint typecheck pytest clean
 

@@ -1,4 +1,4 @@
-"""Build the ``cdw_interfaces`` ROS 2 message package and install it into this venv.
+"""Build the ``cdw_interfaces`` and ``tf2_msgs`` ROS 2 message packages into this venv.
 
 One command, run by ``make`` during set-up (a second call is a no-op)::
 
@@ -7,7 +7,10 @@ One command, run by ``make`` during set-up (a second call is a no-op)::
     .venv/bin/python interfaces/build_interfaces.py --clean   # from an empty build directory
 
 Afterwards ``import cdw_interfaces.msg`` works from ``.venv/bin/python`` with no sourcing and no
-environment variables, exactly like ``std_msgs`` from the ``ros-jazzy-*`` wheels.
+environment variables, exactly like ``std_msgs`` from the ``ros-jazzy-*`` wheels. ``tf2_msgs``
+holds only ``TFMessage``, with ROS's name and definition (ROS 2's ``tf2_msgs`` is not on PyPI):
+the twin's ``/tf`` and ``/tf_static`` carry it, so RViz and Foxglove recognise them. Each package
+is built in turn (:data:`PACKAGE_DIRS`), with its own stamp, and only when its sources changed.
 
 How it works
 ------------
@@ -62,6 +65,9 @@ from interfaces.errors import CdwTwinError
 PACKAGE = "cdw_interfaces"
 HERE = Path(__file__).resolve().parent
 SOURCE_DIR = HERE / PACKAGE
+PACKAGE_DIRS: tuple[Path, ...] = (HERE / "tf2_msgs", SOURCE_DIR)
+"""Every package this script builds, in build order; ``cdw_interfaces`` builds in the build
+directory itself, any other in a folder of its name under it."""
 FIXUPS_CMAKE = HERE / "cmake" / "pypi_wheel_fixups.cmake"
 DEFAULT_BUILD_DIR = HERE / "build"
 STAMP_NAME = "cdw_build.stamp"
@@ -121,14 +127,14 @@ def source_files(source_dir: Path = SOURCE_DIR) -> list[Path]:
     return files
 
 
-def stamp_path(prefix: Path) -> Path:
-    """Path of the stamp written after a successful install into ``prefix``."""
-    return prefix / "share" / PACKAGE / STAMP_NAME
+def stamp_path(prefix: Path, source_dir: Path = SOURCE_DIR) -> Path:
+    """Path of the stamp written after a successful install of a package into ``prefix``."""
+    return prefix / "share" / source_dir.name / STAMP_NAME
 
 
 def is_up_to_date(prefix: Path, source_dir: Path = SOURCE_DIR) -> bool:
     """True when the install stamp in ``prefix`` is newer than every source file."""
-    stamp = stamp_path(prefix)
+    stamp = stamp_path(prefix, source_dir)
     if not stamp.is_file():
         return False
     newest_source_s = max(path.stat().st_mtime for path in source_files(source_dir))
@@ -191,12 +197,14 @@ def build_environment(prefix: Path, base: Mapping[str, str] | None = None) -> di
     return env
 
 
-def configure_command(cmake: Path, prefix: Path, build_dir: Path) -> list[str]:
+def configure_command(
+    cmake: Path, prefix: Path, build_dir: Path, source_dir: Path = SOURCE_DIR
+) -> list[str]:
     """The ``cmake`` configure command line."""
     return [
         str(cmake),
         "-S",
-        str(SOURCE_DIR),
+        str(source_dir),
         "-B",
         str(build_dir),
         "-DCMAKE_BUILD_TYPE=Release",
@@ -248,15 +256,15 @@ def _remove_stale_files(old: set[Path], new: set[Path], prefix: Path) -> int:
     return removed
 
 
-def verify_install(env: Mapping[str, str], names: Sequence[str]) -> None:
-    """Import every message in a fresh interpreter and load its C typesupport."""
+def verify_install(env: Mapping[str, str], names: Sequence[str], package: str = PACKAGE) -> None:
+    """Import every message of ``package`` in a fresh interpreter and load its C typesupport."""
     clean_env = {
         key: value
         for key, value in env.items()
         if key not in {"AMENT_PREFIX_PATH", "_ROS_WHEELS_BOOTSTRAP_COMPLETE", "LD_LIBRARY_PATH"}
     }
     result = subprocess.run(
-        [sys.executable, "-c", _VERIFY_SCRIPT, *names],
+        [sys.executable, "-c", _VERIFY_SCRIPT.replace(PACKAGE, package), *names],
         env=clean_env,
         capture_output=True,
         text=True,
@@ -265,7 +273,7 @@ def verify_install(env: Mapping[str, str], names: Sequence[str]) -> None:
     )
     if result.returncode != 0 or result.stdout.strip() != str(len(names)):
         msg = (
-            f"installed {PACKAGE} does not import from {sys.executable} "
+            f"installed {package} does not import from {sys.executable} "
             f"(exit status {result.returncode}):\n{result.stderr.strip()[-2000:]}"
         )
         raise InterfaceBuildError(msg)
@@ -301,46 +309,62 @@ def build(
     clean: bool = False,
     jobs: int | None = None,
 ) -> bool:
-    """Build and install the package into ``prefix``; returns False when it was up to date.
+    """Build and install every package of :data:`PACKAGE_DIRS` into ``prefix``; returns False
+    when all were up to date.
 
     ``clean`` empties ``build_dir`` first (a fresh configure and full compile) and implies
     ``force``.
     """
     with _build_lock(build_dir):
-        manifest = build_dir / "install_manifest.txt"
-        old_files = _read_manifest(manifest)
         if clean:
             _empty_build_dir(build_dir)
-        if not (force or clean) and is_up_to_date(prefix):
-            _say(f"{PACKAGE} in {prefix} is newer than its sources; nothing to do (--force)")
-            return False
-        start_s = time.monotonic()
-        check_prerequisites(prefix)
-        names = message_names()
-        if not names:
-            msg = f"no .msg files in {SOURCE_DIR / 'msg'}"
-            raise InterfaceBuildError(msg)
-        cmake = find_cmake(prefix)
-        env = build_environment(prefix)
-        log_path = build_dir / "build.log"
-        log_path.write_text("", encoding="utf-8")
-        stamp_path(prefix).unlink(missing_ok=True)
-        _say(f"building {PACKAGE} ({len(names)} messages) with {cmake}; log: {log_path}")
-        _run("configure", configure_command(cmake, prefix, build_dir), env, log_path)
-        n_jobs = jobs or os.cpu_count() or 1
-        _run("build", [str(cmake), "--build", str(build_dir), "-j", str(n_jobs)], env, log_path)
-        _run("install", [str(cmake), "--install", str(build_dir)], env, log_path)
-        removed = _remove_stale_files(old_files, _read_manifest(manifest), prefix)
-        if removed:
-            _say(f"removed {removed} files a previous build installed and this one did not")
-        _say("verify: importing every message and loading its typesupport")
-        verify_install(env, names)
-        stamp = stamp_path(prefix)
-        tmp = stamp.with_suffix(".tmp")
-        tmp.write_text(" ".join(names) + "\n", encoding="utf-8")
-        os.replace(tmp, stamp)
-        _say(f"installed {PACKAGE} into {prefix} in {time.monotonic() - start_s:.1f} s")
-        return True
+        built = False
+        for source_dir in PACKAGE_DIRS:
+            folder = build_dir if source_dir == SOURCE_DIR else build_dir / source_dir.name
+            folder.mkdir(parents=True, exist_ok=True)
+            built = (
+                _build_package(source_dir, prefix, folder, force=force or clean, jobs=jobs) or built
+            )
+        return built
+
+
+def _build_package(
+    source_dir: Path, prefix: Path, build_dir: Path, *, force: bool, jobs: int | None
+) -> bool:
+    """Configure, build, install and verify one package; False when it was up to date."""
+    package = source_dir.name
+    manifest = build_dir / "install_manifest.txt"
+    old_files = _read_manifest(manifest)
+    if not force and is_up_to_date(prefix, source_dir):
+        _say(f"{package} in {prefix} is newer than its sources; nothing to do (--force)")
+        return False
+    start_s = time.monotonic()
+    check_prerequisites(prefix)
+    names = message_names(source_dir)
+    if not names:
+        msg = f"no .msg files in {source_dir / 'msg'}"
+        raise InterfaceBuildError(msg)
+    cmake = find_cmake(prefix)
+    env = build_environment(prefix)
+    log_path = build_dir / "build.log"
+    log_path.write_text("", encoding="utf-8")
+    stamp = stamp_path(prefix, source_dir)
+    stamp.unlink(missing_ok=True)
+    _say(f"building {package} ({len(names)} messages) with {cmake}; log: {log_path}")
+    _run("configure", configure_command(cmake, prefix, build_dir, source_dir), env, log_path)
+    n_jobs = jobs or os.cpu_count() or 1
+    _run("build", [str(cmake), "--build", str(build_dir), "-j", str(n_jobs)], env, log_path)
+    _run("install", [str(cmake), "--install", str(build_dir)], env, log_path)
+    removed = _remove_stale_files(old_files, _read_manifest(manifest), prefix)
+    if removed:
+        _say(f"removed {removed} files a previous build installed and this one did not")
+    _say("verify: importing every message and loading its typesupport")
+    verify_install(env, names, package)
+    tmp = stamp.with_suffix(".tmp")
+    tmp.write_text(" ".join(names) + "\n", encoding="utf-8")
+    os.replace(tmp, stamp)
+    _say(f"installed {package} into {prefix} in {time.monotonic() - start_s:.1f} s")
+    return True
 
 
 def main(argv: Sequence[str] | None = None) -> int:

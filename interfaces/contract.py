@@ -49,6 +49,8 @@ CLOCK = Qos(depth=1, reliable=False)
 """``/clock``: only the newest matters."""
 GROUND_TRUTH = Qos(depth=1, reliable=False)
 """Evaluation-only ground truth: only the newest matters."""
+TRANSFORMS = Qos(depth=100)
+"""``/tf``: what tf2's listeners expect (reliable, volatile, keep last 100)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -107,6 +109,15 @@ LOCKSTEP_TICK = _cell("/lockstep/tick", "cdw_interfaces/msg/LockstepTick", STREA
 FAULTS = _cell("/twin/faults", "std_msgs/msg/String", STREAM)
 CLAIMS = _cell("/line/claims", "cdw_interfaces/msg/ClaimArray", STATE)
 
+# -- the scene (visualisation: RViz, Foxglove, the episode's recording) ------------------------
+TF = _cell("/tf", "tf2_msgs/msg/TFMessage", TRANSFORMS)
+TF_STATIC = _cell("/tf_static", "tf2_msgs/msg/TFMessage", LATCHED)
+SCENE_MARKERS = _cell("/scene/markers", "visualization_msgs/msg/MarkerArray", LATCHED)
+SCENE_OBJECTS = _cell("/scene/objects", "visualization_msgs/msg/MarkerArray", LATCHED)
+SCENE_TARGETS = _cell("/scene/targets", "visualization_msgs/msg/MarkerArray", STATE)
+SCENE: tuple[Topic, ...] = (TF, TF_STATIC, SCENE_MARKERS, SCENE_OBJECTS, SCENE_TARGETS)
+"""The scene's topics: sent only while recorded, served live or subscribed."""
+
 CLAIM_STATES: tuple[str, ...] = ("claimed", "released", "picked")
 """The values of a ``Claim``'s ``state``: the station pursues the object, gave it up, holds it."""
 
@@ -135,6 +146,7 @@ PUBLISHED: tuple[Topic, ...] = (
     LOCKSTEP_TICK,
     FAULTS,
     CLAIMS,
+    *SCENE,
 )
 """Every topic the cell publishes."""
 

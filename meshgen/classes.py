@@ -37,6 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from interfaces.class_colours import CLASS_RGB
 from meshgen.errors import ClassTableError
 
 
@@ -59,28 +60,28 @@ DEFAULT_CLASSES: dict[str, ClassSpec] = {
             density_kg_m3=2400.0,
             height_min_m=0.03,
             height_max_m=0.10,
-            rgb=(0.62, 0.62, 0.60),
+            rgb=CLASS_RGB["concrete"],
         ),
         ClassSpec(
             name="brick",
             density_kg_m3=1900.0,
             height_min_m=0.04,
             height_max_m=0.08,
-            rgb=(0.70, 0.30, 0.20),
+            rgb=CLASS_RGB["brick"],
         ),
         ClassSpec(
             name="wood",
             density_kg_m3=600.0,
             height_min_m=0.02,
             height_max_m=0.06,
-            rgb=(0.76, 0.60, 0.42),
+            rgb=CLASS_RGB["wood"],
         ),
         ClassSpec(
             name="rubber",
             density_kg_m3=1200.0,
             height_min_m=0.005,
             height_max_m=0.03,
-            rgb=(0.10, 0.10, 0.10),
+            rgb=CLASS_RGB["rubber"],
         ),
     )
 }

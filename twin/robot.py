@@ -23,6 +23,7 @@ from interfaces.errors import ConfigError
 from interfaces.robots import RobotSpec, resolve_urdf
 from twin.errors import SceneError
 from twin.joint_limiter import JointLimiter
+from twin.scene import Pose
 
 HOLD_S = 0.05
 """How long a commanded velocity moves the position target on after the command."""
@@ -210,6 +211,38 @@ class Robot:
             velocityGains=self._gains[1],
             physicsClientId=self.client,
         )
+
+    @property
+    def root_link(self) -> str:
+        """The URDF name of the body's root link (PyBullet's base)."""
+        return str(pb.getBodyInfo(self.body, physicsClientId=self.client)[0].decode())
+
+    def root_pose(self) -> Pose:
+        """The world pose of the root link's URDF frame (PyBullet reports the base's inertial
+        frame; this takes its offset off)."""
+        c = self.client
+        com_pos, com_orn = pb.getBasePositionAndOrientation(self.body, physicsClientId=c)
+        info = pb.getDynamicsInfo(self.body, -1, physicsClientId=c)
+        inv_pos, inv_orn = pb.invertTransform(info[3], info[4])
+        pos, orn = pb.multiplyTransforms(com_pos, com_orn, inv_pos, inv_orn)
+        return (pos[0], pos[1], pos[2]), (orn[0], orn[1], orn[2], orn[3])
+
+    def link_poses(self) -> dict[str, Pose]:
+        """The world pose of every non-root link's URDF frame, by link name, in PyBullet's
+        link order (forward kinematics of the current joint positions)."""
+        indices = list(range(len(self.infos)))
+        if not indices:
+            return {}
+        states = pb.getLinkStates(
+            self.body, indices, computeForwardKinematics=1, physicsClientId=self.client
+        )
+        return {
+            self.link_name(i): (
+                (state[4][0], state[4][1], state[4][2]),
+                (state[5][0], state[5][1], state[5][2], state[5][3]),
+            )
+            for i, state in zip(indices, states, strict=True)
+        }
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Arm joint positions and velocities, ``(n,)`` each."""

@@ -19,6 +19,14 @@ Claims: the node keeps the line's claims board (one entry per station and track,
 station's ``line/claim``) and relays it on ``/line/claims`` after every step in which it
 changed, a counted topic of the tick; it allocates nothing.
 
+Scene (``docs/interfaces.md``, :mod:`twin.scene`): ``/tf`` (every link of every station, each
+TCP, every object in the simulation; at the ground-truth tick), ``/tf_static`` (each station's
+root link), ``/scene/markers`` (belt, bins, robot links; once), ``/scene/objects`` (every live
+object's mesh, re-sent whole when the set changes, and a DELETE for each one gone) and
+``/scene/targets`` (each station's announced target and TCP path, at :data:`SCENE_TARGETS_HZ`),
+sent only while a tap exists or some subscriber is matched, and not at all with
+``scene=False``.
+
 Modes: ``realtime`` paces the physics to the wall clock; ``lockstep`` steps tick k+1 only when
 every station's controller has acknowledged tick k (see the LockstepTick/StepAck handshake in
 the docs).
@@ -60,11 +68,14 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import Marker, MarkerArray
 
 from interfaces import contract as c
+from interfaces.class_colours import class_rgb, dataset_class_rgb
 from interfaces.contract import Topic
 from interfaces.events import Event
 from interfaces.ros import message_class, msg_stamp_ns, msg_stamp_s, qos_profile, time_msg
+from twin import scene as sc
 from twin.commands import (
     JointTarget,
     Rejected,
@@ -73,9 +84,12 @@ from twin.commands import (
     validate_priorities,
     validate_setpoint,
 )
+from twin.link_visuals import link_visuals
+from twin.monitor import GroundTruth
 from twin.perception import DetectionFrame
 from twin.sim import ArmCommand, Twin
 from twin.station import Station
+from twin.target_metric import PURSUIT_PHASES
 from twin.telemetry import TelemetryRecorder
 
 Tap = Callable[[str, bytes, int], None]
@@ -117,6 +131,8 @@ class StationLink:
     alive: bool = True
     acks_at_loss: int = -1
     lost_at_s: float | None = None
+    target: sc.Target | None = None
+    path: sc.TcpPath = field(default_factory=sc.TcpPath)
 
     @property
     def name(self) -> str:
@@ -146,6 +162,9 @@ class StationLink:
 CLAIMS_REFRESH_S = 1.0
 """Longest sim time between two relays of the claims board once one was relayed."""
 
+SCENE_TARGETS_HZ = 5.0
+"""Rate of ``/scene/targets`` (each station's target and TCP path), sim time."""
+
 
 class TwinNode(Node):
     """Publishes the twin's state and takes commands; :func:`run_loop` drives it."""
@@ -158,6 +177,7 @@ class TwinNode(Node):
         state_every: int = 4,
         ground_truth_every: int = 8,
         tap: Tap | None = None,
+        scene: bool = True,
     ) -> None:
         super().__init__("cdw_twin")
         if not twin.stations:
@@ -187,6 +207,25 @@ class TwinNode(Node):
         self.pub_tick = self._publisher(c.LOCKSTEP_TICK)
         self.pub_faults = self._publisher(c.FAULTS)
         self.pub_claims = self._publisher(c.CLAIMS)
+        self.scene = scene
+        self.pub_tf = self._publisher(c.TF)
+        self.pub_tf_static = self._publisher(c.TF_STATIC)
+        self.pub_markers = self._publisher(c.SCENE_MARKERS)
+        self.pub_objects = self._publisher(c.SCENE_OBJECTS)
+        self.pub_targets = self._publisher(c.SCENE_TARGETS)
+        self._scene_pubs = (
+            self.pub_tf,
+            self.pub_tf_static,
+            self.pub_markers,
+            self.pub_objects,
+            self.pub_targets,
+        )
+        self._scene_static_sent = False
+        self._targets_every = max(1, round(1.0 / (SCENE_TARGETS_HZ * twin.dt_s)))
+        colours = dataset_class_rgb(twin.dataset_dir)
+        self._colour = partial(class_rgb, overrides=colours)
+        self._objects = sc.ObjectMarkers(mesh=twin.object_mesh, colour=self._colour)
+        self._marker_msgs: dict[tuple[str, int], tuple[sc.SceneMarker, Marker]] = {}
         self.links = [self._station_link(station) for station in twin.stations]
         self._cell_command_subs = [self._subscribe(c.BELT_SETPOINT, self._on_setpoint)]
         self._subscribe(c.PRIORITIES, self._on_priorities)
@@ -229,6 +268,12 @@ class TwinNode(Node):
         data = serialize_message(msg)
         publisher.publish(data)
         self._tap(publisher.topic_name, data, time.time_ns())
+
+    def _send_serialized(self, publisher: Any, data: bytes) -> None:
+        """Publish a message already serialized (CDR); with a tap, hand it the same bytes."""
+        publisher.publish(data)
+        if self._tap is not None:
+            self._tap(publisher.topic_name, data, time.time_ns())
 
     def _subscribe(self, topic: Topic, callback: Callable[[Any], None], namespace: str = "") -> Any:
         """Subscribe ``callback``; with a tap, take the serialized bytes and record them too."""
@@ -298,6 +343,11 @@ class TwinNode(Node):
         self._received(link)
         p = msg.grasp_point
         self.twin.announce_target(int(msg.track_id), (p.x, p.y, p.z), msg.phase, link.station.index)
+        if msg.phase in PURSUIT_PHASES:
+            v = msg.velocity
+            link.target = sc.Target((p.x, p.y, p.z), (v.x, v.y, v.z), msg_stamp_s(msg.header.stamp))
+        else:
+            link.target = None
 
     def _on_claim(self, link: StationLink, msg: Claim) -> None:
         """A station's claim goes on the board (one entry per station and track); the board is
@@ -426,10 +476,15 @@ class TwinNode(Node):
             self.publish_belt(stamp)
         for frame in twin.take_detections():
             self.publish_detections(frame)
-        if step % self.ground_truth_every == 0 and (
-            self._tap is not None or self.pub_gt.get_subscription_count() > 0
-        ):
-            self.publish_ground_truth(stamp)
+        if step % self.ground_truth_every == 0:
+            want_gt = self._tap is not None or self.pub_gt.get_subscription_count() > 0
+            want_scene = self.scene_wanted()
+            if want_gt or want_scene:
+                objects = twin.observe_objects()
+                if want_gt:
+                    self.publish_ground_truth(stamp, objects)
+                if want_scene:
+                    self.publish_scene(stamp, objects, targets=step % self._targets_every == 0)
         self.publish_new_events()
         self.publish_claims(stamp, step)
         if self.lockstep:
@@ -530,12 +585,14 @@ class TwinNode(Node):
         self._send(self.pub_det, msg)
         self._count(c.DETECTIONS, c.DETECTIONS.name, msg_stamp_ns(msg.header.stamp))
 
-    def publish_ground_truth(self, stamp: Any) -> None:
-        """``/objects/ground_truth`` (evaluation only)."""
+    def publish_ground_truth(
+        self, stamp: Any, objects: tuple[GroundTruth, ...] | None = None
+    ) -> None:
+        """``/objects/ground_truth`` (evaluation only) of ``objects`` (default: now's)."""
         msg = ObjectStateArray()
         msg.header.stamp = stamp
         msg.header.frame_id = "world"
-        for gt in self.twin.observe_objects():
+        for gt in self.twin.observe_objects() if objects is None else objects:
             state = ObjectState(
                 id=gt.id,
                 class_name=gt.class_name,
@@ -559,6 +616,79 @@ class TwinNode(Node):
             msg.objects.append(state)
         self._send(self.pub_gt, msg)
 
+    # -- the scene --------------------------------------------------------------------------
+    def scene_wanted(self) -> bool:
+        """The scene is on and someone takes it: a tap (recording, live view) or a matched
+        subscriber of a scene topic."""
+        if not self.scene:
+            return False
+        return self._tap is not None or any(
+            p.get_subscription_count() > 0 for p in self._scene_pubs
+        )
+
+    def publish_scene(
+        self, stamp: Any, objects: tuple[GroundTruth, ...], *, targets: bool = True
+    ) -> None:
+        """The scene at a ground-truth tick: the static part once, ``/tf``, the objects'
+        markers when their set changed, and (``targets``) each station's target and path."""
+        twin = self.twin
+        if not self._scene_static_sent:
+            self._scene_static_sent = True
+            self.publish_scene_static(stamp)
+        live = [gt for gt in objects if not gt.in_bin]
+        frames: list[sc.Frame] = []
+        for link in self.links:
+            robot = link.station.robot
+            tcp = twin.tcp_pose(link.station.index)
+            frames += sc.station_frames(link.namespace, robot.link_poses(), tcp)
+            link.path.add(twin.time_s, tcp[0])
+        frames += sc.world_frames(
+            (sc.object_frame(gt.id), (gt.position_m, gt.orientation_xyzw)) for gt in live
+        )
+        self._send_serialized(self.pub_tf, sc.tf_message_cdr(frames, stamp.sec, stamp.nanosec))
+        update = self._objects.update(gt.id for gt in live)
+        if update is not None:
+            self._send(self.pub_objects, self._marker_array(update.markers, stamp))
+        if targets:
+            markers: list[sc.SceneMarker] = []
+            for i, link in enumerate(self.links):
+                markers += [sc.target_marker(i, link.target, twin.time_s), link.path.marker(i)]
+            self._send(self.pub_targets, self._marker_array(markers, stamp))
+
+    def publish_scene_static(self, stamp: Any) -> None:
+        """``/tf_static`` (each station's root link in ``world``) and ``/scene/markers`` (belt,
+        bins, every station's link meshes), once."""
+        frames: list[sc.Frame] = []
+        markers = [sc.belt_marker(self.twin.cell), *sc.bin_markers(self.twin.cell, self._colour)]
+        for link in self.links:
+            robot = link.station.robot
+            root = sc.link_frame(link.namespace, robot.root_link)
+            frames += sc.world_frames([(root, robot.root_pose())])
+            markers += sc.link_markers(link.namespace, link_visuals(robot.urdf))
+        self._send_serialized(
+            self.pub_tf_static, sc.tf_message_cdr(frames, stamp.sec, stamp.nanosec)
+        )
+        self._send(self.pub_markers, self._marker_array(markers, stamp))
+
+    def _marker_array(self, markers: Any, stamp: Any) -> MarkerArray:
+        """The markers as a ``MarkerArray``, each stamped ``stamp``; a marker already converted
+        (the same value) is reused, so a live object's mesh is converted once."""
+        out = []
+        for marker in markers:
+            key = (marker.ns, marker.id)
+            cached = self._marker_msgs.get(key)
+            if cached is not None and cached[0] is marker:
+                cached[1].header.stamp = stamp
+                out.append(cached[1])
+                continue
+            msg = _marker_msg(marker, stamp)
+            if marker.action is sc.MarkerAction.ADD and marker.frame_locked:
+                self._marker_msgs[key] = (marker, msg)
+            else:
+                self._marker_msgs.pop(key, None)
+            out.append(msg)
+        return MarkerArray(markers=out)
+
     def publish_new_events(self) -> None:
         """``/events``: every event the twin logged since the last call, in log order."""
         events = self.twin.events
@@ -576,6 +706,29 @@ class TwinNode(Node):
         )
         msg.header.stamp = time_msg(event.time_s)
         self._send(self.pub_events, msg)
+
+
+def _marker_msg(marker: sc.SceneMarker, stamp: Any) -> Marker:
+    """A ``visualization_msgs/Marker`` of a scene marker."""
+    msg = Marker()
+    msg.header.stamp = stamp
+    msg.header.frame_id = marker.frame_id
+    msg.ns = marker.ns
+    msg.id = marker.id
+    msg.type = int(marker.kind)
+    msg.action = int(marker.action)
+    if marker.action is sc.MarkerAction.DELETE:
+        return msg
+    p, o = msg.pose.position, msg.pose.orientation
+    p.x, p.y, p.z = marker.position_m
+    o.x, o.y, o.z, o.w = marker.orientation_xyzw
+    msg.scale.x, msg.scale.y, msg.scale.z = marker.scale
+    col = msg.color
+    col.r, col.g, col.b, col.a = marker.rgba
+    msg.frame_locked = marker.frame_locked
+    if marker.points_m is not None:
+        msg.points = [Point(x=x, y=y, z=z) for x, y, z in marker.points_m.tolist()]
+    return msg
 
 
 def run_loop(

@@ -41,6 +41,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
 
+import numpy as np
 import pybullet as pb
 
 from interfaces.cell import Cell, DriveSpec
@@ -50,7 +51,7 @@ from twin.belt_drive import BeltDrive, BeltState
 from twin.builtin import cache_root
 from twin.errors import ConfigError
 from twin.monitor import GroundTruth, Monitor
-from twin.objects import ImageLayout, load_dataset
+from twin.objects import ImageLayout, ObjectSpec, load_dataset, read_obj_triangles
 from twin.perception import DetectionFrame, Perception, PerceptionConfig
 from twin.scenario import PerturbationLevel, Scenario, scenario_cell, seed_tree
 from twin.station import ArmCommand, Station
@@ -208,6 +209,7 @@ class Twin:
         self.perception_enabled = perception_enabled
         self.perception: Perception | None = None
         self._released: list[DetectionFrame] = []
+        self.dataset_dir = dataset_dir
         self.layouts: tuple[ImageLayout, ...] = load_dataset(dataset_dir)
         self.classes = entering_classes(self.layouts, scenario, self.cell)
         drive_parameters(self.cell.drive, scenario.system.perturbation, 0)  # refused early
@@ -223,6 +225,8 @@ class Twin:
         self.setpoint_mps = scenario.system.belt_speed_mps
         self._belt_state = BeltState(0.0, 0.0, 0.0, 0.0, 0.0)
         self._events: list[Event] = []
+        self._shapes: dict[int, tuple[ObjectSpec, float]] = {}  # object id -> spec, height
+        self._triangles: dict[tuple[Path, float], np.ndarray] = {}
         self.event_sink = event_sink
         self._wall_start = 0.0
         self._realtime_factor = 1.0
@@ -282,6 +286,7 @@ class Twin:
         self.setpoint_mps = self.scenario.system.belt_speed_mps
         self._belt_state = BeltState(0.0, 0.0, 0.0, 0.0, 0.0)
         self._events = []
+        self._shapes = {}
         self.perception = Perception(
             self.perception_config,
             self.classes,
@@ -471,7 +476,8 @@ class Twin:
                     friction=placement.friction,
                     restitution=placement.restitution,
                 )
-                monitor.add(placement, spawned, self.step_count, self.time_s)
+                event = monitor.add(placement, spawned, self.step_count, self.time_s)
+                self._shapes[event.object_id] = (placement.spec, spawned.height_m)
             self._next_batch = next(self._batches, None)
 
     # -- reading ----------------------------------------------------------------------------
@@ -509,6 +515,23 @@ class Twin:
         """Ground truth of every object on the belt, held or in a bin."""
         _, monitor, _ = self._started()
         return monitor.ground_truth()
+
+    def object_mesh(self, object_id: int) -> tuple[np.ndarray, str]:
+        """An object's mesh triangles ``(t, 3, 3)`` in its own frame (the frame of its ground
+        truth pose; z stretched to its sampled height), m, and its class. Cached per mesh and
+        height; :class:`ConfigError` for an id no object of this episode has."""
+        shape = self._shapes.get(object_id)
+        if shape is None:
+            msg = f"object id {object_id}: no object of this episode has it"
+            raise ConfigError(msg)
+        spec, height_m = shape
+        key = (spec.mesh_path, height_m)
+        triangles = self._triangles.get(key)
+        if triangles is None:
+            triangles = read_obj_triangles(spec.mesh_path).astype(float)
+            triangles[..., 2] *= height_m / spec.height_m
+            self._triangles[key] = triangles
+        return triangles, spec.class_name
 
     def landing_in_bins(self) -> list[int]:
         """Ids of released objects over a bin, still above its top (see :class:`Monitor`)."""

@@ -85,4 +85,7 @@ def test_installed_package_matches_its_sources(build_script: ModuleType) -> None
             "cdw_interfaces is not built; run `.venv/bin/python interfaces/build_interfaces.py`"
         )
 
-    assert build_script.is_up_to_date(Path(sys.prefix)), "sources changed since the last build"
+    for source_dir in build_script.PACKAGE_DIRS:
+        assert build_script.is_up_to_date(Path(sys.prefix), source_dir), (
+            f"{source_dir.name}: sources changed since the last build"
+        )
