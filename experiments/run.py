@@ -5,6 +5,12 @@ Example::
     cdw-twin run --speed 0.4 --seed 1 --json
     cdw-twin run experiments/scenarios/default.yaml --episodes 3 --mode realtime --out runs/a
     cdw-twin run experiments/scenarios/default.yaml --cell two_pandas --duration 20
+    cdw-twin run experiments/scenarios/default.yaml --episodes 3 --foxglove
+
+``--foxglove [PORT]`` (after the scenario: a bare ``--foxglove`` takes the next word as its
+port) serves every episode live over Foxglove's WebSocket protocol, each in turn on the same
+port (:mod:`twin.live_view`); ``--gui`` opens PyBullet's window for each episode. A port in use
+or a display that cannot be opened is a one-line error before the run folder is written.
 
 The scenario (with the command-line overrides applied) is validated before anything starts and
 written to the run folder as ``scenario.yaml``; every process of the run reads that file. The
@@ -143,7 +149,10 @@ class EpisodeCancelledError(CdwTwinError):
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    """Add the run options."""
+    """Add the run options (``--foxglove``, ``--foxglove-host`` and ``--gui`` go to every
+    episode's twin node: see :mod:`twin.cmd_node`)."""
+    from twin.cmd_node import add_view_options
+
     parser.add_argument("scenario", type=Path, nargs="?", default=None, help="scenario YAML")
     parser.add_argument("--speed", type=float, default=None, help="belt speed m/s (override)")
     parser.add_argument("--episodes", type=int, default=1, help="episodes (1)")
@@ -156,6 +165,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/...)")
     parser.add_argument("--json", action="store_true", help="print the run's metrics as JSON")
+    add_view_options(parser)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -165,7 +175,9 @@ class RunOptions:
     ``scenario_path`` is the resolved scenario file (overrides applied, validated); ``dataset``
     the meshgen output folder; ``cell_path`` the resolved cell file and ``stations`` its station
     names (one controller process each); ``restart_at_s`` the controller restart times (sim
-    seconds); ``controller_params`` the controller's parameter file (None: its default).
+    seconds); ``controller_params`` the controller's parameter file (None: its default);
+    ``foxglove_port`` (None: no live view), ``foxglove_host`` and ``gui`` are passed to the twin
+    node, whose live view serves each episode in turn on the same port.
     """
 
     scenario_path: Path
@@ -177,6 +189,9 @@ class RunOptions:
     duration_s: float = 60.0
     restart_at_s: tuple[float, ...] = ()
     ack_timeout_s: float = 2.0
+    foxglove_port: int | None = None
+    foxglove_host: str = "127.0.0.1"
+    gui: bool = False
 
 
 @dataclass(frozen=True)
@@ -322,7 +337,18 @@ def twin_command(options: RunOptions, episode: EpisodeSpec) -> list[str]:
         str(episode.folder / "twin"),
         "--record",
         str(episode.folder / "recording.mcap"),
+        *view_arguments(options),
     ]
+
+
+def view_arguments(options: RunOptions) -> list[str]:
+    """The twin node's live view and window options."""
+    args = []
+    if options.foxglove_port is not None:
+        args += ["--foxglove", str(options.foxglove_port), "--foxglove-host", options.foxglove_host]
+    if options.gui:
+        args.append("--gui")
+    return args
 
 
 def controller_stem(station: str | None, stations: Sequence[str]) -> str:
@@ -866,13 +892,22 @@ class PreparedRun:
 
 
 def prepare_run(args: argparse.Namespace) -> PreparedRun:
-    """Validate the scenario, its cell and its controller parameters; write the run folder's
-    ``scenario.yaml``, ``cell.yaml`` and ``controller.yaml``."""
-    from twin.cmd_node import build_scenario
+    """Validate the scenario, its cell and its controller parameters, the display (``--gui``)
+    and the live view's port (``--foxglove``); write the run folder's ``scenario.yaml``,
+    ``cell.yaml`` and ``controller.yaml``."""
+    from twin.cmd_node import build_scenario, check_display
+    from twin.live_view import DEFAULT_HOST, check_port
 
     if args.episodes < 1:
         msg = f"--episodes = {args.episodes}: must be >= 1"
         raise CdwTwinError(msg)
+    gui = bool(getattr(args, "gui", False))
+    if gui:
+        check_display()
+    foxglove: int | None = getattr(args, "foxglove", None)
+    host: str = getattr(args, "foxglove_host", DEFAULT_HOST)
+    if foxglove is not None:
+        check_port(host, foxglove)
     node_args = argparse.Namespace(
         scenario=args.scenario,
         dataset=args.dataset,
@@ -890,7 +925,12 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
     out: Path = args.out or Path("runs") / f"{scenario.name}-{stamp}"
     own_dataset = args.dataset is not None or scenario.dataset != "builtin"
     files = write_run_scenario(scenario, params, cell, out, Path(dataset) if own_dataset else None)
-    options = run_options(files, cell, scenario, Path(dataset), args.mode)
+    options = replace(
+        run_options(files, cell, scenario, Path(dataset), args.mode),
+        foxglove_port=foxglove,
+        foxglove_host=host,
+        gui=gui,
+    )
     extra: dict[str, Any] = {
         "scenario": scenario.name,
         "scenario_path": str(args.scenario) if args.scenario is not None else None,
@@ -949,6 +989,13 @@ def run(args: argparse.Namespace) -> int:
     out = prepared.out
     write_tables(out, [], complete=False, extra=prepared.extra)
     tty = sys.stdout.isatty() and not args.json
+    port = prepared.options.foxglove_port
+    if port is not None and not args.json:
+        print(
+            f"live view on ws://{prepared.options.foxglove_host}:{port} "
+            "(Foxglove: Open connection; each episode in turn)",
+            flush=True,
+        )
     rows, stopped, code = _run_episodes(prepared, args.episodes, quiet=args.json, tty=tty)
     extra = prepared.extra if stopped is None else {**prepared.extra, "stopped": stopped}
     summary = write_tables(out, rows, complete=stopped is None, extra=extra)

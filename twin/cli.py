@@ -11,6 +11,7 @@ Examples::
     cdw-twin bench meshgen --json
     cdw-twin fmu build
     cdw-twin bench fmu --json
+    cdw-twin picture --out cell.png
 """
 
 from __future__ import annotations
@@ -46,9 +47,12 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("run",), "experiments.run", "closed-loop episodes: twin node + controller processes"),
     (("sweep",), "experiments.sweep", "a grid of scenarios x seeds in parallel, aggregated"),
     (("bench", "sweep"), "experiments.bench_sweep", "sweep speed-up with 2 workers against 1"),
+    (("bench", "ray"), "experiments.bench_ray", "the same sweep on the local pool and on Ray"),
     (("report",), "experiments.report", "HTML report with figures from run folders"),
     (("record",), "experiments.record", "record every twin/controller topic to MCAP"),
     (("demo",), "experiments.demo", "the main job: sample, mesh, closed-loop runs, report"),
+    (("picture",), "experiments.picture", "a PNG of the cell as the twin renders it"),
+    (("player",), "experiments.player", "an episode's self-contained HTML player"),
 )
 
 

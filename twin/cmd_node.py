@@ -20,25 +20,42 @@ Ctrl-C (SIGINT) or SIGTERM ends the episode at the next step: the node writes th
 ``docs/interfaces.md``) as the bytes on the wire, from inside the node: no recorder process to
 start, match and feed (``cdw-twin run`` records its episodes this way; ``cdw-twin record`` is
 the stand-alone recorder for a cell the twin does not run).
+
+``--foxglove [PORT]`` serves the same messages live over Foxglove's WebSocket protocol
+(:mod:`twin.live_view`; port 8765 unless given, on ``--foxglove-host``, loopback by default):
+open Foxglove, *Open connection*, ``ws://127.0.0.1:8765``, and watch the episode as it runs. A
+port in use is a one-line error (exit 2) before the episode starts. ``--gui`` opens PyBullet's
+own window on the cell; without a display that can be opened (``DISPLAY``) it is a one-line
+error (exit 2) before anything starts::
+
+    cdw-twin twin-node --duration 60 --foxglove
+    cdw-twin twin-node --duration 60 --gui
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
+import ctypes.util
 import dataclasses
+import os
 import signal
 import time
+from collections.abc import Sequence
 from contextlib import ExitStack
 from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
+from interfaces.errors import CdwTwinError
 from interfaces.lifecycle import STOP_SIGNALS, die_with_parent
 
 if TYPE_CHECKING:
     from interfaces.cell import Cell
     from twin.episode_log import EventLog
+    from twin.live_view import LiveView
     from twin.recording import McapRecording
+    from twin.ros_node import Tap
     from twin.scenario import Scenario
     from twin.sim import Twin
 
@@ -97,6 +114,60 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="MCAP",
         help="record every message the node sends or receives to this MCAP file",
     )
+    add_view_options(parser)
+
+
+def add_view_options(parser: argparse.ArgumentParser) -> None:
+    """``--foxglove [PORT]``, ``--foxglove-host`` and ``--gui`` (twin-node and run)."""
+    from twin.live_view import DEFAULT_HOST, DEFAULT_PORT
+
+    parser.add_argument(
+        "--foxglove",
+        type=int,
+        nargs="?",
+        const=DEFAULT_PORT,
+        default=None,
+        metavar="PORT",
+        help=f"serve every topic live to Foxglove over WebSocket (port {DEFAULT_PORT})",
+    )
+    parser.add_argument(
+        "--foxglove-host",
+        default=DEFAULT_HOST,
+        metavar="HOST",
+        help=f"address the live view listens on ({DEFAULT_HOST}: this machine only)",
+    )
+    parser.add_argument("--gui", action="store_true", help="open PyBullet's window on the cell")
+
+
+class DisplayError(CdwTwinError):
+    """``--gui`` without a display PyBullet can open a window on."""
+
+
+def check_display(environ: dict[str, str] | None = None) -> str:
+    """The X display ``--gui`` will open (``DISPLAY``); raises :class:`DisplayError` when there
+    is none or it cannot be opened.
+
+    PyBullet ends the whole process when its window cannot connect, so the display is opened
+    (and closed) here first, with the X library PyBullet loads itself.
+    """
+    display = (os.environ if environ is None else environ).get("DISPLAY", "")
+    if not display:
+        msg = "--gui: no display (DISPLAY is not set); run without --gui, or under xvfb-run"
+        raise DisplayError(msg)
+    name = ctypes.util.find_library("X11")
+    if name is None:
+        msg = f"--gui: cannot open display {display!r}: the X11 library (libX11) is not installed"
+        raise DisplayError(msg)
+    xlib = ctypes.CDLL(name)
+    xlib.XOpenDisplay.restype = ctypes.c_void_p
+    xlib.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    xlib.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    handle = xlib.XOpenDisplay(display.encode())
+    if not handle:
+        msg = f"--gui: cannot open display {display!r} (DISPLAY); run without --gui"
+        raise DisplayError(msg)
+    xlib.XCloseDisplay(handle)
+    return display
 
 
 def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path, Cell]:
@@ -174,6 +245,67 @@ def _open_recording(out: Path | None, cell: Cell) -> McapRecording | None:
     return McapRecording(out, topics, flush_interval_s=DEFAULT_FLUSH_INTERVAL_S)
 
 
+def _open_live_view(args: argparse.Namespace, cell: Cell) -> LiveView | None:
+    """The live view of every topic of the cell on ``--foxglove``'s port, if asked for."""
+    port: int | None = getattr(args, "foxglove", None)
+    if port is None:
+        return None
+    from interfaces.contract import resolved_topics
+    from twin.live_view import LiveView
+
+    topics = resolved_topics(tuple(s.namespace for s in cell.stations))
+    view = LiveView(topics, host=args.foxglove_host, port=port)
+    print(f"cdw-twin twin-node: live view on {view.url} (Foxglove: Open connection)", flush=True)
+    return view
+
+
+def fan_out(writers: Sequence[Tap]) -> Tap | None:
+    """One tap handing each message to every writer in turn (None without writers)."""
+    if not writers:
+        return None
+    if len(writers) == 1:
+        return writers[0]
+
+    def tap(topic: str, data: bytes, log_time_ns: int) -> None:
+        for write in writers:
+            write(topic, data, log_time_ns)
+
+    return tap
+
+
+def _window_off(twin: Twin) -> None:
+    """Stop PyBullet's window from redrawing while the episode's bodies are loaded."""
+    import pybullet as pb
+
+    pb.configureDebugVisualizer(pb.COV_ENABLE_RENDERING, 0, physicsClientId=twin.client)
+
+
+def _window_on(twin: Twin) -> None:
+    """Show the cell in PyBullet's window: the belt and stations in view, the side panels,
+    camera previews and shadows off (each costs a redraw of the scene), drawing on again."""
+    import pybullet as pb
+
+    for flag in (
+        pb.COV_ENABLE_GUI,
+        pb.COV_ENABLE_SHADOWS,
+        pb.COV_ENABLE_RGB_BUFFER_PREVIEW,
+        pb.COV_ENABLE_DEPTH_BUFFER_PREVIEW,
+        pb.COV_ENABLE_SEGMENTATION_MARK_PREVIEW,
+    ):
+        pb.configureDebugVisualizer(flag, 0, physicsClientId=twin.client)
+    belt = twin.cell.belt
+    centre = [0.5 * (belt.start_x_m + belt.end_x_m), belt.centre_y_m, belt.surface_z_m]
+    pb.resetDebugVisualizerCamera(
+        cameraDistance=max(1.5, 0.6 * belt.length_m),
+        cameraYaw=30.0,
+        cameraPitch=-40.0,
+        cameraTargetPosition=centre,
+        physicsClientId=twin.client,
+    )
+    pb.configureDebugVisualizer(pb.COV_ENABLE_RENDERING, 1, physicsClientId=twin.client)
+    print("cdw-twin twin-node: PyBullet window open", flush=True)
+
+
 def run(args: argparse.Namespace) -> int:
     """Run one episode as a ROS 2 node; 130 when SIGINT or SIGTERM ended it early."""
     stop: list[int] = []
@@ -199,8 +331,12 @@ def _run_episode(args: argparse.Namespace, stop: list[int]) -> bool:
     from twin.ros_isolation import clean_stale_fastdds_shm, local_ros_defaults
     from twin.sim import Twin
 
+    gui = getattr(args, "gui", False)
+    if gui:
+        check_display()
     scenario, dataset, cell = build_scenario(args)
     perception = PerceptionConfig.zero_noise() if args.perception == "zero" else None
+    view = _open_live_view(args, cell)
     local_ros_defaults()
     clean_stale_fastdds_shm()
     out: Path | None = args.out
@@ -209,6 +345,8 @@ def _run_episode(args: argparse.Namespace, stop: list[int]) -> bool:
         log = start_episode_folder(out, scenario=scenario.name, seed=scenario.seed)
     try:
         with ExitStack() as stack:
+            if view is not None:
+                stack.callback(view.close)
             if log is not None:
                 stack.enter_context(log)
             twin = stack.enter_context(
@@ -217,18 +355,27 @@ def _run_episode(args: argparse.Namespace, stop: list[int]) -> bool:
                     dataset_dir=dataset,
                     cell=cell,
                     perception=perception,
+                    gui=gui,
                     event_sink=None if log is None else log.append,
                 )
             )
-            return _serve(args, twin, stop, log)
+            return _serve(args, twin, stop, log, view)
     except BaseException as exc:
         if out is not None:
             write_status(out, "failed", error=f"{type(exc).__name__}: {exc}")
         raise
 
 
-def _serve(args: argparse.Namespace, twin: Twin, stop: list[int], log: EventLog | None) -> bool:
-    """Run the twin node until the episode ends or a stop signal; write the episode folder."""
+def _serve(
+    args: argparse.Namespace,
+    twin: Twin,
+    stop: list[int],
+    log: EventLog | None,
+    view: LiveView | None = None,
+) -> bool:
+    """Run the twin node until the episode ends or a stop signal; write the episode folder.
+
+    The node's tap feeds the recording and the live view, when there are."""
     import rclpy
     from rclpy.signals import SignalHandlerOptions
     from rclpy.utilities import try_shutdown
@@ -238,14 +385,20 @@ def _serve(args: argparse.Namespace, twin: Twin, stop: list[int], log: EventLog 
     from twin.ros_node import TwinNode, make_executor, run_loop
 
     scenario = twin.scenario
+    gui = getattr(args, "gui", False)
+    if gui:
+        _window_off(twin)
     twin.reset()
+    if gui:
+        _window_on(twin)
     recording = _open_recording(args.record, twin.cell)
+    writers = [sink.write for sink in (recording, view) if sink is not None]
     # rclpy's own SIGINT handler would shut the context down under the step loop
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = TwinNode(
         twin,
         lockstep=args.mode == "lockstep",
-        tap=None if recording is None else recording.write,
+        tap=fan_out(writers),
     )
     executor = make_executor()
     executor.add_node(node)
