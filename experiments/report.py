@@ -26,6 +26,9 @@ of every run are pooled and grouped by belt speed. Figures:
    meshgen recorded in ``scene.json``) over the generated footprints (bottom face of each mesh,
    placed at its ``scene.csv`` centroid) for up to four images.
 
+Every episode row links the episode's player (``epNNN/player.html``, written or refreshed
+here by :mod:`experiments.player`: a self-contained page replaying the episode from above).
+
 The tables give per cell and belt speed and per episode the line's numbers (picks per minute,
 recovery, success, miss rate, ...) and, when a run has several stations, per cell, speed and
 station each station's; then recovery against the number of stations, recovery and purity per
@@ -815,7 +818,15 @@ def _save_png(fig: Figure, path: Path) -> None:
         raise
 
 
+class _Html(str):
+    """Table cell text that is already HTML (not escaped again)."""
+
+    __slots__ = ()
+
+
 def _fmt(value: Any, digits: int = 3) -> str:
+    if isinstance(value, _Html):
+        return str(value)
     if value is None:
         return "–"
     if isinstance(value, bool):
@@ -884,6 +895,7 @@ EPISODE_COLUMNS = (
     ("rtt_ms_p99", "RTT p99 (ms)"),
     ("step_rate_hz_mean", "steps/s"),
     ("real_time_factor", "RTF"),
+    ("player", "player"),
 )
 
 _CSS = (
@@ -927,6 +939,33 @@ def _line_section(data: RunData) -> str:
     )
 
 
+def _players(data: RunData, out: Path, notes: list[str]) -> list[_Html]:
+    """Write (or refresh) each episode's player; a link to it, relative to ``out``.
+
+    A player is rewritten when it is older than its episode's files or than the player code.
+    An episode folder that cannot be written to gets its player in ``out/players/``.
+    """
+    from experiments.player import PAGE_NAME, write_player
+
+    code = Path(__file__).resolve().parent / "player.py"
+    links = []
+    for ep in data.episodes:
+        page = ep.folder / PAGE_NAME
+        inputs = [code, ep.run_dir / "cell.yaml", ep.folder / "recording.mcap"]
+        inputs.append(ep.folder / "twin" / "events.jsonl")
+        stamp = page.stat().st_mtime if page.is_file() else -1.0
+        if any(p.is_file() and p.stat().st_mtime > stamp for p in inputs):
+            try:
+                written = write_player(ep.folder, ep.run_dir)
+            except OSError:
+                page = out / "players" / ep.run_dir.name / f"{ep.folder.name}.html"
+                written = write_player(ep.folder, ep.run_dir, page)
+            notes.extend(f"{ep.name} player: {note}" for note in written.notes)
+        href = html.escape(Path(os.path.relpath(page, out)).as_posix(), quote=True)
+        links.append(_Html(f'<a class="player" href="{href}">play</a>'))
+    return links
+
+
 def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
     """Write ``report.html`` and its PNGs into ``out``; returns the HTML path.
 
@@ -954,9 +993,13 @@ def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
             _save_png(fig, png)
             body = f'<img id="fig-{stem}" src="{png.name}" alt="{html.escape(heading)}">'
         sections.append(f"<figure><h2>{html.escape(heading)}</h2>{body}</figure>")
+    player_notes: list[str] = []
+    rows = episode_rows(data)
+    for row, link in zip(rows, _players(data, out, player_notes), strict=True):
+        row["player"] = link
     runs = "".join(f"<li>{html.escape(str(p))}</li>" for p in data.run_dirs)
     sets = "".join(f"<li>{html.escape(str(p))}</li>" for p in data.datasets)
-    notes = "".join(f"<li>{html.escape(n)}</li>" for n in data.notes)
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in (*data.notes, *player_notes))
     page = (
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
         f"<title>cdw-twin report</title><style>{_CSS}</style></head><body>"
@@ -968,7 +1011,9 @@ def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
         f"{_table(speed_rows(data), SPEED_COLUMNS)}"
         f"{_station_section(data)}"
         f"{_line_section(data)}"
-        f"<h2>Per episode</h2>{_table(episode_rows(data), EPISODE_COLUMNS)}"
+        "<h2>Per episode</h2><p>Each episode's player replays it from above (open the file; "
+        "it needs no network).</p>"
+        f"{_table(rows, EPISODE_COLUMNS)}"
         + "".join(sections)
         + (f'<div class="notes"><p>Notes:</p><ul>{notes}</ul></div>' if notes else "")
         + "</body></html>\n"
