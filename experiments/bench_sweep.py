@@ -59,7 +59,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
 
 
-def _grid(folder: Path, episodes: int, duration_s: float) -> Path:
+def bench_grid(folder: Path, episodes: int, duration_s: float) -> Path:
+    """The benchmark grid: the default scenario at 0.4 m/s, ``episodes`` lockstep episodes."""
     scenario = folder / "bench.yaml"
     write_atomic(
         scenario, f"name: bench\nduration_s: {duration_s}\nsystem:\n  belt_speed_mps: 0.4\n"
@@ -119,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     loads: dict[int, list[float]] = {w: [] for w in passes}
     ceilings: list[float] = []
     with tempfile.TemporaryDirectory(prefix="cdw-bench-sweep-") as tmp:
-        grid = _grid(Path(tmp), args.episodes, args.duration)
+        grid = bench_grid(Path(tmp), args.episodes, args.duration)
         for r in range(args.rounds):
             for workers in passes:
                 loads[workers].append(round(os.getloadavg()[0], 2))

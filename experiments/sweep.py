@@ -494,6 +494,23 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--dataset", type=Path, default=None, help="meshgen output folder (overrides the grid's)"
     )
     parser.add_argument("--json", action="store_true", help="print the sweep summary as JSON")
+    parser.add_argument(
+        "--backend",
+        choices=("local", "ray"),
+        default="local",
+        help="local: a pool of --workers threads (default); ray: one Ray task per episode",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="Ray cluster address (ray backend; default: start Ray here with --workers CPUs)",
+    )
+    parser.add_argument(
+        "--cpus-per-episode",
+        type=float,
+        default=None,
+        help="CPUs a Ray task declares (default: the measured 1.0 of a lockstep episode)",
+    )
 
 
 @dataclass
@@ -661,6 +678,8 @@ class Sweep:
         self.lock = threading.Lock()
         self.cancel = threading.Event()
         self.stopped: list[str] = []
+        self.retried: list[str] = []
+        self.backend: dict[str, Any] = {"name": "local"}
         self.quiet = quiet
         self._wall0 = time.monotonic()
 
@@ -678,6 +697,9 @@ class Sweep:
             "headline": [row for c in cells for row in headline(c, self.headline)],
             "cells": cells,
         }
+        data["backend"] = self.backend
+        if self.retried:
+            data["retried"] = list(self.retried)
         if self.stopped:
             data["stopped"] = "; ".join(self.stopped)
         return data
@@ -714,28 +736,36 @@ class Sweep:
 
     def job(self, run: CellRun, episode: EpisodeSpec) -> None:
         """Run one episode (a worker thread's task) and record its row."""
-        from experiments.run import (
-            EpisodeCancelledError,
-            EpisodeFailedError,
-            failed_row,
-            failure_text,
-            run_episode,
-        )
+        from experiments.run import EpisodeCancelledError, EpisodeFailedError, run_episode
 
         if self.cancel.is_set():
             return
-        speed = run.cell.scenario.system.belt_speed_mps
         try:
             metrics = run_episode(run.options, episode, cancel=self.cancel)
         except EpisodeCancelledError:
             return
         except EpisodeFailedError as exc:
-            row = {**failed_row(episode, run.options.mode, exc.reason), "speed_mps": speed}
-            self.record(
-                run, episode.index, row, failure_text(episode.index, episode.seed, exc.reason)
-            )
+            self.finished(run, episode, None, exc.reason)
+            return
+        self.finished(run, episode, metrics, "")
+
+    def finished(
+        self, run: CellRun, episode: EpisodeSpec, metrics: dict[str, Any] | None, reason: str
+    ) -> None:
+        """Record an episode that ran to its end (``metrics``) or failed (``reason``), whatever
+        ran it."""
+        from experiments.run import failed_row, failure_text
+
+        speed = run.cell.scenario.system.belt_speed_mps
+        if metrics is None:
+            row = {**failed_row(episode, run.options.mode, reason), "speed_mps": speed}
+            self.record(run, episode.index, row, failure_text(episode.index, episode.seed, reason))
             if not self.quiet:
-                print(f"FAILED {run.cell.name}: {exc}", file=sys.stderr)
+                print(
+                    f"FAILED {run.cell.name}: episode {episode.index} (seed {episode.seed}): "
+                    f"{reason}",
+                    file=sys.stderr,
+                )
             return
         done = self.record(run, episode.index, {**metrics, "speed_mps": speed})
         if not self.quiet:
@@ -781,6 +811,16 @@ class Sweep:
         return data, 0 if complete else (130 if self.cancel.is_set() else 1)
 
 
+@dataclass(frozen=True)
+class Backend:
+    """Where a sweep's episodes run: ``local`` (threads on this machine) or ``ray`` (tasks on
+    the Ray cluster at ``address``, or on one started here; see :mod:`experiments.ray_backend`)."""
+
+    name: Literal["local", "ray"] = "local"
+    address: str | None = None
+    cpus_per_episode: float | None = None
+
+
 def run_sweep(
     grid_path: Path,
     out: Path,
@@ -788,17 +828,28 @@ def run_sweep(
     *,
     quiet: bool = False,
     dataset: Path | None = None,
+    backend: Backend | None = None,
 ) -> tuple[dict[str, Any], int]:
-    """Run a grid (its dataset replaced by ``dataset`` when given); returns the ``sweep.json``
-    content and the exit status."""
+    """Run a grid (its dataset replaced by ``dataset`` when given) on ``backend`` (default: the
+    local pool); returns the ``sweep.json`` content and the exit status."""
     if workers < 1:
         msg = f"--workers = {workers}: must be >= 1"
         raise ConfigError(msg)
+    backend = backend or Backend()
+    if backend.name == "ray":
+        from experiments.ray_backend import import_ray
+
+        import_ray()  # before anything is written
     runs = prepare_sweep(grid_path, out, dataset=dataset)
     names = Grid.load(grid_path).headline
     sweep = Sweep(grid_path, out, workers, runs, quiet=quiet, headline=names)
     sweep.write_all(False)
-    sweep.execute()
+    if backend.name == "ray":
+        from experiments.ray_backend import execute_on_ray
+
+        execute_on_ray(sweep, backend.address, workers, backend.cpus_per_episode)
+    else:
+        sweep.execute()
     return sweep.finish()
 
 
@@ -806,7 +857,13 @@ def run(args: argparse.Namespace) -> int:
     """Run the sweep and print its summary."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out: Path = args.out or Path("runs") / f"sweep-{args.grid.stem}-{stamp}"
-    data, code = run_sweep(args.grid, out, args.workers, quiet=args.json, dataset=args.dataset)
+    if args.backend != "ray" and (args.address or args.cpus_per_episode is not None):
+        msg = "--address and --cpus-per-episode need --backend ray"
+        raise ConfigError(msg)
+    backend = Backend(args.backend, args.address, args.cpus_per_episode)
+    data, code = run_sweep(
+        args.grid, out, args.workers, quiet=args.json, dataset=args.dataset, backend=backend
+    )
     if args.json:
         print(json.dumps(data))
     else:

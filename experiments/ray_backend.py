@@ -1,0 +1,446 @@
+"""Sweeps on Ray: ``cdw-twin sweep GRID --backend ray [--address ADDR]``.
+
+Every episode of the grid is one Ray task that runs :func:`experiments.run.run_episode` on the
+worker's machine exactly as the local backend does on this one: its own ROS domain (claimed
+from the worker machine's lock folder), its own twin and controller processes, its own run
+folder (a temporary copy of the grid cell's). Nothing relies on a shared file system: the grid
+cell's small files (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``) travel in the task's
+arguments, the dataset travels once per sweep through Ray's object store as a tar archive
+(unpacked once per worker machine, keyed by its SHA-256), and the finished episode folder comes
+back as a tar archive with the metrics. The driver unpacks it where the local backend would have
+written it, so ``sweep.json``, ``sweep.csv``, the cells' tables and intervals are written by the
+same code (:class:`experiments.sweep.Sweep`) for both backends.
+
+Resources: each task declares :data:`EPISODE_CPUS` CPUs (``--cpus-per-episode``), the measured
+load of one lockstep episode (twin and controllers alternate, one core busy; see
+``docs/benchmarks.md``), so Ray runs as many episodes at once on a node as it has cores.
+Without ``--address`` a Ray instance is started for the sweep with ``--workers`` CPUs.
+
+Failures: an episode whose twin or controller fails is a failed row, as locally. A task whose
+worker process or node dies (killed, out of memory, node lost) is retried once
+(:data:`RETRIES`) and listed in ``sweep.json``'s ``retried``; if the retry dies too the episode
+is a failed row naming the Ray error. No episode is ever silently missing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import hashlib
+import io
+import os
+import resource
+import shutil
+import signal
+import socket
+import sys
+import tarfile
+import tempfile
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from interfaces.errors import CdwTwinError
+
+if TYPE_CHECKING:
+    from experiments.run import EpisodeSpec
+    from experiments.sweep import CellRun, Sweep
+
+EPISODE_CPUS = 1.0
+"""CPUs one lockstep episode keeps busy (twin and controllers take turns)."""
+
+RETRIES = 1
+"""How often an episode whose Ray worker died is run again."""
+
+RAY_INIT_OPTIONS: dict[str, Any] = {
+    "include_dashboard": False,
+    "log_to_driver": False,
+    "configure_logging": False,
+}
+"""Options of every ``ray.init`` the sweep makes: no dashboard, no worker logs on the terminal."""
+
+
+class RayBackendError(CdwTwinError):
+    """Ray cannot be used (not installed, no cluster at the address)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ShippedEpisode:
+    """Everything a worker needs to run one episode, by value.
+
+    ``files`` are the grid cell's run-folder files by name; ``options`` the driver's run
+    options, whose paths the worker maps onto its own copy (:func:`worker_options`).
+    """
+
+    files: dict[str, bytes]
+    options: Any
+    index: int
+    seed: int
+    dataset_key: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class EpisodeResult:
+    """What a task sends back: the metrics (None when the episode failed, with ``reason``),
+    the episode folder as a tar archive, and the CPU seconds the episode's processes used."""
+
+    metrics: dict[str, Any] | None
+    reason: str
+    archive: bytes
+    cpu_s: float
+    node: str
+
+
+def pack(folder: Path) -> bytes:
+    """``folder``'s content as an uncompressed tar archive, names relative to it, in sorted
+    order (the same folder gives the same bytes)."""
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w") as tar:
+        for path in sorted(folder.rglob("*")):
+            info = tar.gettarinfo(str(path), arcname=str(path.relative_to(folder)))
+            info.mtime = 0
+            info.uid = info.gid = 0
+            info.uname = info.gname = ""
+            if info.isfile():
+                with path.open("rb") as handle:
+                    tar.addfile(info, handle)
+            elif info.isdir():
+                tar.addfile(info)
+    return buffer.getvalue()
+
+
+def unpack(archive: bytes, folder: Path) -> None:
+    """Unpack ``archive`` as ``folder`` whole: into a temporary sibling renamed into place,
+    so a folder of that name is never half-written. An existing ``folder`` is replaced."""
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+    try:
+        with tarfile.open(fileobj=io.BytesIO(archive), mode="r") as tar:
+            tar.extractall(staging, filter="data")
+        if folder.exists():
+            shutil.rmtree(folder)
+        staging.rename(folder)
+    finally:
+        if staging.exists():
+            shutil.rmtree(staging)
+
+
+def dataset_key(archive: bytes) -> str:
+    """The key a worker caches an unpacked dataset under: the archive's SHA-256."""
+    return hashlib.sha256(archive).hexdigest()
+
+
+def worker_cache() -> Path:
+    """Where a worker machine keeps the datasets it has unpacked."""
+    return Path(tempfile.gettempdir()) / "cdw-twin-ray" / "datasets"
+
+
+def local_dataset(key: str, archive: bytes) -> Path:
+    """The dataset of ``key`` on this machine, unpacked from ``archive`` the first time."""
+    folder = worker_cache() / key
+    if not folder.is_dir():
+        try:
+            unpack(archive, folder)
+        except OSError:
+            if not folder.is_dir():  # another task unpacked it first: theirs is as good
+                raise
+    return folder
+
+
+def worker_options(options: Any, run_dir: Path, dataset: Path) -> Any:
+    """``options`` with every path of the driver's run folder moved to ``run_dir`` (its copy
+    on the worker) and the dataset to ``dataset``."""
+
+    def moved(path: Path | None) -> Path | None:
+        return None if path is None else run_dir / path.name
+
+    return dataclasses.replace(
+        options,
+        scenario_path=moved(options.scenario_path),
+        cell_path=moved(options.cell_path),
+        controller_params=moved(options.controller_params),
+        dataset=dataset,
+    )
+
+
+def _children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def run_shipped_episode(shipped: ShippedEpisode, dataset_archive: bytes) -> EpisodeResult:
+    """The Ray task: run one episode in a temporary run folder; return its result."""
+    from experiments.run import EpisodeFailedError, EpisodeSpec, run_episode
+
+    dataset = local_dataset(shipped.dataset_key, dataset_archive)
+    cpu0 = _children_cpu_s()
+    with tempfile.TemporaryDirectory(prefix="cdw-ray-run-") as tmp:
+        run_dir = Path(tmp) / "run"
+        run_dir.mkdir()
+        for name, data in shipped.files.items():
+            (run_dir / name).write_bytes(data)
+        options = worker_options(shipped.options, run_dir, dataset)
+        episode = EpisodeSpec(
+            index=shipped.index, seed=shipped.seed, folder=run_dir / f"ep{shipped.index:03d}"
+        )
+        metrics: dict[str, Any] | None
+        try:
+            metrics, reason = run_episode(options, episode), ""
+        except EpisodeFailedError as exc:
+            metrics, reason = None, exc.reason
+        archive = pack(episode.folder) if episode.folder.is_dir() else b""
+    return EpisodeResult(
+        metrics=metrics,
+        reason=reason,
+        archive=archive,
+        cpu_s=_children_cpu_s() - cpu0,
+        node=socket.gethostname(),
+    )
+
+
+def run_files(folder: Path, names: Iterable[str]) -> dict[str, bytes]:
+    """The named files of a run folder, by name (what a worker needs of it)."""
+    return {name: (folder / name).read_bytes() for name in names}
+
+
+def import_ray() -> Any:
+    """The ``ray`` module, or a one-line error saying how to get it."""
+    try:
+        import ray
+    except ImportError as exc:
+        msg = f"--backend ray: the ray package is not installed ({exc}); pip install ray"
+        raise RayBackendError(msg) from exc
+    return ray
+
+
+def start(address: str | None, cpus: int) -> Any:
+    """Connect to the Ray cluster at ``address``, or start one on this machine with ``cpus``
+    CPUs; returns the ``ray`` module."""
+    ray = import_ray()
+    try:
+        if address:
+            ray.init(address=address, **RAY_INIT_OPTIONS)
+        else:
+            ray.init(num_cpus=cpus, **RAY_INIT_OPTIONS)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        where = f"the cluster at {address}" if address else "a local Ray instance"
+        msg = f"--backend ray: cannot connect to {where}: {exc}"
+        raise RayBackendError(msg) from exc
+    return ray
+
+
+def worker_died(ray: Any, exc: BaseException) -> bool:
+    """Whether ``exc`` (from ``ray.get``) says the task's worker or node died, the failures
+    an episode is retried for (a task that raised is not retried: it would raise again)."""
+    e = ray.exceptions
+    died = (
+        e.WorkerCrashedError,
+        e.NodeDiedError,
+        e.LocalRayletDiedError,
+        e.OwnerDiedError,
+        e.ObjectLostError,
+    )
+    return isinstance(exc, died)
+
+
+@dataclass
+class _Attempt:
+    """One submitted task: which episode of which grid cell, and how often it has been tried."""
+
+    run: CellRun
+    episode: EpisodeSpec
+    tries: int
+
+
+class RaySweep:
+    """Runs a :class:`experiments.sweep.Sweep`'s episodes as Ray tasks and hands each result
+    to the sweep, which writes every table as the local backend does."""
+
+    def __init__(self, sweep: Sweep, ray: Any, cpus_per_episode: float) -> None:
+        self.sweep = sweep
+        self.ray = ray
+        self.cpus_per_episode = cpus_per_episode
+        self.task = ray.remote(num_cpus=cpus_per_episode, max_retries=0)(run_shipped_episode)
+        self.datasets: dict[Path, tuple[str, Any]] = {}
+        self.pending: dict[Any, _Attempt] = {}
+        self.cpu_s = 0.0
+        self.nodes: set[str] = set()
+
+    def _dataset(self, folder: Path) -> tuple[str, Any]:
+        if folder not in self.datasets:
+            archive = pack(folder)
+            self.datasets[folder] = (dataset_key(archive), self.ray.put(archive))
+        return self.datasets[folder]
+
+    def submit(self, run: CellRun, episode: EpisodeSpec, tries: int = 0) -> None:
+        """Send one episode to the cluster."""
+        key, ref = self._dataset(run.options.dataset)
+        names = sorted(p.name for p in run.folder.iterdir() if p.is_file())
+        shipped = ShippedEpisode(
+            files=run_files(run.folder, names),
+            options=run.options,
+            index=episode.index,
+            seed=episode.seed,
+            dataset_key=key,
+        )
+        self.pending[self.task.remote(shipped, ref)] = _Attempt(run, episode, tries)
+
+    def collect(self, ref: Any) -> None:
+        """Take one finished task's result: unpack its folder, record its row, or retry it."""
+        attempt = self.pending.pop(ref)
+        run, episode = attempt.run, attempt.episode
+        try:
+            result: EpisodeResult = self.ray.get(ref)
+        except self.ray.exceptions.RayError as exc:
+            text = f"{run.cell.name} episode {episode.index} (seed {episode.seed})"
+            first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc)
+            if worker_died(self.ray, exc) and attempt.tries < RETRIES:
+                self.sweep.retried.append(f"{text}: {type(exc).__name__}: {first_line}")
+                self.submit(run, episode, attempt.tries + 1)
+                return
+            self.sweep.finished(run, episode, None, f"Ray task failed: {first_line}")
+            return
+        if result.archive:
+            unpack(result.archive, episode.folder)
+        self.cpu_s += result.cpu_s
+        self.nodes.add(result.node)
+        self.sweep.finished(run, episode, result.metrics, result.reason)
+
+    def execute(self) -> None:
+        """Submit every episode, collect results as they finish; Ctrl-C or SIGTERM cancels
+        the tasks (their workers are killed, and with them the episodes' processes)."""
+        from experiments.run import raise_interrupt
+
+        previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            for run, episode in self.sweep.jobs:
+                self.submit(run, episode)
+            while self.pending:
+                done, _ = self.ray.wait(list(self.pending), num_returns=1, timeout=0.5)
+                for ref in done:
+                    self.collect(ref)
+        except KeyboardInterrupt as exc:
+            self.sweep.stopped.append(f"interrupted ({exc.args[0] if exc.args else 'SIGINT'})")
+            self.sweep.cancel.set()
+            for ref in self.pending:
+                self.ray.cancel(ref, force=True)
+        finally:
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
+        self.sweep.backend = {
+            "name": "ray",
+            "cpus_per_episode": self.cpus_per_episode,
+            "nodes": sorted(self.nodes),
+            "episode_cpu_s": round(self.cpu_s, 3),
+        }
+
+
+def execute_on_ray(
+    sweep: Sweep, address: str | None, workers: int, cpus_per_episode: float | None
+) -> None:
+    """Run ``sweep`` on the Ray cluster at ``address`` (None: a Ray instance started here with
+    ``workers`` x the episode's CPUs), then shut the connection down."""
+    cpus = EPISODE_CPUS if cpus_per_episode is None else cpus_per_episode
+    if not cpus > 0:
+        msg = f"--cpus-per-episode = {cpus_per_episode}: must be > 0"
+        raise RayBackendError(msg)
+    # Ray's driver prints its cluster's news (a worker died, ...) to standard output, which
+    # belongs to the sweep's own output (``--json``): send it to standard error instead
+    with contextlib.redirect_stdout(sys.stderr):
+        ray = start(address, max(1, round(workers * cpus)))
+        try:
+            RaySweep(sweep, ray, cpus).execute()
+            sweep.backend["address"] = address or "local"
+        finally:
+            ray.shutdown()
+
+
+RAY_TEMP_PREFIX = "/tmp/cdwray-"
+"""Prefix of a local head's temp folder (Ray's socket paths must stay short)."""
+
+
+@contextlib.contextmanager
+def local_head(cpus: int, *, start_timeout_s: float = 60.0) -> Iterator[str]:
+    """A Ray head on this machine with ``cpus`` CPUs, for benchmarks and tests: its own temp
+    folder, a fresh authentication token, a free port. Yields its address; while it runs,
+    ``os.environ`` carries the token (Ray's clients, in this process or started from it, read
+    it there). At the end every process it started is killed and the environment restored."""
+    import secrets
+    import subprocess
+
+    temp = tempfile.mkdtemp(prefix=Path(RAY_TEMP_PREFIX).name, dir=Path(RAY_TEMP_PREFIX).parent)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = int(s.getsockname()[1])
+    token = {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
+    saved = {k: os.environ.get(k) for k in token}
+    os.environ.update(token)
+    head = subprocess.Popen(
+        [
+            str(Path(sys.executable).parent / "ray"),
+            "start",
+            "--head",
+            "--block",
+            f"--port={port}",
+            f"--num-cpus={cpus}",
+            "--include-dashboard=false",
+            "--disable-usage-stats",
+            f"--temp-dir={temp}",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    try:
+        _wait_for_port(head, port, start_timeout_s)
+        yield f"127.0.0.1:{port}"
+    finally:
+        _stop_head(head, temp)
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+        shutil.rmtree(temp, ignore_errors=True)
+
+
+def _wait_for_port(head: Any, port: int, timeout_s: float) -> None:
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        if head.poll() is not None:
+            err = head.stderr.read().decode(errors="replace") if head.stderr else ""
+            msg = f"ray start --head exited with {head.returncode}: {err.strip()[-500:]}"
+            raise RayBackendError(msg)
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        if time.monotonic() > deadline:
+            msg = f"the Ray head did not open port {port} in {timeout_s:.0f} s"
+            raise RayBackendError(msg)
+        time.sleep(0.5)
+
+
+def _stop_head(head: Any, temp: str) -> None:
+    """Stop the head's process group, then kill whatever still names its temp folder."""
+    import subprocess
+
+    try:
+        os.killpg(head.pid, signal.SIGTERM)
+        head.wait(timeout=20)
+    except (ProcessLookupError, subprocess.TimeoutExpired):
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(head.pid, signal.SIGKILL)
+        head.wait()
+    for pid_dir in Path("/proc").iterdir():
+        if not pid_dir.name.isdigit():
+            continue
+        try:
+            cmdline = (pid_dir / "cmdline").read_bytes().decode(errors="replace")
+        except OSError:
+            continue
+        if temp in cmdline:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(int(pid_dir.name), signal.SIGKILL)
