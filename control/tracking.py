@@ -6,6 +6,22 @@ one camera frame are assigned to tracks by the Hungarian method on the squared M
 distance, with a gate. Class is a confidence-weighted vote; yaw (modulo pi) and the footprint are
 smoothed exponentially. :meth:`Tracker.predict_to` extrapolates every track to the time a command
 will take effect, which compensates perception and actuation latency.
+
+The filter is written in closed form. The transition ``F``, the white-noise acceleration ``Q``
+(variance ``process_accel_std_mps2**2``), the measurement ``H = [I 0]`` and ``R = r I`` act on
+x and y alike and never couple them, and both axes start from the same covariance: the 4x4
+covariance is two equal 2x2 blocks ``[[p_pp, p_pv], [p_pv, p_vv]]`` (position, velocity) for
+all time, so one block per track is kept. The update is the Kalman update of that block, whose
+gain is ``K = [p_pp, p_pv] / (p_pp + r)``. This is the standard filter, not an approximation;
+it runs in Python floats, which at this size cost far less than numpy's per-call overhead.
+``tests/control/test_tracking.py`` checks it against the 4x4 matrix form.
+
+The assignment gates every (track, detection) pair with numpy in one pass. A pair that is the
+only candidate of both its track and its detection is matched directly; the Hungarian method
+(``scipy.optimize.linear_sum_assignment``) solves the rest, which has the same optimum as
+solving the whole matrix: gated-out pairs cost ``1e12``, so the optimum first maximises the
+number of gated pairs and then minimises their summed distance, and an isolated pair belongs to
+every such optimum.
 """
 
 from __future__ import annotations
@@ -16,9 +32,6 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from filterpy.common import Q_discrete_white_noise
-from filterpy.kalman import KalmanFilter
-from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
 from control.config import TrackingConfig
@@ -63,17 +76,17 @@ class Detection:
 
     def is_finite(self) -> bool:
         """True when every numeric field is a finite number (``base_z_m`` may be NaN)."""
-        values = (
-            self.stamp_s,
-            self.confidence,
-            self.x_m,
-            self.y_m,
-            self.yaw_rad,
-            self.length_m,
-            self.width_m,
-            self.height_m,
+        isfinite = math.isfinite
+        return (
+            isfinite(self.stamp_s)
+            and isfinite(self.confidence)
+            and isfinite(self.x_m)
+            and isfinite(self.y_m)
+            and isfinite(self.yaw_rad)
+            and isfinite(self.length_m)
+            and isfinite(self.width_m)
+            and isfinite(self.height_m)
         )
-        return all(math.isfinite(v) for v in values)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -112,7 +125,36 @@ class Track:
 
 
 class _TrackState:
-    """Mutable per-object state: the filter plus smoothed attributes and the class vote."""
+    """Mutable per-object state: the filter, the smoothed attributes and the class vote.
+
+    The filter's state is ``x_m, y_m, vx_mps, vy_mps`` and its covariance the 2x2 block
+    ``p_pp, p_pv, p_vv`` shared by both axes (see the module docstring), all at the tracker's
+    :attr:`~Tracker.last_stamp_s`. ``class_name``, ``class_confidence`` and ``yaw_rad`` are those
+    of :class:`Track`, refreshed whenever the vote or the yaw changes.
+    """
+
+    __slots__ = (
+        "base_z_m",
+        "class_confidence",
+        "class_name",
+        "confirmed",
+        "height_m",
+        "hits",
+        "last_update_s",
+        "length_m",
+        "p_pp",
+        "p_pv",
+        "p_vv",
+        "track_id",
+        "votes",
+        "vx_mps",
+        "vy_mps",
+        "width_m",
+        "x_m",
+        "y_m",
+        "yaw_rad",
+        "yaw_vec",
+    )
 
     def __init__(
         self,
@@ -122,47 +164,57 @@ class _TrackState:
         config: TrackingConfig,
     ) -> None:
         self.track_id = track_id
-        self.kf = KalmanFilter(dim_x=4, dim_z=2)
-        self.kf.x = np.array([detection.x_m, detection.y_m, *belt_velocity_mps], dtype=float)
-        r = config.position_std_m**2
-        v = config.initial_velocity_std_mps**2
-        self.kf.P = np.diag([r, r, v, v])
-        self.kf.H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
-        self.kf.R = np.eye(2) * r
-        self.stamp_s = detection.stamp_s
+        self.x_m = float(detection.x_m)
+        self.y_m = float(detection.y_m)
+        self.vx_mps = float(belt_velocity_mps[0])
+        self.vy_mps = float(belt_velocity_mps[1])
+        self.p_pp = config.position_std_m**2
+        self.p_pv = 0.0
+        self.p_vv = config.initial_velocity_std_mps**2
         self.last_update_s = detection.stamp_s
         self.hits = 1
         self.confirmed = config.confirm_hits <= 1
-        self.votes: dict[str, float] = {}
-        self.votes[detection.class_name] = self.votes.get(detection.class_name, 0.0) + max(
-            detection.confidence, 1e-6
-        )
+        self.votes: dict[str, float] = {detection.class_name: max(detection.confidence, 1e-6)}
         self.yaw_vec = (math.cos(2 * detection.yaw_rad), math.sin(2 * detection.yaw_rad))
         self.length_m = detection.length_m
         self.width_m = detection.width_m
         self.height_m = detection.height_m
         self.base_z_m = detection.base_z_m
+        self._refresh()
 
-    def predict(self, t_s: float, accel_var: float) -> None:
-        dt_s = t_s - self.stamp_s
-        if dt_s <= 0.0:
-            return
-        self.kf.F = np.array(
-            [
-                [1.0, 0.0, dt_s, 0.0],
-                [0.0, 1.0, 0.0, dt_s],
-                [0.0, 0.0, 1.0, 0.0],
-                [0.0, 0.0, 0.0, 1.0],
-            ]
-        )
-        self.kf.Q = Q_discrete_white_noise(
-            dim=2, dt=dt_s, var=accel_var, block_size=2, order_by_dim=False
-        )
-        self.kf.predict()
-        self.stamp_s = t_s
+    def _refresh(self) -> None:
+        """Recompute the class and yaw of :class:`Track` from the vote and the yaw vector."""
+        votes = self.votes
+        self.class_name = max(votes, key=votes.__getitem__)
+        self.class_confidence = votes[self.class_name] / sum(votes.values())
+        self.yaw_rad = wrap_half_turn(0.5 * math.atan2(self.yaw_vec[1], self.yaw_vec[0]))
 
-    def update(self, detection: Detection, config: TrackingConfig) -> None:
-        self.kf.update(np.array([detection.x_m, detection.y_m]))
+    def predict(self, dt_s: float, q_pp: float, q_pv: float, q_vv: float) -> None:
+        """Advance the filter by ``dt_s`` with process noise ``[[q_pp, q_pv], [q_pv, q_vv]]``:
+        ``P <- F P F^T + Q`` with ``F = [[1, dt], [0, 1]]`` on each axis."""
+        self.x_m += self.vx_mps * dt_s
+        self.y_m += self.vy_mps * dt_s
+        p_pv = self.p_pv + dt_s * self.p_vv
+        self.p_pp = self.p_pp + dt_s * self.p_pv + dt_s * p_pv + q_pp
+        self.p_pv = p_pv + q_pv
+        self.p_vv = self.p_vv + q_vv
+
+    def update(self, detection: Detection, config: TrackingConfig, r_m2: float) -> None:
+        """Correct the filter with the detected position (measurement variance ``r_m2`` per
+        axis) and fold the detection's class, yaw and footprint in."""
+        s_m2 = self.p_pp + r_m2
+        k_p = self.p_pp / s_m2
+        k_v = self.p_pv / s_m2
+        innovation_x = detection.x_m - self.x_m
+        innovation_y = detection.y_m - self.y_m
+        self.x_m += k_p * innovation_x
+        self.y_m += k_p * innovation_y
+        self.vx_mps += k_v * innovation_x
+        self.vy_mps += k_v * innovation_y
+        # P <- (I - K H) P, written so that the block stays symmetric.
+        self.p_vv -= k_v * self.p_pv
+        self.p_pp = k_p * r_m2
+        self.p_pv = k_v * r_m2
         self.last_update_s = detection.stamp_s
         self.hits += 1
         if self.hits >= config.confirm_hits:
@@ -180,20 +232,22 @@ class _TrackState:
             known = math.isfinite(self.base_z_m)
             base = detection.base_z_m
             self.base_z_m = (1 - a) * self.base_z_m + a * base if known else base
+        self._refresh()
 
-    def snapshot(self, x: NDArray[np.float64], p: NDArray[np.float64], t_s: float) -> Track:
-        class_name, weight = max(self.votes.items(), key=lambda item: item[1])
-        total = sum(self.votes.values())
-        position_std = math.sqrt(max(float(np.linalg.eigvalsh(p[:2, :2])[-1]), 0.0))
+    def snapshot(
+        self, stamp_s: float, position_m: tuple[float, float], position_var_m2: float
+    ) -> Track:
+        """The track at ``stamp_s``, at ``position_m`` with position variance
+        ``position_var_m2`` per axis."""
         return Track(
             track_id=self.track_id,
-            stamp_s=t_s,
-            class_name=class_name,
-            class_confidence=weight / total,
-            position_m=(float(x[0]), float(x[1])),
-            velocity_mps=(float(x[2]), float(x[3])),
-            position_std_m=position_std,
-            yaw_rad=wrap_half_turn(0.5 * math.atan2(self.yaw_vec[1], self.yaw_vec[0])),
+            stamp_s=stamp_s,
+            class_name=self.class_name,
+            class_confidence=self.class_confidence,
+            position_m=position_m,
+            velocity_mps=(self.vx_mps, self.vy_mps),
+            position_std_m=math.sqrt(max(position_var_m2, 0.0)),
+            yaw_rad=self.yaw_rad,
             length_m=self.length_m,
             width_m=self.width_m,
             height_m=self.height_m,
@@ -238,11 +292,13 @@ class Tracker:
         rejected as ``unknown_class``)."""
         self._config = config
         self._classes = frozenset(classes)
+        # Insertion order is increasing track id: new ids only grow.
         self._tracks: dict[int, _TrackState] = {}
         self._next_id = 1
         self._last_stamp_s = -math.inf
         self._rejected: Counter[str] = Counter()
         self._accel_var = config.process_accel_std_mps2**2
+        self._r_m2 = config.position_std_m**2
 
     @property
     def rejected(self) -> Mapping[str, int]:
@@ -251,7 +307,8 @@ class Tracker:
 
     @property
     def last_stamp_s(self) -> float:
-        """Stamp of the last accepted frame (``-inf`` before the first)."""
+        """Stamp of the last accepted frame (``-inf`` before the first); every track's filter
+        is at this time."""
         return self._last_stamp_s
 
     def _accept(self, detections: Iterable[Detection], stamp_s: float) -> list[Detection]:
@@ -290,81 +347,98 @@ class Tracker:
             else:
                 self._rejected["non_finite"] += len(accepted)
             return
+        if self._tracks:
+            dt_s = stamp_s - self._last_stamp_s
+            var = self._accel_var
+            q_pp, q_pv, q_vv = 0.25 * dt_s**4 * var, 0.5 * dt_s**3 * var, dt_s**2 * var
+            for state in self._tracks.values():
+                state.predict(dt_s, q_pp, q_pv, q_vv)
         self._last_stamp_s = stamp_s
         if not all(math.isfinite(v) for v in belt_velocity_mps):
             belt_velocity_mps = (0.0, 0.0)
-        for state in self._tracks.values():
-            state.predict(stamp_s, self._accel_var)
         unmatched = self._assign(accepted)
         for det in unmatched:
             self._tracks[self._next_id] = _TrackState(
                 self._next_id, det, belt_velocity_mps, self._config
             )
             self._next_id += 1
+        max_coast_s = self._config.max_coast_s
         dead = [
             tid
             for tid, state in self._tracks.items()
-            if stamp_s - state.last_update_s > self._config.max_coast_s
+            if stamp_s - state.last_update_s > max_coast_s
         ]
         for tid in dead:
             del self._tracks[tid]
 
     def _assign(self, detections: list[Detection]) -> list[Detection]:
-        """Update matched tracks in place; return the detections that matched no track."""
+        """Update matched tracks in place; return the detections that matched no track.
+
+        A pair is a candidate when its squared Mahalanobis distance is within the gate or its
+        distance within ``gate_min_m``; the matching minimises the summed squared Mahalanobis
+        distance of the candidates among those with the most pairs.
+        """
         states = list(self._tracks.values())
         if not states or not detections:
             return detections
-        cost = np.full((len(states), len(detections)), _GATE_INF)
-        gate_sq = self._config.gate_mahalanobis_sq
-        for i, state in enumerate(states):
-            kf = state.kf
-            s = kf.H @ kf.P @ kf.H.T + kf.R
-            s_inv = np.linalg.inv(s)
-            predicted = kf.x[:2]
-            for j, det in enumerate(detections):
-                innovation = np.array([det.x_m, det.y_m]) - predicted
-                d_sq = float(innovation @ s_inv @ innovation)
-                near = float(np.hypot(*innovation)) <= self._config.gate_min_m
-                if d_sq <= gate_sq or near:
-                    cost[i, j] = d_sq
-        rows, cols = linear_sum_assignment(cost)
+        config = self._config
+        innovation_x = (
+            np.array([d.x_m for d in detections]) - np.array([s.x_m for s in states])[:, None]
+        )
+        innovation_y = (
+            np.array([d.y_m for d in detections]) - np.array([s.y_m for s in states])[:, None]
+        )
+        s_m2 = np.array([s.p_pp for s in states]) + self._r_m2
+        d_sq = (innovation_x * innovation_x + innovation_y * innovation_y) / s_m2[:, None]
+        gated = (d_sq <= config.gate_mahalanobis_sq) | (
+            np.hypot(innovation_x, innovation_y) <= config.gate_min_m
+        )
+        gated &= d_sq < _GATE_INF
+        rows, cols = np.nonzero(gated)
+        if rows.size == 0:
+            return detections
+        # A candidate pair that is the only one of its track and of its detection is in every
+        # optimal matching; the Hungarian method solves the rest.
+        alone = (np.bincount(rows)[rows] == 1) & (np.bincount(cols)[cols] == 1)
+        pairs = list(zip(rows[alone].tolist(), cols[alone].tolist(), strict=True))
+        if not alone.all():
+            rest_rows = np.unique(rows[~alone])
+            rest_cols = np.unique(cols[~alone])
+            block = np.ix_(rest_rows, rest_cols)
+            cost = np.where(gated[block], d_sq[block], _GATE_INF)
+            for i, j in zip(*linear_sum_assignment(cost), strict=True):
+                if cost[i, j] < _GATE_INF:
+                    pairs.append((int(rest_rows[i]), int(rest_cols[j])))
         matched: set[int] = set()
-        for i, j in zip(rows, cols, strict=True):
-            if cost[i, j] >= _GATE_INF:
-                continue
-            states[i].update(detections[j], self._config)
-            matched.add(int(j))
+        for i, j in pairs:
+            states[i].update(detections[j], config, self._r_m2)
+            matched.add(j)
         return [det for j, det in enumerate(detections) if j not in matched]
 
     def predict_to(self, t_s: float, *, confirmed_only: bool = True) -> tuple[Track, ...]:
         """Every (confirmed) track extrapolated to ``t_s`` without changing the filters.
 
-        Tracks are returned in increasing ``track_id`` order.
+        Tracks are returned in increasing ``track_id`` order, stamped ``t_s`` (the time of the
+        last frame, unextrapolated, when ``t_s`` is earlier).
         """
+        dt_s = t_s - self._last_stamp_s
+        stamp_s = max(t_s, self._last_stamp_s)
         result: list[Track] = []
-        for tid in sorted(self._tracks):
-            state = self._tracks[tid]
-            if confirmed_only and not state.confirmed:
-                continue
-            dt_s = t_s - state.stamp_s
-            kf = state.kf
-            x = np.asarray(kf.x, dtype=float)
-            p = np.asarray(kf.P, dtype=float)
-            if dt_s > 0.0:
-                f = np.array(
-                    [
-                        [1.0, 0.0, dt_s, 0.0],
-                        [0.0, 1.0, 0.0, dt_s],
-                        [0.0, 0.0, 1.0, 0.0],
-                        [0.0, 0.0, 0.0, 1.0],
-                    ]
-                )
-                q = Q_discrete_white_noise(
-                    dim=2, dt=dt_s, var=self._accel_var, block_size=2, order_by_dim=False
-                )
-                x = f @ x
-                p = f @ p @ f.T + q
-            result.append(state.snapshot(x, p, max(t_s, state.stamp_s)))
+        if dt_s > 0.0:
+            # The position variance of F P F^T + Q (see _TrackState.predict).
+            q_pp = 0.25 * dt_s**4 * self._accel_var
+            for state in self._tracks.values():
+                if confirmed_only and not state.confirmed:
+                    continue
+                position_m = (state.x_m + state.vx_mps * dt_s, state.y_m + state.vy_mps * dt_s)
+                p_pv = state.p_pv + dt_s * state.p_vv
+                var_m2 = state.p_pp + dt_s * state.p_pv + dt_s * p_pv + q_pp
+                result.append(state.snapshot(stamp_s, position_m, var_m2))
+        else:
+            for state in self._tracks.values():
+                if confirmed_only and not state.confirmed:
+                    continue
+                result.append(state.snapshot(stamp_s, (state.x_m, state.y_m), state.p_pp))
         return tuple(result)
 
     def __len__(self) -> int:
