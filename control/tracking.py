@@ -276,6 +276,7 @@ def _normalised(detection: Detection) -> Detection:
         length_m=length,
         width_m=width,
         height_m=detection.height_m,
+        base_z_m=detection.base_z_m,
     )
 
 

@@ -61,6 +61,21 @@ def test_converges_on_noisy_constant_velocity(speed_mps: float) -> None:
     assert track.position_std_m < 0.0015
 
 
+@pytest.mark.parametrize("swapped", [False, True])
+def test_the_underside_the_camera_reports_reaches_the_track(swapped: bool) -> None:
+    """An object lying on another one: the camera's underside height (``base_z_m``) reaches
+    the track, whichever side it reports as length, so the grasp is planned on its top."""
+    rng = np.random.default_rng(3)
+    tracker = Tracker(TrackingConfig(), classes=CLASSES)
+    size = {"length_m": 0.05, "width_m": 0.15} if swapped else {}
+    for k in range(10):
+        t_s = k / RATE_HZ
+        detection = _detection(t_s, -0.5 + 0.4 * t_s, 0.45, rng, base_z_m=0.04, **size)
+        tracker.update(t_s, [detection], (0.4, 0.0))
+    (track,) = tracker.predict_to(10 / RATE_HZ)
+    assert track.base_z_m == pytest.approx(0.04)
+
+
 def test_identities_kept_through_crossing() -> None:
     rng = np.random.default_rng(3)
     tracker = Tracker(TrackingConfig(), classes=CLASSES)
