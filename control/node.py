@@ -46,7 +46,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -54,7 +54,6 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.publisher import Publisher
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from control.allocation import Claim, ClaimState
@@ -81,9 +80,11 @@ from interfaces.contract import (
     LOCKSTEP_TICK,
     PICK_TARGET,
     PRIORITIES,
+    Qos,
     Topic,
 )
-from interfaces.ros import message_class, msg_stamp_ns, msg_stamp_s, qos_profile, time_msg
+from interfaces.inproc import Bus, InprocLogger
+from interfaces.ros import RosWire, message_class, msg_stamp_ns, msg_stamp_s, time_msg
 
 FloatArray = NDArray[np.float64]
 
@@ -214,24 +215,36 @@ def _timing(values_s: Sequence[float]) -> dict[str, float | None]:
     }
 
 
-class ControllerNode(Node):
+class Wire(Protocol):
+    """What carries the controller's messages: DDS (:class:`interfaces.ros.RosWire` around the
+    rclpy node) or the in-process bus (:class:`interfaces.inproc.Bus`)."""
+
+    def create_publisher(self, msg_type: Any, name: str, qos: Qos) -> Any:
+        """A publisher (``publish``, ``topic_name``, ``get_subscription_count``)."""
+        ...
+
+    def create_subscription(
+        self, msg_type: Any, name: str, callback: Any, qos: Qos, *, raw: bool = False
+    ) -> Any:
+        """A subscription (``topic_name``, ``get_publisher_count``)."""
+        ...
+
+
+class ControllerEndpoint:
     """Tracks detections, picks objects and streams arm, tool and target commands for one
-    station, its topics under the station's namespace."""
+    station, its topics under the station's namespace, whatever carries the messages:
+    :class:`ControllerNode` over ROS 2, :class:`InprocController` on the in-process bus."""
 
-    def __init__(
-        self, config: ControllerConfig, *, lockstep: bool, node_name: str = "controller"
-    ) -> None:
-        """Create publishers and subscriptions; ``use_sim_time`` is always true.
+    _wire: Wire
+    _log: Any
 
-        The node lives in the station's namespace. Raises ``ControlError``
-        (``RobotModelError``, ``ControlConfigError``) when the robot model cannot be built.
+    def _setup(self, config: ControllerConfig, *, lockstep: bool) -> None:
+        """Create publishers and subscriptions on ``self._wire``.
+
+        Raises ``ControlError`` (``RobotModelError``, ``ControlConfigError``) when the robot
+        model cannot be built.
         """
         namespace = config.station.namespace
-        super().__init__(
-            node_name,
-            namespace=f"/{namespace}" if namespace else "",
-            parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)],
-        )
         self.config = config
         self.lockstep = lockstep
         self._kin = Kinematics.of_station(config.station, config.ik)
@@ -276,7 +289,7 @@ class ControllerNode(Node):
         self.pub_gripper = self._publisher(GRIPPER_COMMAND)
         self.pub_target = self._publisher(PICK_TARGET)
         self.pub_claim = self._publisher(CLAIM)
-        self.pub_ack: Publisher | None = None
+        self.pub_ack: Any = None
         self._outputs_matched = False
         self._counted_subs = self._subscribe_inputs()
 
@@ -291,33 +304,27 @@ class ControllerNode(Node):
         self._subscribe(PRIORITIES, self._on_priorities)
         if self.lockstep:
             counted.append(self._subscribe(LOCKSTEP_TICK, self._on_tick))
-            self._match_timer = self.create_timer(
-                0.005, self._on_match_timer, clock=Clock(clock_type=ClockType.STEADY_TIME)
-            )
         return counted
 
-    def _publisher(self, topic: Topic) -> Publisher:
-        return self.create_publisher(
-            message_class(topic),
-            topic.resolve(self.config.station.namespace),
-            qos_profile(topic.qos),
+    def _publisher(self, topic: Topic) -> Any:
+        return self._wire.create_publisher(
+            message_class(topic), topic.resolve(self.config.station.namespace), topic.qos
         )
 
     def _subscribe(self, topic: Topic, callback: Any) -> Any:
-        return self.create_subscription(
-            message_class(topic),
-            topic.resolve(self.config.station.namespace),
-            callback,
-            qos_profile(topic.qos),
+        return self._wire.create_subscription(
+            message_class(topic), topic.resolve(self.config.station.namespace), callback, topic.qos
         )
 
-    def _on_match_timer(self) -> None:
+    def try_match(self) -> bool:
+        """Lockstep: create the ack publisher once every counted subscription has matched a
+        publisher, and handle the ticks that waited for it; True once the outputs have matched
+        too (:meth:`outputs_matched`)."""
         if self.pub_ack is None and all(s.get_publisher_count() > 0 for s in self._counted_subs):
             self.pub_ack = self._publisher(LOCKSTEP_ACK)
         if self._ticks:
             self._drain_ticks()
-        if self._outputs_matched:
-            self._match_timer.cancel()
+        return self._outputs_matched
 
     def outputs_matched(self) -> bool:
         """Whether the ack publisher exists and it and every command topic has a matched
@@ -425,7 +432,10 @@ class ControllerNode(Node):
                 self._control(msg_stamp_s(tick.stamp))
             sent = self.n_commands - self._acked_commands
             self._acked_commands = self.n_commands
-            pub_ack.publish(message_class(LOCKSTEP_ACK)(tick=k, n_commands=sent))
+            next_tick = (k // self._steps_per_update + 1) * self._steps_per_update
+            pub_ack.publish(
+                message_class(LOCKSTEP_ACK)(tick=k, n_commands=sent, next_tick=next_tick)
+            )
             self.ticks_acked += 1
             self.tick_to_ack_wall_s.append(time.perf_counter() - arrived_wall_s)
 
@@ -568,11 +578,7 @@ class ControllerNode(Node):
         now_s = time.monotonic()
         if now_s - self._logged.get(kind, -math.inf) >= self.config.node.log_throttle_s:
             self._logged[kind] = now_s
-            self.get_logger().warning(text)
-
-    def sim_time_s(self) -> float:
-        """The node's clock (``/clock`` with ``use_sim_time``), seconds."""
-        return float(self.get_clock().now().nanoseconds) * 1e-9
+            self._log.warning(text)
 
     def summary(self) -> dict[str, Any]:
         """Counters and timing as a JSON-ready mapping (written on shutdown)."""
@@ -595,9 +601,58 @@ class ControllerNode(Node):
         }
 
 
+class ControllerNode(Node, ControllerEndpoint):
+    """A station's controller as a ROS 2 node, in the station's namespace."""
+
+    def __init__(
+        self, config: ControllerConfig, *, lockstep: bool, node_name: str = "controller"
+    ) -> None:
+        """Create publishers and subscriptions; ``use_sim_time`` is always true. Lockstep: a
+        steady-clock timer re-checks the matching every 5 ms until it holds
+        (:meth:`~ControllerEndpoint.try_match`)."""
+        namespace = config.station.namespace
+        Node.__init__(
+            self,
+            node_name,
+            namespace=f"/{namespace}" if namespace else "",
+            parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)],
+        )
+        self._wire = RosWire(self)
+        self._log = self.get_logger()
+        self._setup(config, lockstep=lockstep)
+        if lockstep:
+            self._match_timer = self.create_timer(
+                0.005, self._on_match_timer, clock=Clock(clock_type=ClockType.STEADY_TIME)
+            )
+
+    def _on_match_timer(self) -> None:
+        if self.try_match():
+            self._match_timer.cancel()
+
+    def sim_time_s(self) -> float:
+        """The node's clock (``/clock`` with ``use_sim_time``), seconds."""
+        return float(self.get_clock().now().nanoseconds) * 1e-9
+
+
+class InprocController(ControllerEndpoint):
+    """A station's controller on the in-process bus (``--transport inproc``), always in
+    lockstep: the same topics, messages and handshake as :class:`ControllerNode`, without DDS.
+    Call :meth:`~ControllerEndpoint.try_match` once the twin's endpoint exists."""
+
+    def __init__(self, config: ControllerConfig, bus: Bus) -> None:
+        """Create publishers and subscriptions on ``bus``."""
+        self._wire = bus
+        namespace = config.station.namespace
+        self._log = InprocLogger(f"{namespace}.controller" if namespace else "controller")
+        self._setup(config, lockstep=True)
+
+
 __all__ = [
+    "ControllerEndpoint",
     "ControllerNode",
+    "InprocController",
     "JointSample",
+    "Wire",
     "claim_msg",
     "claims_of",
     "detections_of",

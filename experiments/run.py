@@ -159,6 +159,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=None, help="first seed (override)")
     parser.add_argument("--duration", type=float, default=None, help="episode seconds")
     parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    add_transport_option(parser)
     parser.add_argument("--dataset", type=Path, default=None, help="meshgen output folder")
     parser.add_argument(
         "--cell", default=None, help="cell file: a shipped name or a path (override)"
@@ -166,6 +167,41 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/...)")
     parser.add_argument("--json", action="store_true", help="print the run's metrics as JSON")
     add_view_options(parser)
+
+
+def add_transport_option(parser: argparse.ArgumentParser) -> None:
+    """``--transport ros|inproc`` (run, sweep, bench sweep)."""
+    parser.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        default="ros",
+        help="ros: a twin node and a controller process per station over ROS 2 (default); "
+        "inproc: lockstep in one process, the same events and metrics, cheaper",
+    )
+
+
+TRANSPORTS = ("ros", "inproc")
+"""How an episode's twin and controllers talk: ROS 2 between processes, or the in-process
+bus (:mod:`experiments.inproc`; lockstep only)."""
+
+Transport = Literal["ros", "inproc"]
+
+
+def check_transport(transport: str, mode: str, restart_at_s: Sequence[float]) -> None:
+    """The in-process transport runs lockstep episodes without controller restarts (there is
+    no controller process to restart); raises ``CdwTwinError`` naming what does not fit."""
+    if transport != "inproc":
+        return
+    if mode != "lockstep":
+        msg = f"--transport inproc runs lockstep only, not --mode {mode}"
+        raise CdwTwinError(msg)
+    if restart_at_s:
+        msg = (
+            "--transport inproc: the scenario restarts controllers "
+            f"(faults.controller_restart_at_s {list(restart_at_s)}), which needs controller "
+            "processes: use --transport ros"
+        )
+        raise CdwTwinError(msg)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -176,6 +212,7 @@ class RunOptions:
     the meshgen output folder; ``cell_path`` the resolved cell file and ``stations`` its station
     names (one controller process each); ``restart_at_s`` the controller restart times (sim
     seconds); ``controller_params`` the controller's parameter file (None: its default);
+    ``transport`` how the twin and the controllers talk (:data:`TRANSPORTS`);
     ``foxglove_port`` (None: no live view), ``foxglove_host`` and ``gui`` are passed to the twin
     node, whose live view serves each episode in turn on the same port.
     """
@@ -192,6 +229,7 @@ class RunOptions:
     foxglove_port: int | None = None
     foxglove_host: str = "127.0.0.1"
     gui: bool = False
+    transport: Transport = "ros"
 
 
 @dataclass(frozen=True)
@@ -319,10 +357,20 @@ def _cli() -> list[str]:
 
 
 def twin_command(options: RunOptions, episode: EpisodeSpec) -> list[str]:
-    """The twin node's command line for one episode."""
+    """The twin node's command line for one episode; with the in-process transport, the
+    episode process's (:mod:`experiments.inproc`), which runs every station's controller
+    too."""
+    inproc: list[str] = []
+    if options.transport == "inproc":
+        if options.controller_params is not None:
+            inproc += ["--params-file", str(options.controller_params)]
+        for station in options.stations:
+            name = stats_name(controller_stem(station, options.stations), 0)
+            inproc += ["--controller-stats", f"{station}={episode.folder / name}"]
     return [
         *_cli(),
-        "twin-node",
+        "twin-node" if options.transport == "ros" else "episode",
+        *inproc,
         "--scenario",
         str(options.scenario_path),
         "--dataset",
@@ -473,9 +521,11 @@ class EpisodeProcesses:
         self.controllers: dict[str | None, subprocess.Popen[bytes]] = {}
 
     def start(self) -> subprocess.Popen[bytes]:
-        """Start the twin, then every station's controller; returns the twin."""
+        """Start the twin, then every station's controller (in the twin's process with the
+        in-process transport); returns the twin."""
         self.twin = self._start("twin", twin_command(self.options, self.episode))
-        self._start_controllers()
+        if self.options.transport == "ros":
+            self._start_controllers()
         return self.twin
 
     def _start(self, log_name: str, cmd: list[str]) -> subprocess.Popen[bytes]:
@@ -606,8 +656,8 @@ def run_episode(
         procs = EpisodeProcesses(options, episode, env, stack)
         try:
             twin = procs.start()
-            if options.restart_at_s or progress:
-                watch = ClockWatch(domain.domain_id)
+            if options.transport == "ros" and (options.restart_at_s or progress):
+                watch = ClockWatch(domain.domain_id)  # nothing on DDS with inproc
             exited = _supervise(procs, twin, watch, cancel, progress)
         finally:
             if watch is not None:
@@ -901,6 +951,7 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
     if args.episodes < 1:
         msg = f"--episodes = {args.episodes}: must be >= 1"
         raise CdwTwinError(msg)
+    transport: Transport = getattr(args, "transport", "ros")
     gui = bool(getattr(args, "gui", False))
     if gui:
         check_display()
@@ -919,6 +970,7 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
         prefill=None,
     )
     scenario, dataset, cell = build_scenario(node_args)
+    check_transport(transport, args.mode, scenario.faults.controller_restart_at_s)
     scenario_dir = args.scenario.parent if args.scenario is not None else None
     params = controller_params(scenario.controller, scenario_dir)
     stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -930,6 +982,7 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
         foxglove_port=foxglove,
         foxglove_host=host,
         gui=gui,
+        transport=transport,
     )
     extra: dict[str, Any] = {
         "scenario": scenario.name,
@@ -938,6 +991,7 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
         "cell": cell.name,
         "stations": list(options.stations),
         "mode": args.mode,
+        "transport": transport,
         "speed_mps": scenario.system.belt_speed_mps,
         "episodes_planned": args.episodes,
     }

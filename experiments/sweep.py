@@ -75,12 +75,12 @@ import yaml
 
 from experiments.stats import student_t_interval, wilson_interval
 from interfaces.dataclass_io import from_data
-from interfaces.errors import ConfigError
+from interfaces.errors import CdwTwinError, ConfigError
 from interfaces.fileio import write_atomic
 from interfaces.metrics import BY_NAME, METRICS, RATES, Scope, in_scope
 
 if TYPE_CHECKING:
-    from experiments.run import EpisodeSpec, RunOptions
+    from experiments.run import EpisodeSpec, RunOptions, Transport
     from interfaces.cell import Cell
     from twin.scenario import Scenario
 
@@ -487,6 +487,8 @@ def sweep_csv(cells: Sequence[dict[str, Any]]) -> str:
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the sweep options."""
+    from experiments.run import add_transport_option
+
     parser.add_argument("grid", type=Path, help="grid YAML (scenarios, seeds, overrides)")
     parser.add_argument("--workers", type=int, default=1, help="episodes at once (1)")
     parser.add_argument("--out", type=Path, default=None, help="sweep folder (default runs/...)")
@@ -494,6 +496,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--dataset", type=Path, default=None, help="meshgen output folder (overrides the grid's)"
     )
     parser.add_argument("--json", action="store_true", help="print the sweep summary as JSON")
+    add_transport_option(parser)
     parser.add_argument(
         "--backend",
         choices=("local", "ray"),
@@ -624,19 +627,30 @@ def load_grid(grid_path: Path, dataset: Path | None = None) -> Grid:
     return grid
 
 
-def prepare_sweep(grid_path: Path, out: Path, *, dataset: Path | None = None) -> list[CellRun]:
+def prepare_sweep(
+    grid_path: Path, out: Path, *, dataset: Path | None = None, transport: Transport = "ros"
+) -> list[CellRun]:
     """Check every grid cell (before anything is written), then write each one's run folder
     (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``, empty tables). ``dataset``
-    overrides the grid's (:func:`load_grid`)."""
-    from experiments.run import run_options, write_run_scenario, write_tables
+    overrides the grid's (:func:`load_grid`); every episode runs on ``transport``."""
+    from experiments.run import check_transport, run_options, write_run_scenario, write_tables
 
     checked = _check_cells(load_grid(grid_path, dataset), grid_path)
+    for c in checked:
+        try:
+            check_transport(transport, c.cell.mode, c.cell.scenario.faults.controller_restart_at_s)
+        except CdwTwinError as exc:
+            msg = f"{grid_path}: grid cell {c.cell.name}: {exc}"
+            raise ConfigError(msg) from exc
     out.mkdir(parents=True, exist_ok=True)
     runs = []
     for c in checked:
         folder = out / c.cell.name
         files = write_run_scenario(c.cell.scenario, c.params, c.station_cell, folder, c.own_dataset)
-        options = run_options(files, c.station_cell, c.cell.scenario, c.dataset, c.cell.mode)
+        options = dataclasses.replace(
+            run_options(files, c.station_cell, c.cell.scenario, c.dataset, c.cell.mode),
+            transport=transport,
+        )
         extra = {
             "scenario": c.cell.scenario.name,
             "scenario_path": str(c.cell.scenario_path),
@@ -644,6 +658,7 @@ def prepare_sweep(grid_path: Path, out: Path, *, dataset: Path | None = None) ->
             "cell": c.station_cell.name,
             "stations": list(options.stations),
             "mode": c.cell.mode,
+            "transport": transport,
             "speed_mps": c.cell.scenario.system.belt_speed_mps,
             "duration_s": c.cell.scenario.duration_s,
             "overrides": c.cell.overrides,
@@ -814,11 +829,13 @@ class Sweep:
 @dataclass(frozen=True)
 class Backend:
     """Where a sweep's episodes run: ``local`` (threads on this machine) or ``ray`` (tasks on
-    the Ray cluster at ``address``, or on one started here; see :mod:`experiments.ray_backend`)."""
+    the Ray cluster at ``address``, or on one started here; see :mod:`experiments.ray_backend`),
+    each episode on ``transport`` (ROS 2 processes, or one process: ``inproc``)."""
 
     name: Literal["local", "ray"] = "local"
     address: str | None = None
     cpus_per_episode: float | None = None
+    transport: Transport = "ros"
 
 
 def run_sweep(
@@ -840,7 +857,7 @@ def run_sweep(
         from experiments.ray_backend import import_ray
 
         import_ray()  # before anything is written
-    runs = prepare_sweep(grid_path, out, dataset=dataset)
+    runs = prepare_sweep(grid_path, out, dataset=dataset, transport=backend.transport)
     names = Grid.load(grid_path).headline
     sweep = Sweep(grid_path, out, workers, runs, quiet=quiet, headline=names)
     sweep.write_all(False)
@@ -860,7 +877,7 @@ def run(args: argparse.Namespace) -> int:
     if args.backend != "ray" and (args.address or args.cpus_per_episode is not None):
         msg = "--address and --cpus-per-episode need --backend ray"
         raise ConfigError(msg)
-    backend = Backend(args.backend, args.address, args.cpus_per_episode)
+    backend = Backend(args.backend, args.address, args.cpus_per_episode, args.transport)
     data, code = run_sweep(
         args.grid, out, args.workers, quiet=args.json, dataset=args.dataset, backend=backend
     )

@@ -48,3 +48,31 @@ def msg_stamp_ns(stamp: Any) -> int:
 def msg_stamp_s(stamp: Any) -> float:
     """Seconds of a ``builtin_interfaces/Time``."""
     return stamp_s(stamp.sec, stamp.nanosec)
+
+
+class RosWire:
+    """A node's endpoints on DDS, behind the surface :class:`interfaces.inproc.Bus` also has:
+    the twin's and the controller's node logic creates its publishers and subscriptions,
+    and counts the graph's endpoints through a wire, so the same logic runs over ROS 2
+    and in process (``--transport inproc``)."""
+
+    def __init__(self, node: Any) -> None:
+        self.node = node
+
+    def create_publisher(self, msg_type: Any, name: str, qos: Qos) -> Any:
+        """``Node.create_publisher`` with the contract's QoS."""
+        return self.node.create_publisher(msg_type, name, qos_profile(qos))
+
+    def create_subscription(
+        self, msg_type: Any, name: str, callback: Any, qos: Qos, *, raw: bool = False
+    ) -> Any:
+        """``Node.create_subscription`` with the contract's QoS (``raw``: CDR bytes)."""
+        return self.node.create_subscription(msg_type, name, callback, qos_profile(qos), raw=raw)
+
+    def count_publishers(self, name: str) -> int:
+        """Publishers of ``name`` in the ROS graph."""
+        return int(self.node.count_publishers(name))
+
+    def count_subscribers(self, name: str) -> int:
+        """Subscriptions of ``name`` in the ROS graph."""
+        return int(self.node.count_subscribers(name))

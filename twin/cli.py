@@ -44,6 +44,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("bench", "rtt"), "twin.bench_rtt", "round-trip latency to the twin node over ROS 2"),
     (("twin-node",), "twin.cmd_node", "run the twin as a ROS 2 node"),
     (("controller",), "control.cmd_controller", "run the controller as a ROS 2 node"),
+    (("episode",), "experiments.inproc", "one lockstep episode in one process (no ROS 2)"),
     (("run",), "experiments.run", "closed-loop episodes: twin node + controller processes"),
     (("sweep",), "experiments.sweep", "a grid of scenarios x seeds in parallel, aggregated"),
     (("bench", "sweep"), "experiments.bench_sweep", "sweep speed-up with 2 workers against 1"),

@@ -41,21 +41,22 @@ import dataclasses
 import os
 import signal
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from pathlib import Path
 from types import FrameType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from interfaces.errors import CdwTwinError
 from interfaces.lifecycle import STOP_SIGNALS, die_with_parent
 
 if TYPE_CHECKING:
     from interfaces.cell import Cell
+    from interfaces.inproc import Bus
     from twin.episode_log import EventLog
     from twin.live_view import LiveView
     from twin.recording import McapRecording
-    from twin.ros_node import Tap
+    from twin.ros_node import Tap, TwinEndpoint
     from twin.scenario import Scenario
     from twin.sim import Twin
 
@@ -306,8 +307,23 @@ def _window_on(twin: Twin) -> None:
     print("cdw-twin twin-node: PyBullet window open", flush=True)
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run one episode as a ROS 2 node; 130 when SIGINT or SIGTERM ended it early."""
+class InprocPeers(Protocol):
+    """The controllers of an in-process episode (``--transport inproc``), built by the caller
+    that knows them (:mod:`experiments.inproc`: the twin's package does not import the
+    controller's)."""
+
+    def start(self, bus: Bus, cell: Cell) -> None:
+        """Create every station's controller on ``bus`` and match it to the twin's endpoint."""
+        ...
+
+    def finish(self) -> None:
+        """The episode ended (or stopped): write each controller's stats."""
+        ...
+
+
+def run(args: argparse.Namespace, peers: InprocPeers | None = None) -> int:
+    """Run one episode as a ROS 2 node (with ``peers``: on the in-process bus, the controllers
+    in this process, lockstep); 130 when SIGINT or SIGTERM ended it early."""
     stop: list[int] = []
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
@@ -317,14 +333,16 @@ def run(args: argparse.Namespace) -> int:
     previous = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
     try:
         die_with_parent()
-        interrupted = _run_episode(args, stop)
+        interrupted = _run_episode(args, stop, peers)
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
     return 130 if interrupted else 0
 
 
-def _run_episode(args: argparse.Namespace, stop: list[int]) -> bool:
+def _run_episode(
+    args: argparse.Namespace, stop: list[int], peers: InprocPeers | None = None
+) -> bool:
     """The episode; True when a stop signal ended it before its duration."""
     from twin.episode_log import start_episode_folder, write_status
     from twin.perception import PerceptionConfig
@@ -359,7 +377,7 @@ def _run_episode(args: argparse.Namespace, stop: list[int]) -> bool:
                     event_sink=None if log is None else log.append,
                 )
             )
-            return _serve(args, twin, stop, log, view)
+            return _serve(args, twin, stop, log, view, peers)
     except BaseException as exc:
         if out is not None:
             write_status(out, "failed", error=f"{type(exc).__name__}: {exc}")
@@ -372,17 +390,20 @@ def _serve(
     stop: list[int],
     log: EventLog | None,
     view: LiveView | None = None,
+    peers: InprocPeers | None = None,
 ) -> bool:
     """Run the twin node until the episode ends or a stop signal; write the episode folder.
 
-    The node's tap feeds the recording and the live view, when there are."""
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
+    The node's tap feeds the recording and the live view, when there are. With ``peers`` the
+    twin's endpoint and the controllers share the in-process bus instead of ROS 2.
+
+    ``wall_seconds`` (and the real-time factor) count from the first step: the wait for the
+    controllers to start and match is ``match_wall_seconds``."""
     from rclpy.utilities import try_shutdown
 
     from interfaces.fileio import write_atomic
     from twin.episode_log import tracking_summary, write_status, write_summary
-    from twin.ros_node import TwinNode, make_executor, run_loop
+    from twin.ros_node import run_loop
 
     scenario = twin.scenario
     gui = getattr(args, "gui", False)
@@ -393,22 +414,27 @@ def _serve(
         _window_on(twin)
     recording = _open_recording(args.record, twin.cell)
     writers = [sink.write for sink in (recording, view) if sink is not None]
-    # rclpy's own SIGINT handler would shut the context down under the step loop
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = TwinNode(
-        twin,
-        lockstep=args.mode == "lockstep",
-        tap=fan_out(writers),
-    )
-    executor = make_executor()
-    executor.add_node(node)
+    node, executor, detach = _endpoint(args, twin, fan_out(writers), peers)
     wall0 = time.perf_counter()
+    stepping: list[float] = []
     interrupted = False
     try:
-        run_loop(node, StoppableExecutor(executor, stop), ack_timeout_s=args.ack_timeout)
+        run_loop(
+            node,
+            StoppableExecutor(executor, stop),
+            ack_timeout_s=args.ack_timeout,
+            on_first_step=lambda: stepping.append(time.perf_counter()),
+        )
     except EpisodeStopped:
         interrupted = True
-    wall = time.perf_counter() - wall0
+    finally:
+        if peers is not None:
+            detach()
+            executor.spin_once(timeout_sec=0.0)  # the last tick, as over ROS 2
+            peers.finish()
+    end = time.perf_counter()
+    first = stepping[0] if stepping else end
+    wall = end - first
     if recording is not None:
         recording.close()
     if log is not None:
@@ -422,6 +448,8 @@ def _serve(
         "complete": not interrupted,
         "sim_seconds": twin.time_s,
         "wall_seconds": wall,
+        "match_wall_seconds": first - wall0,
+        "transport": "ros" if peers is None else "inproc",
         "real_time_factor": twin.time_s / wall if wall > 0 else 0.0,
         "cell": twin.cell.name,
         "scores": twin.scores(),
@@ -457,5 +485,33 @@ def _serve(
             sim_seconds=twin.time_s,
         )
     node.destroy_node()
-    try_shutdown()
+    if peers is None:
+        try_shutdown()
     return interrupted
+
+
+def _endpoint(
+    args: argparse.Namespace, twin: Twin, tap: Tap | None, peers: InprocPeers | None
+) -> tuple[TwinEndpoint, Any, Callable[[], None]]:
+    """The twin's endpoint, what serves its callbacks, and what stops its reading at the end:
+    a ROS 2 node and its executor, or (``peers``) the in-process bus, with the controllers
+    created on it."""
+    if peers is None:
+        import rclpy
+        from rclpy.signals import SignalHandlerOptions
+
+        from twin.ros_node import TwinNode, make_executor
+
+        # rclpy's own SIGINT handler would shut the context down under the step loop
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        node = TwinNode(twin, lockstep=args.mode == "lockstep", tap=tap)
+        executor = make_executor()
+        executor.add_node(node)
+        return node, executor, lambda: None
+    from interfaces.inproc import Bus
+    from twin.ros_node import InprocTwin
+
+    bus = Bus()
+    inproc = InprocTwin(twin, bus, tap=tap)
+    peers.start(bus, twin.cell)
+    return inproc, bus, inproc.detach

@@ -41,7 +41,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Any
+from typing import Any, Protocol
 
 from cdw_interfaces.msg import (
     BeltState,
@@ -74,7 +74,8 @@ from interfaces import contract as c
 from interfaces.class_colours import class_rgb, dataset_class_rgb
 from interfaces.contract import Topic
 from interfaces.events import Event
-from interfaces.ros import message_class, msg_stamp_ns, msg_stamp_s, qos_profile, time_msg
+from interfaces.inproc import Bus, InprocLogger
+from interfaces.ros import RosWire, message_class, msg_stamp_ns, msg_stamp_s, time_msg
 from twin import scene as sc
 from twin.commands import (
     JointTarget,
@@ -113,7 +114,9 @@ class StationLink:
     """One station's side of the node: its topics, its controller's commands and acks.
 
     ``pending`` counts commands received and not yet consumed by an acknowledged tick;
-    ``alive``, ``acks_at_loss`` and ``lost_at_s`` follow the lockstep controller's losses.
+    ``next_tick`` is the controller's next control tick (no command comes for the ticks before
+    it, so they are not waited for); ``alive``, ``acks_at_loss`` and ``lost_at_s`` follow the
+    lockstep controller's losses.
     """
 
     station: Station
@@ -128,6 +131,7 @@ class StationLink:
     pending: int = 0
     acks: dict[int, int] = field(default_factory=dict)
     last_ack_tick: int = -1
+    next_tick: int = 0
     alive: bool = True
     acks_at_loss: int = -1
     lost_at_s: float | None = None
@@ -166,10 +170,45 @@ SCENE_TARGETS_HZ = 5.0
 """Rate of ``/scene/targets`` (each station's target and TCP path), sim time."""
 
 
-class TwinNode(Node):
-    """Publishes the twin's state and takes commands; :func:`run_loop` drives it."""
+class Wire(Protocol):
+    """What carries a node's messages: DDS (:class:`interfaces.ros.RosWire` around the rclpy
+    node) or the in-process bus (:class:`interfaces.inproc.Bus`)."""
 
-    def __init__(
+    def create_publisher(self, msg_type: Any, name: str, qos: c.Qos) -> Any:
+        """A publisher (``publish``, ``topic_name``, ``get_subscription_count``)."""
+        ...
+
+    def create_subscription(
+        self, msg_type: Any, name: str, callback: Any, qos: c.Qos, *, raw: bool = False
+    ) -> Any:
+        """A subscription (``topic_name``, ``get_publisher_count``)."""
+        ...
+
+    def count_publishers(self, name: str) -> int:
+        """Publishers of ``name``."""
+        ...
+
+    def count_subscribers(self, name: str) -> int:
+        """Subscriptions of ``name``."""
+        ...
+
+
+class TwinEndpoint:
+    """The twin's side of the contract, whatever carries the messages: publishes the twin's
+    state and takes commands; :func:`run_loop` drives it. :class:`TwinNode` runs it over ROS 2,
+    :class:`InprocTwin` on the in-process bus."""
+
+    _wire: Wire
+    _log: Any
+
+    def destroy_node(self) -> None:
+        """Release the endpoint (a ROS node's ``destroy_node``; nothing on the bus)."""
+
+    def _subscribed(self, subscription: Any) -> Any:
+        """A subscription just created (kept by endpoints that must drop theirs)."""
+        return subscription
+
+    def _setup(
         self,
         twin: Twin,
         *,
@@ -179,7 +218,7 @@ class TwinNode(Node):
         tap: Tap | None = None,
         scene: bool = True,
     ) -> None:
-        super().__init__("cdw_twin")
+        """Create every publisher and subscription of the cell's contract on ``self._wire``."""
         if not twin.stations:
             msg = "the twin has no episode: call reset() before building its node"
             raise RuntimeError(msg)
@@ -256,9 +295,13 @@ class TwinNode(Node):
 
     # -- the wire: every message in or out also goes to the tap (the episode's recording) ---
     def _publisher(self, topic: Topic, namespace: str = "") -> Any:
-        return self.create_publisher(
-            message_class(topic), topic.resolve(namespace), qos_profile(topic.qos)
+        return self._wire.create_publisher(
+            message_class(topic), topic.resolve(namespace), topic.qos
         )
+
+    _wire_takes_bytes = True
+    """Whether a message already serialized for the tap is published as those bytes (DDS), or
+    as the message (the in-process bus hands it over as it is)."""
 
     def _send(self, publisher: Any, msg: Any) -> None:
         """Publish ``msg``; with a tap, serialize it once and hand the same bytes to both."""
@@ -266,7 +309,7 @@ class TwinNode(Node):
             publisher.publish(msg)
             return
         data = serialize_message(msg)
-        publisher.publish(data)
+        publisher.publish(data if self._wire_takes_bytes else msg)
         self._tap(publisher.topic_name, data, time.time_ns())
 
     def _send_serialized(self, publisher: Any, data: bytes) -> None:
@@ -279,17 +322,28 @@ class TwinNode(Node):
         """Subscribe ``callback``; with a tap, take the serialized bytes and record them too."""
         msg_type = message_class(topic)
         name = topic.resolve(namespace)
-        qos = qos_profile(topic.qos)
+        qos = topic.qos
         tap = self._tap
         if tap is None:
-            return self.create_subscription(msg_type, name, callback, qos)
+            return self._subscribed(self._wire.create_subscription(msg_type, name, callback, qos))
+        if not self._wire_takes_bytes:
+
+            def on_msg(msg: Any) -> None:
+                data = serialize_message(msg)  # as received: a callback may change msg
+                received_ns = time.time_ns()
+                callback(msg)
+                tap(name, data, received_ns)
+
+            return self._subscribed(self._wire.create_subscription(msg_type, name, on_msg, qos))
 
         def on_bytes(data: bytes) -> None:
             received_ns = time.time_ns()
             callback(deserialize_message(data, msg_type))  # first: a ping's echo waits for nothing
             tap(name, data, received_ns)
 
-        return self.create_subscription(msg_type, name, on_bytes, qos, raw=True)
+        return self._subscribed(
+            self._wire.create_subscription(msg_type, name, on_bytes, qos, raw=True)
+        )
 
     # -- commands ---------------------------------------------------------------------------
     def _received(self, link: StationLink | None) -> None:
@@ -300,7 +354,7 @@ class TwinNode(Node):
     def _reject(self, topic: str, rejected: Rejected, link: StationLink | None = None) -> None:
         self.counters.rejected[rejected.reason] += 1
         text = f"{topic}: rejected ({rejected.reason}): {rejected.detail}"
-        self.get_logger().error(text)
+        self._log.error(text)
         self._send(self.pub_faults, String(data=text))
         self.twin.record_fault(rejected.reason, text, None if link is None else link.name)
         self.publish_new_events()
@@ -385,6 +439,7 @@ class TwinNode(Node):
         tick = int(msg.tick)
         link.acks[tick] = int(msg.n_commands)
         link.last_ack_tick = max(link.last_ack_tick, tick)
+        link.next_tick = max(link.next_tick, int(msg.next_tick))
 
     def _on_setpoint(self, msg: Float64) -> None:
         self._received(None)
@@ -438,13 +493,14 @@ class TwinNode(Node):
         if link.sub_ack.get_publisher_count() == 0:
             return False
         subs = (*link.command_subs, *self._cell_command_subs)
-        if any(s.get_publisher_count() < self.count_publishers(s.topic_name) for s in subs):
+        wire = self._wire
+        if any(s.get_publisher_count() < wire.count_publishers(s.topic_name) for s in subs):
             return False
         pubs = [self.pub_tick, link.pub_joints, self.pub_belt, self.pub_det]
         if len(self.links) > 1:  # a single station's controller need not read the board
             pubs.append(self.pub_claims)
         return all(
-            p.get_subscription_count() >= max(1, self.count_subscribers(p.topic_name)) for p in pubs
+            p.get_subscription_count() >= max(1, wire.count_subscribers(p.topic_name)) for p in pubs
         )
 
     # -- publishing -------------------------------------------------------------------------
@@ -708,6 +764,72 @@ class TwinNode(Node):
         self._send(self.pub_events, msg)
 
 
+class TwinNode(Node, TwinEndpoint):
+    """The twin's side of the contract as a ROS 2 node (``cdw_twin``)."""
+
+    def __init__(
+        self,
+        twin: Twin,
+        *,
+        lockstep: bool,
+        state_every: int = 4,
+        ground_truth_every: int = 8,
+        tap: Tap | None = None,
+        scene: bool = True,
+    ) -> None:
+        Node.__init__(self, "cdw_twin")
+        self._wire = RosWire(self)
+        self._log = self.get_logger()
+        self._setup(
+            twin,
+            lockstep=lockstep,
+            state_every=state_every,
+            ground_truth_every=ground_truth_every,
+            tap=tap,
+            scene=scene,
+        )
+
+
+class InprocTwin(TwinEndpoint):
+    """The twin's side of the contract on the in-process bus (``--transport inproc``): the same
+    topics, messages and lockstep handshake as :class:`TwinNode`, without DDS."""
+
+    def __init__(
+        self,
+        twin: Twin,
+        bus: Bus,
+        *,
+        state_every: int = 4,
+        ground_truth_every: int = 8,
+        tap: Tap | None = None,
+        scene: bool = True,
+    ) -> None:
+        self._wire = bus
+        self._log = InprocLogger("cdw_twin")
+        self._subscriptions: list[Any] = []
+        self._setup(
+            twin,
+            lockstep=True,
+            state_every=state_every,
+            ground_truth_every=ground_truth_every,
+            tap=tap,
+            scene=scene,
+        )
+
+    _wire_takes_bytes = False
+
+    def _subscribed(self, subscription: Any) -> Any:
+        self._subscriptions.append(subscription)
+        return subscription
+
+    def detach(self) -> None:
+        """Take nothing more from the bus (the episode ended: over ROS 2 the twin node stops
+        reading here), so the controllers can be handed the last tick on their own."""
+        for subscription in self._subscriptions:
+            subscription.destroy()
+        self._subscriptions.clear()
+
+
 def _marker_msg(marker: sc.SceneMarker, stamp: Any) -> Marker:
     """A ``visualization_msgs/Marker`` of a scene marker."""
     msg = Marker()
@@ -732,22 +854,27 @@ def _marker_msg(marker: sc.SceneMarker, stamp: Any) -> Marker:
 
 
 def run_loop(
-    node: TwinNode,
+    node: TwinEndpoint,
     executor: Any,
     *,
     realtime_factor: float = 1.0,
     ack_timeout_s: float = 2.0,
     start_timeout_s: float = 60.0,
+    on_first_step: Callable[[], None] | None = None,
 ) -> None:
-    """Step the twin until its scenario's duration, serving callbacks between steps."""
+    """Step the twin until its scenario's duration, serving callbacks between steps;
+    ``on_first_step`` is called as the first step's messages go out (in lockstep, once the
+    controllers have matched)."""
     twin = node.twin
     spin_once = executor.spin_once
     duration = twin.scenario.duration_s
     gc.collect()
     gc.freeze()  # everything built so far is long-lived: keep the collector off it
     if node.lockstep:
-        Lockstep(node, spin_once, ack_timeout_s, start_timeout_s).run(duration)
+        Lockstep(node, spin_once, ack_timeout_s, start_timeout_s).run(duration, on_first_step)
         return
+    if on_first_step is not None:
+        on_first_step()
     node.publish_step()
     period = twin.dt_s / realtime_factor
     next_wall = time.perf_counter()
@@ -773,7 +900,8 @@ RESYNC_WAIT_S = 10.0
 
 class Lockstep:
     """Step tick k+1 once every station's controller has acknowledged tick k with all its
-    commands.
+    commands; a tick before the next control tick a controller's last ack announced
+    (``StepAck.next_tick``) is not waited for: no command of it can come.
 
     A station's controller that does not answer within ``ack_timeout_s`` is lost: a
     ``controller_timeout`` fault naming the station is logged, and the cell goes on in lockstep
@@ -785,7 +913,7 @@ class Lockstep:
 
     def __init__(
         self,
-        node: TwinNode,
+        node: TwinEndpoint,
         spin_once: Callable[..., None],
         ack_timeout_s: float,
         start_timeout_s: float,
@@ -797,8 +925,9 @@ class Lockstep:
         self.start_timeout_s = start_timeout_s
         self.next_wall = 0.0
 
-    def run(self, duration: float) -> None:
-        """Match the controllers, then step until ``duration``."""
+    def run(self, duration: float, on_first_step: Callable[[], None] | None = None) -> None:
+        """Match the controllers, then step until ``duration`` (``on_first_step``: see
+        :func:`run_loop`)."""
         node, twin = self.node, self.twin
         deadline = time.monotonic() + self.start_timeout_s
         while not node.peers_matched() and time.monotonic() < deadline:
@@ -808,6 +937,8 @@ class Lockstep:
             if not link.alive:
                 link.lost_at_s = 0.0
                 self._fault(link, "no controller subscribed before the start")
+        if on_first_step is not None:
+            on_first_step()
         node.publish_step()
         self.next_wall = time.perf_counter()
         while twin.time_s < duration - 1e-9:
@@ -817,6 +948,9 @@ class Lockstep:
                 self._wait_for(tick, waits)
                 for link, wait_s in waits:
                     self._settle(link, tick, wait_s)
+            elif any(link.alive for link in node.links):
+                self.spin_once(timeout_sec=0.0)  # no controller sends commands for this tick
+                self.next_wall = time.perf_counter()
             else:
                 self.next_wall += twin.dt_s
                 _serve_until(self.spin_once, self.next_wall)
@@ -830,6 +964,8 @@ class Lockstep:
         waits = []
         for link in self.node.links:
             resync = not link.alive and link.last_ack_tick > link.acks_at_loss
+            if link.alive and tick < link.next_tick:
+                continue  # announced: no command of this controller before its next tick
             if link.alive or resync:
                 wait_s = self.ack_timeout_s
                 if tick == 0 or resync:
@@ -882,4 +1018,13 @@ def make_executor() -> Any:
     return EventsExecutor()
 
 
-__all__ = ["Lockstep", "StationLink", "TwinNode", "make_executor", "run_loop"]
+__all__ = [
+    "InprocTwin",
+    "Lockstep",
+    "StationLink",
+    "TwinEndpoint",
+    "TwinNode",
+    "Wire",
+    "make_executor",
+    "run_loop",
+]

@@ -123,7 +123,7 @@ def sample_messages(token: int) -> dict[str, Any]:
         "/rt/ping": cdw.Ping(
             seq=token, client_send_ns=-123_456_789_012, sim_step=2**40 + token, echo_ns=2**62
         ),
-        "/rt/step_ack": cdw.StepAck(tick=2**33 + token, n_commands=3),
+        "/rt/step_ack": cdw.StepAck(tick=2**33 + token, n_commands=3, next_tick=2**33 + token + 2),
         "/rt/joint_states": JointState(
             header=header,
             name=joints,

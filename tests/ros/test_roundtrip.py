@@ -34,7 +34,11 @@ def test_every_message_type_round_trips(
     assert ping["client_send_ns"] == -123_456_789_012
     assert ping["sim_step"] == 2**40 + token
     assert ping["echo_ns"] == 2**62
-    assert received["/rt/step_ack"][0] == {"tick": 2**33 + token, "n_commands": 3}
+    assert received["/rt/step_ack"][0] == {
+        "tick": 2**33 + token,
+        "n_commands": 3,
+        "next_tick": 2**33 + token + 2,
+    }
     detection = received["/rt/detection"][0]
     assert detection["confidence"] == 0.875
     assert math.isclose(detection["width_m"], 0.19)

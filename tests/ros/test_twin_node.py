@@ -78,6 +78,35 @@ def test_lockstep_is_deterministic_with_an_external_controller(
 
 
 @pytest.mark.usefixtures("require_interfaces")
+def test_ticks_before_the_announced_next_tick_are_not_waited_for(
+    ros_env_factory: Any,
+    builtin_meshes: Path,
+    tmp_path: Path,
+) -> None:
+    """A controller that acknowledges only every 4th tick, announcing the next one, drives the
+    twin through the same episode as one that acknowledges every tick: the same commands at
+    the same ticks give the same events and final state, and the twin never waits in vain."""
+    runs = []
+    for i, every in enumerate((1, 4)):
+        env = ros_env_factory()
+        out = tmp_path / f"run{i}"
+        twin = _twin(env, builtin_meshes, out, *LOCKSTEP)
+        peer = _peer(env, "lockstep", str(tmp_path / f"peer{i}.json"), "--every", str(every))
+        assert _finish(twin) == 0, twin.stderr.read().decode()[-3000:] if twin.stderr else ""
+        _finish(peer)
+        runs.append((out, json.loads((tmp_path / f"peer{i}.json").read_text())))
+    (a, peer_a), (b, peer_b) = runs
+    sa, sb = _summary(a), _summary(b)
+    assert sa["lockstep_timeouts"] == sb["lockstep_timeouts"] == 0
+    assert sa["received_commands"] == sb["received_commands"] == 20
+    assert peer_a["handled"] == peer_b["handled"] == 481
+    assert len(peer_a["acked"]) == 481
+    assert peer_b["acked"] == list(range(0, 481, 4))
+    assert sa["final_state"] == sb["final_state"]
+    assert (a / "events.jsonl").read_bytes() == (b / "events.jsonl").read_bytes()
+
+
+@pytest.mark.usefixtures("require_interfaces")
 def test_controller_crash_is_recorded_and_the_episode_completes(
     ros_env: dict[str, str],
     builtin_meshes: Path,

@@ -1,11 +1,13 @@
 """Peers for the twin node in the tests, run as separate processes.
 
 python twin_peer.py lockstep OUT.json [--die-after TICKS] [--namespace NS] [--claims]
+                                [--every N]
     a scripted lockstep controller of the station with namespace NS (default: the empty one):
     waits for each tick's messages (the claims board on /line/claims too), sends a
     deterministic arm command every 24 ticks, with --claims the claims of :data:`CLAIMS` on its
-    line/claim, acknowledges every tick; optionally dies (exit 3) after a tick. OUT.json has
-    the boards it received and the ticks that counted one
+    line/claim, acknowledges every tick (with --every N only every N-th, announcing the next
+    one in next_tick); optionally dies (exit 3) after a tick. OUT.json has the boards it
+    received, the ticks that counted one and the ticks it acknowledged
 python twin_peer.py listen OUT.json SECONDS  (counted from the first message)
     records what arrives on /conveyor/state (setpoints) and how many messages per topic
 """
@@ -60,9 +62,12 @@ def _claim(track_id: int, state: str) -> Claim:
     return msg
 
 
-def _answer(k: int, arm: Any, ack: Any, claim: Any = None) -> None:
+def _answer(k: int, arm: Any, ack: Any, claim: Any = None, every: int = 1) -> bool:
     """Tick k: an arm command every 24 ticks (and the scripted claim, with ``claim``), then the
-    ack counting them."""
+    ack counting them; with ``every`` > 1 only every ``every``-th tick is acknowledged, with
+    the next such tick as ``next_tick``. True when tick k was acknowledged."""
+    if every > 1 and k % every:
+        return False
     sent = 0
     if k % 24 == 0:
         t = k / 240.0
@@ -72,7 +77,8 @@ def _answer(k: int, arm: Any, ack: Any, claim: Any = None) -> None:
     if claim is not None and k in CLAIMS:
         claim.publish(_claim(*CLAIMS[k]))
         sent += 1
-    ack.publish(StepAck(tick=k, n_commands=sent))
+    ack.publish(StepAck(tick=k, n_commands=sent, next_tick=k + every if every > 1 else 0))
+    return True
 
 
 def _stuck(ticks: list[LockstepTick], pending: Counter[str]) -> dict[str, Any] | None:
@@ -93,7 +99,9 @@ def _board(msg: ClaimArray) -> dict[str, Any]:
     return {"stamp_ns": stamp_ns, "claims": claims}
 
 
-def lockstep(out: str, die_after: int | None, namespace: str = "", claims: bool = False) -> int:
+def lockstep(  # noqa: PLR0915 (one scripted loop)
+    out: str, die_after: int | None, namespace: str = "", claims: bool = False, every: int = 1
+) -> int:
     from interfaces.contract import ARM_TRAJECTORY, CLAIM, CLAIMS, JOINT_STATES, LOCKSTEP_ACK
 
     rclpy.init()
@@ -127,6 +135,7 @@ def lockstep(out: str, die_after: int | None, namespace: str = "", claims: bool 
     counted: list[list[int]] = []  # [tick, n_claims, last_claims_ns] of ticks counting a board
     ack = node.create_publisher(StepAck, LOCKSTEP_ACK.resolve(namespace), RELIABLE)
     handled = 0
+    acked: list[int] = []
     deadline = time.monotonic() + 60.0
     outputs = [p for p in (arm, ack, claim) if p is not None]
     while any(p.get_subscription_count() == 0 for p in outputs):
@@ -151,7 +160,8 @@ def lockstep(out: str, die_after: int | None, namespace: str = "", claims: bool 
                 pending[k] -= n
             if tick.n_claims:
                 counted.append([int(tick.tick), int(tick.n_claims), int(tick.last_claims_ns)])
-            _answer(int(tick.tick), arm, ack, claim)
+            if _answer(int(tick.tick), arm, ack, claim, every):
+                acked.append(int(tick.tick))
             handled += 1
             idle_since = time.monotonic()
             if die_after is not None and handled >= die_after:
@@ -166,6 +176,7 @@ def lockstep(out: str, die_after: int | None, namespace: str = "", claims: bool 
                 "stuck": _stuck(ticks, pending),
                 "boards": boards,
                 "counted": counted,
+                "acked": acked,
             },
             handle,
         )
@@ -209,6 +220,7 @@ if __name__ == "__main__":
         parser.add_argument("--die-after", type=int, default=None)
         parser.add_argument("--namespace", default="")
         parser.add_argument("--claims", action="store_true")
+        parser.add_argument("--every", type=int, default=1)
         args = parser.parse_args()
-        sys.exit(lockstep(args.out, args.die_after, args.namespace, args.claims))
+        sys.exit(lockstep(args.out, args.die_after, args.namespace, args.claims, args.every))
     sys.exit(listen(sys.argv[2], float(sys.argv[3])))

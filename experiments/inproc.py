@@ -1,0 +1,126 @@
+"""``cdw-twin episode``: one lockstep episode in one process, the in-process transport.
+
+``cdw-twin run --transport inproc`` (and ``sweep``) start this instead of a twin node and one
+controller process per station: the twin's endpoint (:class:`twin.ros_node.InprocTwin`) and
+every station's controller (:class:`control.node.InprocController`) share the in-process bus
+(:mod:`interfaces.inproc`), fed the same messages at the same ticks as over ROS 2 in lockstep,
+so the events and metrics are the same, bit for bit, without DDS, its threads and the process
+switches. The options are the twin node's (:mod:`twin.cmd_node`: ``--scenario``, ``--cell``,
+``--dataset``, ``--seed``, ``--out``, ``--record``, ...) and the controllers'
+``--params-file``; ``--controller-stats STATION=PATH`` names each station's stats file
+(default: ``controller.json`` or ``controller-<station>.json`` next to ``--out``). Lockstep
+only: realtime and a real cell need ROS 2 (``cdw-twin twin-node``, ``cdw-twin controller``).
+
+Example::
+
+    cdw-twin episode --scenario experiments/scenarios/line.yaml --seed 1 --out runs/ep/twin
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from interfaces.errors import CdwTwinError
+from interfaces.fileio import write_atomic
+
+if TYPE_CHECKING:
+    from control.node import InprocController
+    from interfaces.cell import Cell
+    from interfaces.inproc import Bus
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """The twin node's options, the controllers' parameter file and their stats files."""
+    from control.cmd_controller import DEFAULT_PARAMS
+    from twin.cmd_node import configure as configure_node
+
+    configure_node(parser)
+    parser.set_defaults(mode="lockstep")
+    parser.add_argument(
+        "--params-file",
+        type=Path,
+        default=DEFAULT_PARAMS,
+        help="controller tuning, ROS 2 parameter YAML (default: control/config/default.yaml)",
+    )
+    parser.add_argument(
+        "--controller-stats",
+        action="append",
+        default=[],
+        metavar="STATION=PATH",
+        help="write this station's controller stats there (repeatable)",
+    )
+
+
+def stats_paths(values: list[str], cell: Cell, out: Path | None) -> dict[str, Path | None]:
+    """Each station's stats file: from ``STATION=PATH`` values, else next to ``out`` (the
+    names ``cdw-twin run`` gives: ``controller.json`` with one station,
+    ``controller-<station>.json`` with several), else none."""
+    names = [s.name for s in cell.stations]
+    given: dict[str, Path] = {}
+    for value in values:
+        station, sep, path = value.partition("=")
+        if not sep or not path:
+            msg = f"--controller-stats {value!r}: expected STATION=PATH"
+            raise CdwTwinError(msg)
+        if station not in names:
+            msg = f"--controller-stats {value!r}: no station {station!r} in the cell {names}"
+            raise CdwTwinError(msg)
+        given[station] = Path(path)
+    paths: dict[str, Path | None] = {}
+    for name in names:
+        default = None
+        if out is not None:
+            stem = "controller" if len(names) == 1 else f"controller-{name}"
+            default = out.parent / f"{stem}.json"
+        paths[name] = given.get(name, default)
+    return paths
+
+
+class Controllers:
+    """Every station's controller on the bus (:class:`twin.cmd_node.InprocPeers`)."""
+
+    def __init__(self, params_file: Path, stats: list[str], out: Path | None) -> None:
+        self._params_file = params_file
+        self._stats = stats
+        self._out = out
+        self._controllers: list[tuple[InprocController, Path | None]] = []
+
+    def start(self, bus: Bus, cell: Cell) -> None:
+        """Load each station's controller parameters and create its controller; the twin's
+        endpoint exists, so each matches at once."""
+        from control.config import load_config
+        from control.node import InprocController
+
+        paths = stats_paths(self._stats, cell, self._out)
+        for station in cell.stations:
+            config = load_config(self._params_file, cell=cell, station=station.name)
+            controller = InprocController(config, bus)
+            self._controllers.append((controller, paths[station.name]))
+        for controller, _ in self._controllers:
+            controller.try_match()
+            if not controller.outputs_matched():
+                msg = f"station {controller.config.station.name!r}: its controller did not match"
+                raise CdwTwinError(msg)
+
+    def finish(self) -> None:
+        """Write each controller's stats (JSON, atomically)."""
+        for controller, path in self._controllers:
+            if path is not None:
+                text = json.dumps(controller.summary(), indent=2, sort_keys=True, allow_nan=False)
+                write_atomic(path, text + "\n")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the episode; the twin node's exit statuses (130 when stopped by a signal)."""
+    from twin.cmd_node import run as run_node
+
+    if args.mode != "lockstep":
+        msg = f"--mode {args.mode}: the in-process transport runs lockstep only; use twin-node"
+        raise CdwTwinError(msg)
+    return run_node(args, peers=Controllers(args.params_file, args.controller_stats, args.out))
+
+
+__all__ = ["Controllers", "configure", "run", "stats_paths"]

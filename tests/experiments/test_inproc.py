@@ -1,0 +1,122 @@
+"""``--transport inproc``: the same lockstep episode as over ROS 2, bit for bit.
+
+Each case runs one scenario, seed and cell twice through ``cdw-twin run``, once as a twin node
+and one controller process per station over ROS 2 and once in one process on the in-process
+bus, and compares what the episode produced: every event line, the final state of every body,
+every metric of ``episodes.json`` but the wall-clock ones, and each controller's pick
+statistics.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+WALL_CLOCK_METRICS = {"real_time_factor"}
+"""The metrics of an episode that measure the machine, not the episode."""
+
+DEFAULT_CELL = "name: same\nduration_s: 10.0\nsystem: {prefill_m: 1.5, belt_speed_mps: 0.4}\n"
+TWO_STATIONS = (
+    "name: same_line\ncell: two_pandas\nduration_s: 12.0\n"
+    "system: {prefill_m: 3.0, belt_speed_mps: 0.3}\n"
+)
+
+
+def _needs_ros() -> None:
+    for module in ("rclpy", "cdw_interfaces"):
+        if importlib.util.find_spec(module) is None:
+            pytest.skip(f"{module} is not installed in this venv")
+
+
+def _json(path: Path) -> Any:
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def _run(scenario: Path, dataset: Path, out: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [
+            *(sys.executable, "-m", "twin.cli", "run", str(scenario)),
+            *("--dataset", str(dataset), "--out", str(out), *args),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+
+
+def _episode(scenario: Path, dataset: Path, out: Path, seed: int, transport: str) -> Path:
+    done = _run(scenario, dataset, out, "--seed", str(seed), "--transport", transport)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return out / "ep000"
+
+
+@pytest.mark.parametrize(
+    ("text", "seed"),
+    [(DEFAULT_CELL, 1), (DEFAULT_CELL, 2), (TWO_STATIONS, 3)],
+    ids=["default-seed1", "default-seed2", "two_pandas-seed3"],
+)
+def test_inproc_gives_the_ros_episode_bit_for_bit(
+    builtin_meshes: Path, tmp_path: Path, text: str, seed: int
+) -> None:
+    _needs_ros()
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(text, encoding="utf-8")
+    ros = _episode(scenario, builtin_meshes, tmp_path / "ros", seed, "ros")
+    inproc = _episode(scenario, builtin_meshes, tmp_path / "inproc", seed, "inproc")
+
+    events = (ros / "twin" / "events.jsonl").read_bytes()
+    assert events == (inproc / "twin" / "events.jsonl").read_bytes()
+    ros_summary, inproc_summary = (
+        _json(ros / "twin" / "summary.json"),
+        _json(inproc / "twin" / "summary.json"),
+    )
+    assert (ros_summary["transport"], inproc_summary["transport"]) == ("ros", "inproc")
+    assert ros_summary["final_state"] == inproc_summary["final_state"]
+    assert ros_summary["scores"] == inproc_summary["scores"]
+
+    (ros_row,) = _json(tmp_path / "ros" / "episodes.json")
+    (inproc_row,) = _json(tmp_path / "inproc" / "episodes.json")
+    assert ros_row.keys() == inproc_row.keys()
+    differ = {k for k in ros_row if ros_row[k] != inproc_row[k]}
+    assert differ <= WALL_CLOCK_METRICS, {k: (ros_row[k], inproc_row[k]) for k in differ}
+    assert ros_row["picked"] > 0, "an episode without a pick compares too little"
+
+    stats = sorted(p.name for p in ros.glob("controller*.json"))
+    assert stats == sorted(p.name for p in inproc.glob("controller*.json"))
+    for name in stats:
+        ros_stats, inproc_stats = _json(ros / name), _json(inproc / name)
+        assert ros_stats["pick"] == inproc_stats["pick"], name
+        assert ros_stats["received"] == inproc_stats["received"], name
+        assert ros_stats["published"] == inproc_stats["published"], name
+        assert ros_stats["ticks_acked"] == inproc_stats["ticks_acked"], name
+
+
+def test_inproc_refuses_realtime_and_controller_restarts(
+    builtin_meshes: Path, tmp_path: Path
+) -> None:
+    scenario = tmp_path / "restart.yaml"
+    scenario.write_text(
+        "name: restart\nduration_s: 4.0\nfaults: {controller_restart_at_s: [2.0]}\n",
+        encoding="utf-8",
+    )
+    done = _run(scenario, builtin_meshes, tmp_path / "a", "--transport", "inproc")
+    assert done.returncode == 2
+    assert "controller_restart_at_s [2.0]" in done.stderr
+    assert "--transport ros" in done.stderr
+    assert not (tmp_path / "a").exists()
+
+    plain = tmp_path / "plain.yaml"
+    plain.write_text("name: plain\nduration_s: 2.0\n", encoding="utf-8")
+    done = _run(
+        plain, builtin_meshes, tmp_path / "b", "--transport", "inproc", "--mode", "realtime"
+    )
+    assert done.returncode == 2
+    assert "--transport inproc runs lockstep only, not --mode realtime" in done.stderr
+    assert not (tmp_path / "b").exists()
