@@ -1,29 +1,39 @@
-"""``cdw-twin bench sweep --json``: the sweep's speed-up with 2 workers against 1.
+"""``cdw-twin bench sweep --json``: what a lockstep episode costs, on each transport, and the
+sweep's speed-up with 2 workers against 1.
 
-Runs the same grid (the default scenario, ``--episodes`` lockstep episodes of ``--duration``
-simulated seconds, built-in dataset) with 1 worker and then with ``--workers`` (2), and repeats
-that pair of passes ``--rounds`` times. ``speedup`` is the best (shortest) 1-worker wall time
-over the best ``--workers`` wall time, the statistic of ``bench meshgen``: the shortest run is
-the one the rest of the machine disturbed least. Every pass's wall and CPU seconds, each
-round's own ratio (``speedup_rounds``) and their median are printed next to it.
+Runs the same grid (the default scenario at 0.4 m/s, ``--episodes`` lockstep episodes of
+``--duration`` simulated seconds, built-in dataset) on each transport of ``--transports``
+(``ros``: a twin node and a controller process over ROS 2; ``inproc``: one process, see
+:mod:`experiments.inproc`), each with 1 worker and then with ``--workers`` (2), and repeats
+that set of passes ``--rounds`` times, interleaved (round r: ros 1 worker, ros N, inproc 1,
+inproc N). Per transport:
 
-Why rounds and a best-of: on a shared virtual machine the speed of one core drifts within
-minutes, so two long passes timed minutes apart compare two machines as much as two worker
-counts. Interleaving the passes and keeping each one's best compares them at the machine's
-normal speed. ``machine_speedup`` calibrates the machine after each round: the speed-up of
-``--workers`` copies of a fixed pure-Python CPU loop run as separate processes against one copy
-(median of three; the median over rounds is printed). No sweep can scale better than that.
+- ``episodes_per_core_hour``: 3600 x episodes / the CPU seconds (user + system) of the pass,
+  the runner's own and every process it started, best (lowest) 1-worker pass: the cost of an
+  episode, whatever the parallelism;
+- ``real_time_factor``: each episode's closed-loop real-time factor (sim time over the wall
+  time of its stepping loop, the twin's summary), best over the 1-worker passes' episodes;
+- ``speedup``: the best 1-worker wall time over the best ``--workers`` wall time (the statistic
+  of ``bench meshgen``: the shortest run is the one the rest of the machine disturbed least),
+  with every round's own ratio and their median.
 
-The ceiling for this workload is below 2 even on an ideal machine: one lockstep episode keeps
-more than one core busy (twin and controller alternate, but Fast DDS's receive and event
-threads and the first seconds, in which the processes start side by side, run in parallel),
-and the parallel pass has only 2. Episodes last as long as the default scenario's (60 s)
-unless ``--duration`` says otherwise; short ones measure start-up more than sweeping. About 10
-minutes with the defaults; measurements are in ``docs/benchmarks.md``.
+``inproc_over_ros`` gives the ratios of the first two (when both transports ran).
 
-Lockstep is the benchmarked mode: it runs as fast as the CPU allows (twin and controller are two
-busy processes), so the figure measures throughput. Realtime episodes are paced by the wall clock
-and would "parallelise" perfectly whatever the cost, which says nothing about throughput.
+Why rounds, interleaving and a best-of: on a shared virtual machine the speed of one core
+drifts within minutes, so two long passes timed minutes apart compare two machines as much as
+two configurations. ``machine_speedup`` calibrates the machine after each round: the speed-up
+of ``--workers`` copies of a fixed pure-Python CPU loop run as separate processes against one
+copy (median of three; the median over rounds is printed). No sweep can scale better than that.
+Over ROS 2 one lockstep episode keeps more than one core busy at times (twin and controller
+alternate, but Fast DDS's threads and the start, in which the processes start side by side,
+run in parallel), so its parallel pass has less than 2 cores to gain; an in-process episode is
+one single-threaded process. Episodes last as long as the default scenario's (60 s) unless
+``--duration`` says otherwise; short ones measure start-up more than sweeping. Measurements are
+in ``docs/benchmarks.md``.
+
+Lockstep is the benchmarked mode: it runs as fast as the CPU allows, so the figure measures
+throughput. Realtime episodes are paced by the wall clock and would "parallelise" perfectly
+whatever the cost, which says nothing about throughput.
 """
 
 from __future__ import annotations
@@ -34,11 +44,16 @@ import os
 import shutil
 import tempfile
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 from interfaces.errors import CdwTwinError
 from interfaces.fileio import write_atomic
 from twin.scenario import Scenario
+
+if TYPE_CHECKING:
+    from experiments.run import Transport
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -56,6 +71,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="sim seconds each (the default scenario's: %(default)s)",
     )
     parser.add_argument("--workers", type=int, default=2, help="workers of the parallel pass")
+    parser.add_argument(
+        "--transports",
+        default="ros,inproc",
+        help="comma-separated transports to measure (ros,inproc)",
+    )
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
 
 
@@ -74,8 +94,9 @@ def bench_grid(folder: Path, episodes: int, duration_s: float) -> Path:
 
 
 STATISTIC = (
-    "speedup = min(wall_s_1 over rounds) / min(wall_s_N over rounds); each round runs the "
-    "1-worker pass, then the N-worker pass, then the machine calibration"
+    "per transport: speedup = min(wall_s_1 over rounds) / min(wall_s_N over rounds); "
+    "episodes_per_core_hour = 3600 * episodes / min(cpu_s_1 over rounds); each round runs, per "
+    "transport, the 1-worker pass, then the N-worker pass; then the machine calibration"
 )
 
 _CALIBRATION = "x = 0\nfor i in range(4_000_000):\n    x += i * i % 7\n"
@@ -100,11 +121,81 @@ def machine_speedup(workers: int, repeats: int = 3) -> float:
     return statistics.median(ratios)
 
 
+def _transports(value: str) -> tuple[Transport, ...]:
+    from experiments.run import TRANSPORTS
+
+    names = tuple(v.strip() for v in value.split(",") if v.strip())
+    bad = [n for n in names if n not in TRANSPORTS]
+    if not names or bad or len(set(names)) != len(names):
+        msg = f"--transports {value!r}: a comma-separated list of distinct {', '.join(TRANSPORTS)}"
+        raise CdwTwinError(msg)
+    return cast("tuple[Transport, ...]", names)
+
+
+@dataclass
+class PassLog:
+    """Every pass of one transport: wall and CPU seconds, load, episode real-time factors."""
+
+    walls: dict[int, list[float]] = field(default_factory=dict)
+    cpus: dict[int, list[float]] = field(default_factory=dict)
+    loads: dict[int, list[float]] = field(default_factory=dict)
+    rtfs: list[float] = field(default_factory=list)
+
+    def add(self, workers: int, wall_s: float, cpu_s: float, load: float) -> None:
+        """One pass of ``workers`` workers."""
+        self.walls.setdefault(workers, []).append(round(wall_s, 3))
+        self.cpus.setdefault(workers, []).append(round(cpu_s, 2))
+        self.loads.setdefault(workers, []).append(round(load, 2))
+
+    def result(self, n: int, episodes: int) -> dict[str, Any]:
+        """The transport's figures (see the module docstring)."""
+        import statistics
+
+        best_1, best_n = min(self.walls[1]), min(self.walls[n])
+        per_round = [round(a / b, 3) for a, b in zip(self.walls[1], self.walls[n], strict=True)]
+        return {
+            "episodes_per_core_hour": round(3600.0 * episodes / min(self.cpus[1]), 2),
+            "real_time_factor": round(max(self.rtfs), 3),
+            "real_time_factor_median": round(statistics.median(self.rtfs), 3),
+            "real_time_factors": self.rtfs,
+            "speedup": round(best_1 / best_n, 3),
+            "speedup_rounds": per_round,
+            "speedup_median": round(statistics.median(per_round), 3),
+            "wall_s_1": best_1,
+            f"wall_s_{n}": best_n,
+            "wall_s_1_rounds": self.walls[1],
+            f"wall_s_{n}_rounds": self.walls[n],
+            "cpu_s_1_rounds": self.cpus[1],
+            f"cpu_s_{n}_rounds": self.cpus[n],
+            "loadavg_1m_1_rounds": self.loads[1],
+            f"loadavg_1m_{n}_rounds": self.loads[n],
+        }
+
+
+def _episode_rtfs(out: Path) -> list[float]:
+    """The closed-loop real-time factor of every episode of a finished sweep folder."""
+    return [
+        round(float(json.loads(path.read_text(encoding="utf-8"))["real_time_factor"]), 3)
+        for path in sorted(out.glob("*/ep*/twin/summary.json"))
+    ]
+
+
+def _cpu_s(before: os.times_result, after: os.times_result) -> float:
+    """CPU seconds between two ``os.times()``: this process's and its finished children's."""
+    return float(
+        sum(
+            getattr(after, k) - getattr(before, k)
+            for k in ("user", "system", "children_user", "children_system")
+        )
+    )
+
+
 def run(args: argparse.Namespace) -> int:
-    """Time the grid with 1 worker, then with ``--workers``, ``--rounds`` times over."""
+    """Time the grid with 1 worker, then with ``--workers``, on every transport, ``--rounds``
+    times over, interleaved."""
     import statistics
 
-    from experiments.sweep import run_sweep
+    from experiments.sweep import Backend, run_sweep
     from twin.builtin import builtin_dataset
 
     if args.rounds < 1 or args.episodes < 1 or args.workers < 2:
@@ -113,56 +204,52 @@ def run(args: argparse.Namespace) -> int:
             "need rounds >= 1, episodes >= 1 and workers >= 2"
         )
         raise CdwTwinError(msg)
+    transports = _transports(args.transports)
     builtin_dataset()  # mesh the sample once, outside the timed passes
-    passes = (1, args.workers)
-    walls: dict[int, list[float]] = {w: [] for w in passes}
-    cpus: dict[int, list[float]] = {w: [] for w in passes}
-    loads: dict[int, list[float]] = {w: [] for w in passes}
+    n = args.workers
+    logs = {t: PassLog() for t in transports}
     ceilings: list[float] = []
     with tempfile.TemporaryDirectory(prefix="cdw-bench-sweep-") as tmp:
         grid = bench_grid(Path(tmp), args.episodes, args.duration)
         for r in range(args.rounds):
-            for workers in passes:
-                loads[workers].append(round(os.getloadavg()[0], 2))
-                t0, c0 = time.perf_counter(), os.times()
-                out = Path(tmp) / f"r{r}w{workers}"
-                data, code = run_sweep(grid, out, workers, quiet=True)
-                walls[workers].append(round(time.perf_counter() - t0, 3))
-                c1 = os.times()
-                cpu = (c1.children_user - c0.children_user) + (
-                    c1.children_system - c0.children_system
-                )
-                cpus[workers].append(round(cpu, 2))
-                if code != 0:
-                    print(json.dumps({"error": data.get("stopped"), "workers": workers}))
-                    return code
-                shutil.rmtree(out)
-            ceilings.append(round(machine_speedup(args.workers), 3))
-    n = args.workers
-    best_1, best_n = min(walls[1]), min(walls[n])
-    per_round = [round(a / b, 3) for a, b in zip(walls[1], walls[n], strict=True)]
-    result = {
-        "speedup": round(best_1 / best_n, 3),
-        "statistic": STATISTIC,
-        "speedup_rounds": per_round,
-        "speedup_median": round(statistics.median(per_round), 3),
-        "machine_speedup": round(statistics.median(ceilings), 3),
-        "machine_speedup_rounds": ceilings,
-        "wall_s_1": best_1,
-        f"wall_s_{n}": best_n,
-        "wall_s_1_rounds": walls[1],
-        f"wall_s_{n}_rounds": walls[n],
-        "cpu_s_1_rounds": cpus[1],
-        f"cpu_s_{n}_rounds": cpus[n],
-        "loadavg_1m_1_rounds": loads[1],
-        f"loadavg_1m_{n}_rounds": loads[n],
-        "workers": n,
-        "episodes": args.episodes,
-        "rounds": args.rounds,
-        "duration_s": args.duration,
-        "mode": "lockstep",
-        "cpus": os.cpu_count(),
-    }
+            for transport in transports:
+                for workers in (1, n):
+                    load = os.getloadavg()[0]
+                    t0, c0 = time.perf_counter(), os.times()
+                    out = Path(tmp) / f"r{r}-{transport}-w{workers}"
+                    backend = Backend(transport=transport)
+                    data, code = run_sweep(grid, out, workers, quiet=True, backend=backend)
+                    wall = time.perf_counter() - t0
+                    logs[transport].add(workers, wall, _cpu_s(c0, os.times()), load)
+                    if code != 0:
+                        print(json.dumps({"error": data.get("stopped"), "transport": transport}))
+                        return code
+                    if workers == 1:
+                        logs[transport].rtfs.extend(_episode_rtfs(out))
+                    shutil.rmtree(out)
+            ceilings.append(round(machine_speedup(n), 3))
+    result: dict[str, Any] = {t: logs[t].result(n, args.episodes) for t in transports}
+    if "ros" in result and "inproc" in result:
+        ros, inproc = result["ros"], result["inproc"]
+        result["inproc_over_ros"] = {
+            "episodes_per_core_hour": round(
+                inproc["episodes_per_core_hour"] / ros["episodes_per_core_hour"], 3
+            ),
+            "real_time_factor": round(inproc["real_time_factor"] / ros["real_time_factor"], 3),
+        }
+    result.update(
+        {
+            "statistic": STATISTIC,
+            "machine_speedup": round(statistics.median(ceilings), 3),
+            "machine_speedup_rounds": ceilings,
+            "workers": n,
+            "episodes": args.episodes,
+            "rounds": args.rounds,
+            "duration_s": args.duration,
+            "mode": "lockstep",
+            "cpus": os.cpu_count(),
+        }
+    )
     if args.json:
         print(json.dumps(result))
     else:

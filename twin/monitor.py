@@ -226,6 +226,7 @@ class Monitor:
         )
         self.load_mass_kg = 0.0
         self._pending: list[Event] = []
+        self._truth_cache: tuple[GroundTruth, ...] | None = None  # of this step
 
     def tcp_pose(self, station: int = 0) -> Pose:
         """A station's TCP pose after the last step (no new forward kinematics)."""
@@ -248,6 +249,7 @@ class Monitor:
         self._records.append(record)
         self._active.append(record)
         self._by_body[spawned.body] = record
+        self._truth_cache = None
         self.load_mass_kg += record.mass_kg
         event = Event(
             time_s=time_s,
@@ -327,6 +329,7 @@ class Monitor:
         reach_m, vertical = self._poll_reach_m, self._poll_vertical_ratio
         load = 0.0
         self._step = step
+        self._truth_cache = None
         for record in tuple(self._active):  # a record may be deactivated in the loop
             if record.next_poll_step > step and record.id not in touched:
                 load += record.mass_kg  # still riding the belt
@@ -725,10 +728,16 @@ class Monitor:
         return ids
 
     def ground_truth(self) -> tuple[GroundTruth, ...]:
-        """Every object that is on the belt, held, or in a bin (not those that fell off)."""
-        return tuple(
-            self._truth(record) for record in self._records if record.active or record.in_bin
-        )
+        """Every object that is on the belt, held, or in a bin (not those that fell off).
+
+        Computed once per step (the camera and the ground-truth topic both take it at the
+        30 Hz steps): nothing changes an object between two :meth:`update` calls but a spawn.
+        """
+        if self._truth_cache is None:
+            self._truth_cache = tuple(
+                self._truth(record) for record in self._records if record.active or record.in_bin
+            )
+        return self._truth_cache
 
     def _truth(self, record: _Record) -> GroundTruth:
         if record.active:
