@@ -203,6 +203,11 @@ def priorities_of(
     return priorities, unknown
 
 
+ERRORS_CHECK_EVERY = 12
+"""Control updates between two checks for new rejections, errors and aborts to log (0.1 s at
+120 Hz)."""
+
+
 def _timing(values_s: Sequence[float]) -> dict[str, float | None]:
     """Mean, 95th percentile and maximum in microseconds (None without samples)."""
     if not values_s:
@@ -284,6 +289,7 @@ class ControllerEndpoint:
         self.update_wall_s: deque[float] = deque(maxlen=200_000)
         self.tick_to_ack_wall_s: deque[float] = deque(maxlen=200_000)
         self._logged: dict[str, float] = {}
+        self._error_snapshot: dict[str, int] = {}
 
         self.pub_traj = self._publisher(ARM_TRAJECTORY)
         self.pub_gripper = self._publisher(GRIPPER_COMMAND)
@@ -473,7 +479,6 @@ class ControllerEndpoint:
             return
         self._last_update_s = t_s
         start = time.perf_counter()
-        before = self._error_counts()
         try:
             controller = self._ensure_controller(joint.positions_rad)
             oMtool = self._kin.fk(joint.positions_rad)  # noqa: N806
@@ -491,7 +496,8 @@ class ControllerEndpoint:
             return
         self._publish(command, tracks)
         self._updates += 1
-        self._log_new_errors(before)
+        if self._updates % ERRORS_CHECK_EVERY == 0:
+            self._log_new_errors()
         self.update_wall_s.append(time.perf_counter() - start)
 
     def _publish(self, command: Command, tracks: Sequence[Track]) -> None:
@@ -566,8 +572,11 @@ class ControllerEndpoint:
             counts.update({f"aborted.{k}": v for k, v in stats.aborted.items()})
         return counts
 
-    def _log_new_errors(self, before: Mapping[str, int]) -> None:
+    def _log_new_errors(self) -> None:
+        """Warn of every count of rejections, errors and aborts that grew since the last
+        check (every :data:`ERRORS_CHECK_EVERY` updates: the counters are not free to read)."""
         after = self._error_counts()
+        before, self._error_snapshot = self._error_snapshot, after
         for key in sorted(after):
             if after[key] > before.get(key, 0):
                 detail = self._controller.last_error if self._controller is not None else ""

@@ -18,7 +18,8 @@ it runs in Python floats, which at this size cost far less than numpy's per-call
 
 The assignment gates every (track, detection) pair with numpy in one pass. A pair that is the
 only candidate of both its track and its detection is matched directly; the Hungarian method
-(``scipy.optimize.linear_sum_assignment``) solves the rest, which has the same optimum as
+(:func:`min_cost_assignment`, exact, on the few contested pairs) solves the rest, which has the
+same optimum as
 solving the whole matrix: gated-out pairs cost ``1e12``, so the optimum first maximises the
 number of gated pairs and then minimises their summed distance, and an isolated pair belongs to
 every such optimum.
@@ -32,7 +33,6 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from control.config import TrackingConfig
 
@@ -280,6 +280,68 @@ def _normalised(detection: Detection) -> Detection:
     )
 
 
+def min_cost_assignment(cost: list[list[float]]) -> list[tuple[int, int]]:
+    """The assignment of minimum total cost of an ``(n, m)`` cost matrix: ``min(n, m)`` pairs
+    ``(row, column)``, each row and column at most once, in row order.
+
+    The Hungarian method with potentials and shortest augmenting paths (``O(n^2 m)``), the
+    optimum ``scipy.optimize.linear_sum_assignment`` gives; written out because the tracker's
+    contested blocks are a few rows wide, where importing scipy.optimize (half a second per
+    controller process) costs more than every assignment of an episode.
+    """
+    if not cost or not cost[0]:
+        return []
+    transposed = len(cost) > len(cost[0])
+    if transposed:
+        cost = [list(column) for column in zip(*cost, strict=True)]
+    n, m = len(cost), len(cost[0])
+    u = [0.0] * (n + 1)  # row potentials, 1-based
+    v = [0.0] * (m + 1)  # column potentials, 1-based; column 0 is the augmenting path's root
+    owner = [0] * (m + 1)  # column j -> its row (1-based), 0: free
+    for row in range(1, n + 1):
+        _augment(cost, row, u, v, owner)
+    pairs = [(owner[j] - 1, j - 1) for j in range(1, m + 1) if owner[j]]
+    if transposed:
+        pairs = [(j, i) for i, j in pairs]
+    return sorted(pairs)
+
+
+def _augment(
+    cost: list[list[float]], row: int, u: list[float], v: list[float], owner: list[int]
+) -> None:
+    """Assign ``row`` (1-based) along the shortest augmenting path in the reduced costs,
+    updating the potentials ``u``, ``v`` and the assignment ``owner`` in place."""
+    m = len(v) - 1
+    least = [math.inf] * (m + 1)
+    used = [False] * (m + 1)
+    way = [0] * (m + 1)
+    owner[0] = row
+    j0 = 0
+    while True:
+        used[j0] = True
+        i0, delta, j1 = owner[j0], math.inf, 0
+        for j in range(1, m + 1):
+            if not used[j]:
+                reduced = cost[i0 - 1][j - 1] - u[i0] - v[j]
+                if reduced < least[j]:
+                    least[j], way[j] = reduced, j0
+                if least[j] < delta:
+                    delta, j1 = least[j], j
+        for j in range(m + 1):
+            if used[j]:
+                u[owner[j]] += delta
+                v[j] -= delta
+            else:
+                least[j] -= delta
+        j0 = j1
+        if owner[j0] == 0:
+            break
+    while j0:
+        j1 = way[j0]
+        owner[j0] = owner[j1]
+        j0 = j1
+
+
 class Tracker:
     """Kalman multi-object tracker with Mahalanobis gating and Hungarian assignment.
 
@@ -407,7 +469,7 @@ class Tracker:
             rest_cols = np.unique(cols[~alone])
             block = np.ix_(rest_rows, rest_cols)
             cost = np.where(gated[block], d_sq[block], _GATE_INF)
-            for i, j in zip(*linear_sum_assignment(cost), strict=True):
+            for i, j in min_cost_assignment(cost.tolist()):
                 if cost[i, j] < _GATE_INF:
                     pairs.append((int(rest_rows[i]), int(rest_cols[j])))
         matched: set[int] = set()

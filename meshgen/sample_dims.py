@@ -25,7 +25,6 @@ untouched by steps 2-4.
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import ndtri
 
 from meshgen.annotations import FloatArray
 from meshgen.footprint import IntArray
@@ -73,6 +72,8 @@ def _iman_conover(
 ) -> FloatArray:
     """Reorder each column of ``columns`` ``(n, d)`` so their rank correlation approaches
     ``correlation`` ``(d, d)``; the values of each column are kept."""
+    from scipy.special import ndtri  # only when a sample is drawn (slow to import)
+
     n, d = columns.shape
     scores = ndtri(np.arange(1, n + 1) / (n + 1))
     mixed = np.stack([rng.permutation(scores) for _ in range(d)], axis=1)

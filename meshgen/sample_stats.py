@@ -29,7 +29,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats as sps
 
 from interfaces.fileio import write_atomic
 from meshgen.annotations import FloatArray
@@ -129,6 +128,10 @@ def _image_length_m(meshed: Path) -> tuple[int, float]:
 
 def measure(meshed: Path, source: str = SOURCE) -> SampleStats:
     """The :class:`SampleStats` of a meshgen output folder ``meshed``."""
+    # imported here: the sample's generator imports this module only to read the stored
+    # statistics, and scipy.stats takes half a second to import
+    from scipy import stats as sps
+
     classes = {}
     for name, figures in sorted(read_scenes(meshed).items()):
         quantiles = {f: tuple(np.quantile(v, PROBABILITIES).tolist()) for f, v in figures.items()}

@@ -29,8 +29,6 @@ def builtin_dataset(
 
     ``dense`` packs 9 to 12 objects into each image (clutter; the 40-object benchmark).
     """
-    from meshgen.config import MeshgenConfig
-    from meshgen.pipeline import mesh_dataset
     from meshgen.sample import SAMPLE_VERSION, write_sample
 
     per_image = (9, 12) if dense else (3, 7)
@@ -40,6 +38,9 @@ def builtin_dataset(
     meshes = base / "meshes"
     if (meshes / "index.csv").is_file():
         return meshes
+    from meshgen.config import MeshgenConfig
+    from meshgen.pipeline import mesh_dataset
+
     sample = base / "sample"
     if not (sample / "data.yaml").is_file():
         write_sample(sample, images=images, seed=seed, objects_per_image=per_image)

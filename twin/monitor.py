@@ -132,6 +132,8 @@ class _Record:
     polled_step: int = -1
     next_poll_step: int = 0
     released_step: int = -1
+    final_truth: GroundTruth | None = None
+    """Once it is no longer simulated (it lies in a bin), its ground truth does not change."""
 
     @property
     def held(self) -> bool:
@@ -740,6 +742,14 @@ class Monitor:
         return self._truth_cache
 
     def _truth(self, record: _Record) -> GroundTruth:
+        if record.final_truth is not None:
+            return record.final_truth
+        if not record.active:
+            record.final_truth = self._truth_now(record)
+            return record.final_truth
+        return self._truth_now(record)
+
+    def _truth_now(self, record: _Record) -> GroundTruth:
         if record.active:
             self._fresh(record)
             lin, ang = pb.getBaseVelocity(record.body, physicsClientId=self.client)

@@ -312,6 +312,11 @@ class TwinEndpoint:
         publisher.publish(data if self._wire_takes_bytes else msg)
         self._tap(publisher.topic_name, data, time.time_ns())
 
+    def _taken(self, publisher: Any) -> bool:
+        """Whether a message of a volatile topic reaches anyone: the tap, or a matched
+        subscriber (nobody else would ever see it, so it need not be built)."""
+        return self._tap is not None or publisher.get_subscription_count() > 0
+
     def _send_serialized(self, publisher: Any, data: bytes) -> None:
         """Publish a message already serialized (CDR); with a tap, hand it the same bytes."""
         publisher.publish(data)
@@ -519,7 +524,8 @@ class TwinEndpoint:
         step = twin.step_count
         stamp = time_msg(twin.time_s)
         stamp_ns = msg_stamp_ns(stamp)
-        self._send(self.pub_clock, Clock(clock=stamp))
+        if self._taken(self.pub_clock):
+            self._send(self.pub_clock, Clock(clock=stamp))
         wall_s = time.perf_counter()
         self.telemetry.on_step(twin.time_s, wall_s)
         self.telemetry.on_state_published(twin.time_s, wall_s)
@@ -559,6 +565,8 @@ class TwinEndpoint:
         joints.position = [float(v) for v in q] + tool_q
         joints.velocity = [float(v) for v in qd] + tool_qd
         self._send(link.pub_joints, joints)
+        if not self._taken(link.pub_tcp):
+            return
         pos, orn = self.twin.tcp_pose(station.index)
         pose = PoseStamped()
         pose.header.stamp = stamp

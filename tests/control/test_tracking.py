@@ -374,12 +374,14 @@ def test_matches_plain_kalman_reference(
     # blackouts and bad detections.
     hungarian_calls = 0
 
-    def counted(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    solve = tracking.min_cost_assignment
+
+    def counted(cost: list[list[float]]) -> list[tuple[int, int]]:
         nonlocal hungarian_calls
         hungarian_calls += 1
-        return linear_sum_assignment(cost)
+        return solve(cost)
 
-    monkeypatch.setattr(tracking, "linear_sum_assignment", counted)
+    monkeypatch.setattr(tracking, "min_cost_assignment", counted)
     tracker = Tracker(cfg, classes=load.classes)
     reference = _ReferenceTracker(cfg, load.classes)
     belt = (load.belt_speed_mps, 0.0)
@@ -404,3 +406,22 @@ def test_matches_plain_kalman_reference(
     assert hungarian_calls > 50
     assert voted_out > 50
     assert all(tracker.rejected[r] > 0 for r in REJECT_REASONS if r != "low_confidence")
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (2, 2), (3, 5), (5, 3), (6, 6), (4, 9)])
+def test_min_cost_assignment_is_the_optimum(shape: tuple[int, int]) -> None:
+    """The tracker's own Hungarian method gives scipy's optimum (total cost and pairs) on
+    random blocks, gated-out entries (``1e12``) included."""
+    rng = np.random.default_rng(sum(shape))
+    for _ in range(200):
+        cost = rng.random(shape) * 9.0
+        cost[rng.random(shape) < 0.4] = 1e12
+        rows, cols = linear_sum_assignment(cost)
+        pairs = tracking.min_cost_assignment(cost.tolist())
+        assert len(pairs) == min(shape)
+        assert len({i for i, _ in pairs}) == len({j for _, j in pairs}) == len(pairs)
+        total = sum(cost[i, j] for i, j in pairs)
+        assert total == pytest.approx(cost[rows, cols].sum(), rel=1e-12)
+        # the gated pairs (what the tracker keeps) are the same; gated-out ones may tie
+        expected = [(i, j) for i, j in zip(rows.tolist(), cols.tolist(), strict=True)]
+        assert [p for p in pairs if cost[p] < 1e12] == [p for p in expected if cost[p] < 1e12]
