@@ -2,7 +2,8 @@
 sweep's speed-up with 2 workers against 1.
 
 Runs the same grid (the default scenario at 0.4 m/s, ``--episodes`` lockstep episodes of
-``--duration`` simulated seconds, built-in dataset) on each transport of ``--transports``
+``--duration`` simulated seconds, built-in dataset; no recordings, as a sweep writes none
+unless ``--record``) on each transport of ``--transports``
 (``ros``: a twin node and a controller process over ROS 2; ``inproc``: one process, see
 :mod:`experiments.inproc`), each with 1 worker and then with ``--workers`` (2), and repeats
 that set of passes ``--rounds`` times, interleaved (round r: ros 1 worker, ros N, inproc 1,
@@ -75,6 +76,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--transports",
         default="ros,inproc",
         help="comma-separated transports to measure (ros,inproc)",
+    )
+    parser.add_argument(
+        "--record",
+        action="store_true",
+        help="record every episode's MCAP, as sweep --record does (default: as sweep, none)",
     )
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
 
@@ -217,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
                     load = os.getloadavg()[0]
                     t0, c0 = time.perf_counter(), os.times()
                     out = Path(tmp) / f"r{r}-{transport}-w{workers}"
-                    backend = Backend(transport=transport)
+                    backend = Backend(transport=transport, record=args.record)
                     data, code = run_sweep(grid, out, workers, quiet=True, backend=backend)
                     wall = time.perf_counter() - t0
                     logs[transport].add(workers, wall, _cpu_s(c0, os.times()), load)
@@ -247,6 +253,7 @@ def run(args: argparse.Namespace) -> int:
             "rounds": args.rounds,
             "duration_s": args.duration,
             "mode": "lockstep",
+            "record": args.record,
             "cpus": os.cpu_count(),
         }
     )

@@ -166,6 +166,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/...)")
     parser.add_argument("--json", action="store_true", help="print the run's metrics as JSON")
+    parser.add_argument(
+        "--no-record",
+        dest="record",
+        action="store_false",
+        help="write no recording.mcap (every message of every topic; about 10 MB a minute)",
+    )
     add_view_options(parser)
 
 
@@ -212,7 +218,8 @@ class RunOptions:
     the meshgen output folder; ``cell_path`` the resolved cell file and ``stations`` its station
     names (one controller process each); ``restart_at_s`` the controller restart times (sim
     seconds); ``controller_params`` the controller's parameter file (None: its default);
-    ``transport`` how the twin and the controllers talk (:data:`TRANSPORTS`);
+    ``transport`` how the twin and the controllers talk (:data:`TRANSPORTS`); ``record``
+    whether the twin writes the episode's ``recording.mcap``;
     ``foxglove_port`` (None: no live view), ``foxglove_host`` and ``gui`` are passed to the twin
     node, whose live view serves each episode in turn on the same port.
     """
@@ -230,6 +237,7 @@ class RunOptions:
     foxglove_host: str = "127.0.0.1"
     gui: bool = False
     transport: Transport = "ros"
+    record: bool = True
 
 
 @dataclass(frozen=True)
@@ -383,8 +391,7 @@ def twin_command(options: RunOptions, episode: EpisodeSpec) -> list[str]:
         str(options.ack_timeout_s),
         "--out",
         str(episode.folder / "twin"),
-        "--record",
-        str(episode.folder / "recording.mcap"),
+        *(["--record", str(episode.folder / "recording.mcap")] if options.record else []),
         *view_arguments(options),
     ]
 
@@ -983,6 +990,7 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
         foxglove_host=host,
         gui=gui,
         transport=transport,
+        record=getattr(args, "record", True),
     )
     extra: dict[str, Any] = {
         "scenario": scenario.name,

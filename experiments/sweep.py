@@ -498,6 +498,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the sweep summary as JSON")
     add_transport_option(parser)
     parser.add_argument(
+        "--record",
+        action="store_true",
+        help="write each episode's recording.mcap (off: a grid of thousands of episodes would "
+        "write about 10 MB a minute each)",
+    )
+    parser.add_argument(
         "--backend",
         choices=("local", "ray"),
         default="local",
@@ -628,11 +634,17 @@ def load_grid(grid_path: Path, dataset: Path | None = None) -> Grid:
 
 
 def prepare_sweep(
-    grid_path: Path, out: Path, *, dataset: Path | None = None, transport: Transport = "ros"
+    grid_path: Path,
+    out: Path,
+    *,
+    dataset: Path | None = None,
+    transport: Transport = "ros",
+    record: bool = False,
 ) -> list[CellRun]:
     """Check every grid cell (before anything is written), then write each one's run folder
     (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``, empty tables). ``dataset``
-    overrides the grid's (:func:`load_grid`); every episode runs on ``transport``."""
+    overrides the grid's (:func:`load_grid`); every episode runs on ``transport``, recorded
+    when ``record``."""
     from experiments.run import check_transport, run_options, write_run_scenario, write_tables
 
     checked = _check_cells(load_grid(grid_path, dataset), grid_path)
@@ -650,6 +662,7 @@ def prepare_sweep(
         options = dataclasses.replace(
             run_options(files, c.station_cell, c.cell.scenario, c.dataset, c.cell.mode),
             transport=transport,
+            record=record,
         )
         extra = {
             "scenario": c.cell.scenario.name,
@@ -659,6 +672,7 @@ def prepare_sweep(
             "stations": list(options.stations),
             "mode": c.cell.mode,
             "transport": transport,
+            "record": record,
             "speed_mps": c.cell.scenario.system.belt_speed_mps,
             "duration_s": c.cell.scenario.duration_s,
             "overrides": c.cell.overrides,
@@ -830,12 +844,14 @@ class Sweep:
 class Backend:
     """Where a sweep's episodes run: ``local`` (threads on this machine) or ``ray`` (tasks on
     the Ray cluster at ``address``, or on one started here; see :mod:`experiments.ray_backend`),
-    each episode on ``transport`` (ROS 2 processes, or one process: ``inproc``)."""
+    each episode on ``transport`` (ROS 2 processes, or one process: ``inproc``), with its
+    ``recording.mcap`` when ``record``."""
 
     name: Literal["local", "ray"] = "local"
     address: str | None = None
     cpus_per_episode: float | None = None
     transport: Transport = "ros"
+    record: bool = False
 
 
 def run_sweep(
@@ -857,7 +873,9 @@ def run_sweep(
         from experiments.ray_backend import import_ray
 
         import_ray()  # before anything is written
-    runs = prepare_sweep(grid_path, out, dataset=dataset, transport=backend.transport)
+    runs = prepare_sweep(
+        grid_path, out, dataset=dataset, transport=backend.transport, record=backend.record
+    )
     names = Grid.load(grid_path).headline
     sweep = Sweep(grid_path, out, workers, runs, quiet=quiet, headline=names)
     sweep.write_all(False)
@@ -877,7 +895,9 @@ def run(args: argparse.Namespace) -> int:
     if args.backend != "ray" and (args.address or args.cpus_per_episode is not None):
         msg = "--address and --cpus-per-episode need --backend ray"
         raise ConfigError(msg)
-    backend = Backend(args.backend, args.address, args.cpus_per_episode, args.transport)
+    backend = Backend(
+        args.backend, args.address, args.cpus_per_episode, args.transport, args.record
+    )
     data, code = run_sweep(
         args.grid, out, args.workers, quiet=args.json, dataset=args.dataset, backend=backend
     )

@@ -57,6 +57,7 @@ def _sweep_on_ray(
             str(grid),
             "--backend",
             "ray",
+            "--record",
             "--address",
             address,
             "--dataset",
@@ -133,7 +134,7 @@ def test_a_worker_killed_mid_episode_gets_its_episode_retried(
     ray_head: tuple[str, dict[str, str]], builtin_meshes: Path, tmp_path: Path
 ) -> None:
     address, env = ray_head
-    grid = _grid(tmp_path, "[3]", 8.0)
+    grid = _grid(tmp_path, "[3]", 20.0)  # long enough to be killed in, on a fast machine
     proc = _sweep_on_ray(grid, tmp_path / "ray", address, env, builtin_meshes)
     deadline = time.monotonic() + 120
     while not (pids := _ray_task_pids("run_shipped_episode")):
