@@ -140,6 +140,12 @@ class LiveView:
         """The address a Foxglove client opens."""
         return f"ws://{self.host}:{self.port}"
 
+    def wants(self, topic: str) -> bool:
+        """Whether some client subscribed to ``topic`` (its wire name): a node serving only
+        the view may skip building what nobody watches (the ground truth, the scene)."""
+        channel = self._channels.get(topic)
+        return channel is not None and bool(channel.has_sinks())
+
     def write(self, topic: str, data: bytes, log_time_ns: int) -> None:
         """Send one serialized message on ``topic`` (its wire name) to every client subscribed
         to it (nothing is sent without one); keep it when the topic is latched."""

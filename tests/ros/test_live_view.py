@@ -2,7 +2,9 @@
 
 The client is the protocol written out with the standard library (handshake, frames, the
 ``foxglove.sdk.v1`` subprotocol's ``subscribe`` and binary message data), so the test checks
-what goes over the wire, not what the SDK says about it.
+what goes over the wire, not what the SDK says about it. Every scene channel
+(:data:`interfaces.contract.SCENE`) must be advertised with its ROS schema and deliver messages
+that decode with it while the episode runs.
 """
 
 from __future__ import annotations
@@ -23,22 +25,18 @@ from typing import Any
 
 import pytest
 
-from interfaces.contract import TOPICS
+from interfaces.contract import SCENE, TOPICS
 from twin.recording import message_definition
 
 SUBPROTOCOLS = "foxglove.sdk.v1, foxglove.websocket.v1"
 """What the Foxglove app offers in its handshake."""
 MESSAGE_DATA = 0x01
 """Opcode of a server's binary message data: subscription id, log time, payload."""
-SCENE_NAMES = ("/tf", "/tf_static", "/scene/markers")
-"""The scene topics of issue 24 sent with or without a controller; the test checks those the
-contract declares."""
+SCENE_TOPICS = [t.name for t in SCENE]
+"""Every scene topic: all are sent with or without a controller (the targets' markers say
+there is none)."""
 START_TIMEOUT_S = 60.0
-
-
-def scene_topics() -> list[str]:
-    """The scene topics the contract declares (none until they are added)."""
-    return [t.name for t in TOPICS if t.name in SCENE_NAMES]
+POSITION_TOL_M = 1e-3
 
 
 class WsClient:
@@ -268,21 +266,67 @@ def check_ground_truth(truth: Any) -> None:
 
 
 def check_tf(tf: Any, truth: Any) -> None:
-    """A ``/tf`` of the ground truth's tick: every object on the belt has its frame, near its
-    ground-truth position (the mesh frame is not the centre of mass), and the station's links
-    are there."""
+    """A ``/tf`` of the ground truth's tick: the station's links and TCP are there, and every
+    object in the simulation (not in a bin) has its frame at its ground-truth pose."""
     frames = {t.child_frame_id: t.transform for t in tf.transforms}
+    assert all(t.header.frame_id == "world" for t in tf.transforms)
     for t in tf.transforms:
         r = t.transform.rotation
         assert math.isclose(r.x**2 + r.y**2 + r.z**2 + r.w**2, 1.0, abs_tol=1e-6)
-    assert any(name.endswith("tcp") for name in frames), sorted(frames)
+    assert {"tcp", "panda_link7", "panda_hand"} <= set(frames), sorted(frames)
+    simulated = {f"object/{o.id}" for o in truth.objects if not o.in_bin}
+    assert {name for name in frames if name.startswith("object/")} == simulated
     for obj in truth.objects:
-        if not obj.on_belt:
+        if obj.in_bin:
             continue
         transform = frames[f"object/{obj.id}"]
-        p = obj.pose.position
-        v = transform.translation
-        assert math.dist((v.x, v.y, v.z), (p.x, p.y, p.z)) < 0.2
+        p, q = obj.pose.position, obj.pose.orientation
+        v, r = transform.translation, transform.rotation
+        assert math.dist((v.x, v.y, v.z), (p.x, p.y, p.z)) <= POSITION_TOL_M
+        dot = abs(q.x * r.x + q.y * r.y + q.z * r.z + q.w * r.w)
+        assert 2.0 * math.acos(min(1.0, dot)) <= math.radians(1.0)
+
+
+def check_static_markers(static: Any) -> None:
+    """``/scene/markers`` holds the belt, the bins and the robot's link meshes."""
+    by_ns: dict[str, list[Any]] = {}
+    for marker in static.markers:
+        by_ns.setdefault(marker.ns, []).append(marker)
+    assert [m.type for m in by_ns["belt"]] == [1]  # CUBE
+    assert len(by_ns["bins"]) >= 2
+    assert {m.header.frame_id for m in by_ns["links"]} >= {f"panda_link{i}" for i in range(8)}
+
+
+def check_object_markers(objects: list[Any], tfs: list[Any]) -> None:
+    """Each ``/scene/objects`` message adds every object then in the simulation as its own mesh
+    locked to its frame, and every ``/tf`` has a frame for exactly the objects of the latest
+    ``/scene/objects`` stamped at or before it. The client saw every message sent after it
+    subscribed (one connection, sent in order), so the check leaves out only the ``/tf`` of the
+    last tick received, whose ``/scene/objects`` may still have been on its way."""
+    sets: list[tuple[tuple[int, int], set[int]]] = []
+    for message in objects:
+        added = [m for m in message.markers if m.action == 0]
+        assert added, "a /scene/objects message with no object"
+        for marker in added:
+            assert marker.ns == "objects"
+            assert marker.type == 11  # TRIANGLE_LIST
+            assert marker.frame_locked
+            assert marker.header.frame_id == f"object/{marker.id}"
+            assert len(marker.points) >= 3 * 8  # a closed mesh: at least a box's triangles
+            assert len(marker.points) % 3 == 0
+        sets.append((stamp_of(message.markers[0].header), {m.id for m in added}))
+    sets.sort()
+    stamps = [stamp_of(tf.transforms[0].header) for tf in tfs]
+    checked = 0
+    for tf, stamp in zip(tfs, stamps, strict=True):
+        if stamp == max(stamps):
+            continue
+        current = [ids for s, ids in sets if s <= stamp]
+        assert current, f"/tf at {stamp} before any /scene/objects"
+        names = {t.child_frame_id for t in tf.transforms if t.child_frame_id.startswith("object/")}
+        assert names == {f"object/{i}" for i in current[-1]}, stamp
+        checked += 1
+    assert checked >= 3
 
 
 def stamp_of(header: Any) -> tuple[int, int]:
@@ -307,8 +351,7 @@ def watch(client: WsClient, channels: dict[str, dict[str, Any]], late: list[str]
     new = client.subscribe([channels[t]["id"] for t in late])
     subs.update({s: names[c] for s, c in new.items()})
     receive_until(client, subs, received, late, 20.0)
-    streams = [t for t in late if t in ("/objects/ground_truth", "/tf")]
-    receive_until(client, subs, received, streams, 5.0, count=5)
+    receive_until(client, subs, received, ["/objects/ground_truth", "/tf"], 5.0, count=5)
     return received
 
 
@@ -318,7 +361,7 @@ def test_a_websocket_client_watches_the_episode_as_it_runs(
 ) -> None:
     out = tmp_path / "ep"
     proc = start_node(ros_env, builtin_meshes, out, "--duration", "6", "--foxglove", "0")
-    late = ["/objects/ground_truth", "/cell/bins", *scene_topics()]
+    late = ["/objects/ground_truth", "/cell/bins", *SCENE_TOPICS]
     try:
         url = wait_for_url(proc, START_TIMEOUT_S)
         host, port = url.removeprefix("ws://").rsplit(":", 1)
@@ -330,43 +373,58 @@ def test_a_websocket_client_watches_the_episode_as_it_runs(
         assert advertise["op"] == "advertise"
         channels = {c["topic"]: c for c in advertise["channels"]}
         check_advertised(channels)
+        for topic in SCENE_TOPICS:  # the scene's schemas: ROS's, which Foxglove renders
+            assert channels[topic]["schemaName"] in (
+                "tf2_msgs/msg/TFMessage",
+                "visualization_msgs/msg/MarkerArray",
+            )
         received = watch(client, channels, late)
+        running = proc.poll() is None  # everything above arrived while the episode ran
         client.close()
     finally:
         code, stderr = stop_node(proc)
     assert code == 0, stderr[-2000:]
+    assert running, "the episode ended before the client had every channel's messages"
     missing = [t for t in late if t not in received.by_topic]
     assert not missing, f"no message on {missing}"
 
     # latched messages sent before the client subscribed reach it
     bins = decode_on(channels, "/cell/bins", received.by_topic["/cell/bins"][0][1])
     assert len(bins.bins) >= 2
-    if "/tf_static" in received.by_topic:
-        static = decode_on(channels, "/tf_static", received.by_topic["/tf_static"][0][1])
-        assert static.transforms
+    static = decode_on(channels, "/tf_static", received.by_topic["/tf_static"][0][1])
+    assert [t.child_frame_id for t in static.transforms] == ["panda_link0"]
 
     log_ns, payload = received.by_topic["/objects/ground_truth"][-1]
     truth = decode_on(channels, "/objects/ground_truth", payload)
     check_ground_truth(truth)
     assert abs(log_ns - time.time_ns()) < 120e9  # the wall-clock log time of this run
 
-    if "/tf" in received.by_topic:
-        truths = {
-            stamp_of(t.header): t
-            for t in (
-                decode_on(channels, "/objects/ground_truth", m)
-                for _, m in received.by_topic["/objects/ground_truth"]
-            )
-        }
-        tfs = [decode_on(channels, "/tf", m) for _, m in received.by_topic["/tf"]]
-        pairs = [
-            (tf, truths[stamp_of(tf.transforms[0].header)])
-            for tf in tfs
-            if tf.transforms and stamp_of(tf.transforms[0].header) in truths
-        ]
-        assert pairs, "no /tf at the tick of a ground truth received"
-        for tf, truth in pairs:
-            check_tf(tf, truth)
+    truths = {
+        stamp_of(t.header): t
+        for t in (
+            decode_on(channels, "/objects/ground_truth", m)
+            for _, m in received.by_topic["/objects/ground_truth"]
+        )
+    }
+    tfs = [decode_on(channels, "/tf", m) for _, m in received.by_topic["/tf"]]
+    pairs = [
+        (tf, truths[stamp_of(tf.transforms[0].header)])
+        for tf in tfs
+        if tf.transforms and stamp_of(tf.transforms[0].header) in truths
+    ]
+    assert pairs, "no /tf at the tick of a ground truth received"
+    for tf, tick_truth in pairs:
+        check_tf(tf, tick_truth)
+
+    check_static_markers(
+        decode_on(channels, "/scene/markers", received.by_topic["/scene/markers"][0][1])
+    )
+    objects = [
+        decode_on(channels, "/scene/objects", m) for _, m in received.by_topic["/scene/objects"]
+    ]
+    check_object_markers(objects, tfs)
+    targets = decode_on(channels, "/scene/targets", received.by_topic["/scene/targets"][-1][1])
+    assert {m.ns for m in targets.markers} == {"targets", "tcp_paths"}
 
 
 def test_a_port_in_use_is_a_one_line_error(
@@ -440,7 +498,7 @@ def test_a_run_serves_each_episode_in_turn_on_one_port(
     )
     sessions: list[str] = []
     received: list[Received] = []
-    wanted = ["/clock", "/objects/ground_truth", *scene_topics()]
+    wanted = ["/clock", "/objects/ground_truth", *SCENE_TOPICS]
     try:
         for _ in range(2):
             client, session = connect_new_session(port, sessions, START_TIMEOUT_S)
@@ -510,7 +568,8 @@ def test_a_run_refuses_a_port_in_use_before_it_starts(builtin_meshes: Path, tmp_
 
 def test_a_late_subscriber_gets_the_kept_messages_of_latched_topics() -> None:
     """The view alone (no node): each latched topic's last ``depth`` messages reach a client
-    that subscribes after they were sent, in order; a volatile topic's do not."""
+    that subscribes after they were sent, in order; a volatile topic's do not. The view says
+    which topics a client subscribed to."""
     from interfaces.contract import BINS, CLOCK_TOPIC, EVENTS_TOPIC
     from twin.live_view import LiveView
 
@@ -523,11 +582,17 @@ def test_a_late_subscriber_gets_the_kept_messages_of_latched_topics() -> None:
             view.write("/bins", f"bins {i}".encode(), 100 + i)  # keep last 1
             view.write("/events", f"event {i}".encode(), 200 + i)  # keep last 1000
             view.write("/clock", f"clock {i}".encode(), 300 + i)  # volatile
+        assert not view.wants("/bins")  # no client yet
         client = WsClient("127.0.0.1", view.port)
         client.recv_json()
         channels = {c["topic"]: c["id"] for c in client.recv_json()["channels"]}
         names = {i: t for t, i in channels.items()}
         subs = {s: names[c] for s, c in client.subscribe(list(channels.values())).items()}
+        deadline = time.monotonic() + 10.0
+        while not view.wants("/bins") and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert view.wants("/bins")
+        assert not view.wants("/no/such/topic")
         received = Received()
         deadline = time.monotonic() + 10.0
         client.sock.settimeout(0.2)
