@@ -19,8 +19,6 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import numpy as np
-
 from interfaces.metrics import TRACKING_THRESHOLD_M, SettleTimer
 
 PURSUIT_PHASES = frozenset({"approach", "descend", "dwell", "track"})
@@ -28,10 +26,21 @@ PURSUIT_PHASES = frozenset({"approach", "descend", "dwell", "track"})
 Pose = tuple[tuple[float, float, float], tuple[float, float, float, float]]
 
 
-def _rotate(q: tuple[float, float, float, float], v: np.ndarray) -> np.ndarray:
+Vec3 = tuple[float, float, float]
+
+
+def _cross(a: Vec3, b: Vec3) -> Vec3:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _rotate(q: tuple[float, float, float, float], v: Vec3) -> Vec3:
+    """``v`` turned by the unit quaternion ``q`` (xyzw): ``v + 2 u x (u x v + w v)``, in floats
+    (numpy's per-call cost is most of it at this size, every physics step of a pursuit)."""
     x, y, z, w = q
-    u = np.array([x, y, z])
-    return np.asarray(v + 2.0 * np.cross(u, np.cross(u, v) + w * v), dtype=float)
+    u = (x, y, z)
+    c = _cross(u, v)
+    t = _cross(u, (c[0] + w * v[0], c[1] + w * v[1], c[2] + w * v[2]))
+    return (v[0] + 2.0 * t[0], v[1] + 2.0 * t[1], v[2] + 2.0 * t[2])
 
 
 @dataclass(frozen=True)
@@ -57,7 +66,7 @@ class TargetTracker:
         self.results: list[TrackingResult] = []
         self._track_id: int | None = None
         self._object_id = 0
-        self._offset = np.zeros(3)
+        self._offset: Vec3 = (0.0, 0.0, 0.0)
         self._timer = SettleTimer(0.0, threshold_m)
 
     @property
@@ -87,8 +96,7 @@ class TargetTracker:
             if best and best_d <= self.match_radius_m:
                 pos, orn = poses[best]
                 inv = (-orn[0], -orn[1], -orn[2], orn[3])
-                height = np.array([0.0, 0.0, grasp_point[2] - pos[2]])
-                self._offset = _rotate(inv, height)
+                self._offset = _rotate(inv, (0.0, 0.0, grasp_point[2] - pos[2]))
                 self._track_id, self._object_id = track_id, best
                 self._timer = SettleTimer(time_s, self.threshold_m)
 
@@ -106,8 +114,9 @@ class TargetTracker:
             self.finish(time_s)
             return
         pos, orn = pose
-        point = np.asarray(pos) + _rotate(orn, self._offset)
-        self._timer.update(time_s, float(np.linalg.norm(np.asarray(tcp_m) - point)))
+        d = _rotate(orn, self._offset)
+        point = (pos[0] + d[0], pos[1] + d[1], pos[2] + d[2])
+        self._timer.update(time_s, math.dist(tcp_m, point))
 
     def finish(self, time_s: float) -> None:
         """End the current pursuit (e.g. the object was picked)."""
