@@ -414,7 +414,9 @@ def _serve(
         _window_on(twin)
     recording = _open_recording(args.record, twin.cell)
     writers = [sink.write for sink in (recording, view) if sink is not None]
-    node, executor, detach = _endpoint(args, twin, fan_out(writers), peers)
+    # a recording takes everything; the live view alone only what a client subscribed to
+    wants = view.wants if recording is None and view is not None else None
+    node, executor, detach = _endpoint(args, twin, fan_out(writers), peers, wants)
     wall0 = time.perf_counter()
     stepping: list[float] = []
     interrupted = False
@@ -491,7 +493,11 @@ def _serve(
 
 
 def _endpoint(
-    args: argparse.Namespace, twin: Twin, tap: Tap | None, peers: InprocPeers | None
+    args: argparse.Namespace,
+    twin: Twin,
+    tap: Tap | None,
+    peers: InprocPeers | None,
+    tap_wants: Callable[[str], bool] | None = None,
 ) -> tuple[TwinEndpoint, Any, Callable[[], None]]:
     """The twin's endpoint, what serves its callbacks, and what stops its reading at the end:
     a ROS 2 node and its executor, or (``peers``) the in-process bus, with the controllers
@@ -504,7 +510,7 @@ def _endpoint(
 
         # rclpy's own SIGINT handler would shut the context down under the step loop
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-        node = TwinNode(twin, lockstep=args.mode == "lockstep", tap=tap)
+        node = TwinNode(twin, lockstep=args.mode == "lockstep", tap=tap, tap_wants=tap_wants)
         executor = make_executor()
         executor.add_node(node)
         return node, executor, lambda: None
@@ -512,6 +518,6 @@ def _endpoint(
     from twin.ros_node import InprocTwin
 
     bus = Bus()
-    inproc = InprocTwin(twin, bus, tap=tap)
+    inproc = InprocTwin(twin, bus, tap=tap, tap_wants=tap_wants)
     peers.start(bus, twin.cell)
     return inproc, bus, inproc.detach

@@ -98,6 +98,10 @@ Tap = Callable[[str, bytes, int], None]
 since the Unix epoch) of the send or receipt. ``cdw-twin run`` records the episode's MCAP this
 way, in the twin's process (see ``twin-node --record``)."""
 
+TapWants = Callable[[str], bool]
+"""Whether the tap takes a topic (its wire name) now. The live view alone takes only what a
+client subscribed to: the node then builds the ground truth and the scene only for a client."""
+
 
 @dataclass
 class NodeCounters:
@@ -216,6 +220,7 @@ class TwinEndpoint:
         state_every: int = 4,
         ground_truth_every: int = 8,
         tap: Tap | None = None,
+        tap_wants: TapWants | None = None,
         scene: bool = True,
     ) -> None:
         """Create every publisher and subscription of the cell's contract on ``self._wire``."""
@@ -224,6 +229,7 @@ class TwinEndpoint:
             raise RuntimeError(msg)
         self.twin = twin
         self._tap = tap
+        self._tap_wants = tap_wants
         self.lockstep = lockstep
         self.state_every = state_every
         self.ground_truth_every = ground_truth_every
@@ -313,9 +319,9 @@ class TwinEndpoint:
         self._tap(publisher.topic_name, data, time.time_ns())
 
     def _taken(self, publisher: Any) -> bool:
-        """Whether a message of a volatile topic reaches anyone: the tap, or a matched
-        subscriber (nobody else would ever see it, so it need not be built)."""
-        return self._tap is not None or publisher.get_subscription_count() > 0
+        """Whether a message of a volatile topic reaches anyone (:meth:`_wanted`); nobody else
+        would ever see it, so it need not be built."""
+        return self._wanted(publisher)
 
     def _send_serialized(self, publisher: Any, data: bytes) -> None:
         """Publish a message already serialized (CDR); with a tap, hand it the same bytes."""
@@ -539,7 +545,7 @@ class TwinEndpoint:
         for frame in twin.take_detections():
             self.publish_detections(frame)
         if step % self.ground_truth_every == 0:
-            want_gt = self._tap is not None or self.pub_gt.get_subscription_count() > 0
+            want_gt = self._wanted(self.pub_gt)
             want_scene = self.scene_wanted()
             if want_gt or want_scene:
                 objects = twin.observe_objects()
@@ -686,9 +692,16 @@ class TwinEndpoint:
         subscriber of a scene topic."""
         if not self.scene:
             return False
-        return self._tap is not None or any(
-            p.get_subscription_count() > 0 for p in self._scene_pubs
-        )
+        return any(self._wanted(p) for p in self._scene_pubs)
+
+    def _wanted(self, publisher: Any) -> bool:
+        """Someone takes ``publisher``'s messages: the tap (unless it says it does not want
+        that topic now) or a matched subscriber."""
+        if self._tap is not None and (
+            self._tap_wants is None or self._tap_wants(publisher.topic_name)
+        ):
+            return True
+        return bool(publisher.get_subscription_count() > 0)
 
     def publish_scene(
         self, stamp: Any, objects: tuple[GroundTruth, ...], *, targets: bool = True
@@ -783,6 +796,7 @@ class TwinNode(Node, TwinEndpoint):
         state_every: int = 4,
         ground_truth_every: int = 8,
         tap: Tap | None = None,
+        tap_wants: TapWants | None = None,
         scene: bool = True,
     ) -> None:
         Node.__init__(self, "cdw_twin")
@@ -794,6 +808,7 @@ class TwinNode(Node, TwinEndpoint):
             state_every=state_every,
             ground_truth_every=ground_truth_every,
             tap=tap,
+            tap_wants=tap_wants,
             scene=scene,
         )
 
@@ -810,6 +825,7 @@ class InprocTwin(TwinEndpoint):
         state_every: int = 4,
         ground_truth_every: int = 8,
         tap: Tap | None = None,
+        tap_wants: TapWants | None = None,
         scene: bool = True,
     ) -> None:
         self._wire = bus
@@ -821,6 +837,7 @@ class InprocTwin(TwinEndpoint):
             state_every=state_every,
             ground_truth_every=ground_truth_every,
             tap=tap,
+            tap_wants=tap_wants,
             scene=scene,
         )
 
