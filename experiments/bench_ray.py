@@ -33,6 +33,8 @@ TIMING = frozenset({"real_time_factor"})
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the benchmark options."""
+    from experiments.run import add_transport_option
+
     parser.add_argument("--episodes", type=int, default=4, help="episodes per pass (4)")
     parser.add_argument("--rounds", type=int, default=2, help="rounds of (local, ray) (2)")
     parser.add_argument(
@@ -42,6 +44,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="sim seconds each (the default scenario's: %(default)s)",
     )
     parser.add_argument("--workers", type=int, default=2, help="workers / Ray CPUs (2)")
+    add_transport_option(parser)
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
 
 
@@ -80,7 +83,11 @@ def run(args: argparse.Namespace) -> int:
             ray_start_s = time.perf_counter() - t_start
             for r in range(args.rounds):
                 seen = {}
-                for name, backend in (("local", Backend()), ("ray", Backend("ray", address))):
+                backends = (
+                    ("local", Backend(transport=args.transport)),
+                    ("ray", Backend("ray", address, transport=args.transport)),
+                )
+                for name, backend in backends:
                     out = Path(tmp) / f"r{r}-{name}"
                     t0, c0 = time.perf_counter(), os.times()
                     data, code = run_sweep(grid, out, args.workers, quiet=True, backend=backend)
@@ -109,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
         "cpu_s_ray_rounds": cpus["ray"],
         "ray_start_s": round(ray_start_s, 2),
         "workers": args.workers,
+        "transport": args.transport,
         "episodes": args.episodes,
         "rounds": args.rounds,
         "duration_s": args.duration,

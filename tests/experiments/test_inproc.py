@@ -120,3 +120,17 @@ def test_inproc_refuses_realtime_and_controller_restarts(
     assert done.returncode == 2
     assert "--transport inproc runs lockstep only, not --mode realtime" in done.stderr
     assert not (tmp_path / "b").exists()
+
+
+def test_a_sweep_refuses_inproc_for_a_cell_that_restarts_controllers(tmp_path: Path) -> None:
+    from twin.cli import main
+
+    (tmp_path / "restart.yaml").write_text(
+        "name: restart\nduration_s: 4.0\nfaults: {controller_restart_at_s: [2.0]}\n",
+        encoding="utf-8",
+    )
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("scenarios: [restart.yaml]\nseeds: [1]\n", encoding="utf-8")
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(grid), "--transport", "inproc", "--out", str(out)]) == 2
+    assert not out.exists()

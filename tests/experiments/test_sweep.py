@@ -244,6 +244,17 @@ def test_bench_sweep_rejects_a_pass_it_cannot_compare_before_running_anything(
     assert "need rounds >= 1, episodes >= 1 and workers >= 2" in err
 
 
+@pytest.mark.parametrize("value", ["dds", "ros,ros", ""])
+def test_bench_sweep_rejects_an_unknown_or_repeated_transport(
+    value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from twin.cli import main
+
+    assert main(["bench", "sweep", "--transports", value, "--json"]) == 2
+    err = capsys.readouterr().err
+    assert f"--transports {value!r}: a comma-separated list of distinct ros, inproc" in err
+
+
 def test_a_grid_with_a_repeated_seed_is_refused_before_anything_runs(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
