@@ -123,6 +123,12 @@ class MotionConfig:
     TCP with the setpoint of that long ago.
     ``joint_velocity_margin`` scales the URDF joint velocity limits that bound every per-tick
     joint step of the Cartesian moves (a faster IK solution is approached at that speed).
+    ``posture_acceleration_margin`` in (0, 1] scales every Cartesian move's acceleration limits
+    down, where the current posture needs it, so that no joint needs more than this fraction of
+    its datasheet acceleration to follow them (near the base and at the edge of the reach a
+    vertical tool's height takes large shoulder and elbow accelerations: a descent the joints
+    cannot follow lags, then overshoots the grasp point catching up); 0 (the default) leaves
+    the limits as they are.
     """
 
     control_period_s: float = 1.0 / 120.0
@@ -135,6 +141,7 @@ class MotionConfig:
     feedback_max_m: float = 0.03
     transfer_speed_scale: float = 0.9
     joint_velocity_margin: float = 1.0
+    posture_acceleration_margin: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field."""
@@ -172,6 +179,12 @@ class MotionConfig:
             "motion.joint_velocity_margin",
             self.joint_velocity_margin,
             "must be > 0",
+        )
+        _require(
+            0.0 <= self.posture_acceleration_margin <= 1.0,
+            "motion.posture_acceleration_margin",
+            self.posture_acceleration_margin,
+            "must be in [0, 1] (0: off)",
         )
 
 

@@ -282,6 +282,20 @@ class Kinematics:
         """World ``(vx, vy, vz, yaw rate)`` ``(4,) float`` of the TCP for joint speeds ``dq``."""
         return np.asarray(self._jacobian_xyz_yaw(q) @ np.asarray(dq, dtype=np.float64))
 
+    def tilt_held_rates(self, q: FloatArray) -> FloatArray:
+        """Joint rates ``(n_arm, 4)`` per unit world ``(vx, vy, vz, yaw rate)`` of the TCP that
+        keep the tool's tilt (roll and pitch rates zero): the columns of the full Jacobian's
+        pseudo-inverse for those four rates, as the IK moves a tool pointing down. Row ``j``
+        times an acceleration of the TCP gives joint ``j``'s acceleration (less the velocity
+        product terms)."""
+        model, data = self._model, self._data
+        jac = pin.computeFrameJacobian(
+            model, data, np.asarray(q, dtype=np.float64), self._tcp_id, pin.LOCAL_WORLD_ALIGNED
+        )
+        rotation = np.asarray(self.oMbase.rotation)
+        world = np.vstack([rotation @ jac[:3], rotation @ jac[3:]])
+        return np.asarray(np.linalg.pinv(world)[:, [0, 1, 2, 5]])
+
     def joint_velocity(self, q: FloatArray, tcp_velocity: FloatArray) -> FloatArray:
         """Least-squares joint velocities ``(n_arm,)`` giving the TCP velocity ``(4,)``."""
         jac = self._jacobian_xyz_yaw(q)

@@ -178,6 +178,10 @@ class Transition:
 
 Handler = Callable[[TickInput], Goal | Transition]
 
+MIN_POSTURE_SCALE = 0.05
+"""The least :meth:`PickController._posture_scale` (near a singularity the joints' needs grow
+without bound; the Cartesian moves still finish)."""
+
 JOINT_REPLAN_UNTIL_S = 0.1
 """The joint-space approach is re-planned to the target's latest prediction until this long
 (s) before it arrives; later corrections are left to the Cartesian approach that follows."""
@@ -954,6 +958,19 @@ class PickController:
             )
         )
 
+    def _posture_scale(self) -> float:
+        """The scale of the Cartesian acceleration limits that the joints can follow in the
+        current posture (``motion.posture_acceleration_margin`` of their datasheet limits, with
+        every axis at its limit at once; 1 when that is more than the limits, or off)."""
+        margin = self._cfg.motion.posture_acceleration_margin
+        if margin <= 0.0:
+            return 1.0
+        rates = np.abs(self._kin.tilt_held_rates(self._commander.q))
+        needed = rates @ np.asarray(self._cfg.motion.max_acceleration)
+        limits = margin * np.asarray(self._kin.acceleration_limit_rps2)
+        scale = float(np.min(limits / np.maximum(needed, 1e-12)))
+        return min(1.0, max(scale, MIN_POSTURE_SCALE))
+
     def _step_joint(self, goal: JointGoal) -> None:
         motion = self._motion
         if not motion.joint_mode:
@@ -978,7 +995,11 @@ class PickController:
     ) -> None:
         motion = self._motion
         try:
-            step = self._planner.step(target, min_duration_s=min_duration_s)
+            step = self._planner.step(
+                target,
+                acceleration_scale=self._posture_scale(),
+                min_duration_s=min_duration_s,
+            )
             motion.yaw_remaining_s = step.yaw_remaining_s
         except PlanningError as exc:
             self._book.error("ruckig_error", f"{self._phase}: {exc}")

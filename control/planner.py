@@ -184,7 +184,7 @@ class CartesianPlanner:
         self._state = state
 
     def _relative(
-        self, target: CartesianTarget, speed_scale: float
+        self, target: CartesianTarget, speed_scale: float, acceleration_scale: float = 1.0
     ) -> tuple[list[float], list[float], tuple[list[float], list[float], list[float], list[float]]]:
         """The state relative to the moving target, and the limits in its frame (see
         :meth:`step`)."""
@@ -194,6 +194,9 @@ class CartesianPlanner:
             raise PlanningError(msg)
         if not 0.0 < speed_scale <= 1.0:
             msg = f"speed_scale {speed_scale} is not in (0, 1]"
+            raise PlanningError(msg)
+        if not 0.0 < acceleration_scale <= 1.0:
+            msg = f"acceleration_scale {acceleration_scale} is not in (0, 1]"
             raise PlanningError(msg)
         motion = self._motion
         vmax = [v * speed_scale for v in motion.max_velocity]
@@ -209,7 +212,7 @@ class CartesianPlanner:
         relative_velocity = [c - v for c, v in zip(state.velocity, target.velocity, strict=True)]
         v_hi = [limit - v for v, limit in zip(target.velocity, vmax, strict=True)]
         v_lo = [-limit - v for v, limit in zip(target.velocity, vmax, strict=True)]
-        amax = [a * speed_scale for a in motion.max_acceleration]
+        amax = [a * speed_scale * acceleration_scale for a in motion.max_acceleration]
         return relative, relative_velocity, (v_lo, v_hi, amax, list(motion.max_jerk))
 
     def step(
@@ -217,6 +220,7 @@ class CartesianPlanner:
         target: CartesianTarget,
         *,
         speed_scale: float = 1.0,
+        acceleration_scale: float = 1.0,
         min_duration_s: float | None = None,
     ) -> PlannerStep:
         """Advance one control period towards a target moving at constant velocity.
@@ -227,12 +231,16 @@ class CartesianPlanner:
         relative velocity, velocity limits shifted by the target velocity), so the world
         trajectory intercepts the moving target exactly and then moves with it (feed-forward of
         the target velocity). ``speed_scale`` in (0, 1] scales the velocity and acceleration
-        limits. With ``min_duration_s`` x, y and z meet the target no sooner than that (s) from
-        now (Ruckig's minimum duration; a longer time-optimal trajectory is not shortened).
+        limits; ``acceleration_scale`` in (0, 1] scales the acceleration limits once more (what
+        the joints can follow in the current posture). With ``min_duration_s`` x, y and z meet
+        the target no sooner than that (s) from now (Ruckig's minimum duration; a longer
+        time-optimal trajectory is not shortened).
         Raises ``PlanningError`` for non-finite targets, a target velocity at or above
         the limits or any other Ruckig error; the state is then unchanged.
         """
-        relative, relative_velocity, (v_lo, v_hi, amax, jmax) = self._relative(target, speed_scale)
+        relative, relative_velocity, (v_lo, v_hi, amax, jmax) = self._relative(
+            target, speed_scale, acceleration_scale
+        )
         state = self._state
         period_s = self._motion.control_period_s
         try:

@@ -156,3 +156,25 @@ def test_the_ik_converges_along_a_joint_limit() -> None:
     assert kin.within_limits(result.q)
     reached = kin.fk(result.q)
     assert np.allclose(reached.translation, target.translation, atol=1e-4)
+
+
+def test_tilt_held_rates_move_the_tcp_as_asked_and_keep_the_tool_vertical() -> None:
+    """The joint rates of :meth:`Kinematics.tilt_held_rates` give the requested world
+    ``(vx, vy, vz, yaw rate)`` of the TCP with no roll or pitch: a small step along them moves
+    a downward-pointing tool to the pose that far away, pointing down still."""
+    config = ControllerConfig(cell=load_cell("suction"))
+    kin = Kinematics.of_station(config.station, config.ik)
+    seed = np.asarray(config.robot.ready_joint_positions_rad)
+    start = kin.solve(tool_pose((0.1, 0.5, 0.1), 1.2), seed)
+    assert start.success
+    rates = kin.tilt_held_rates(np.asarray(start.q))
+    assert rates.shape == (kin.nq, 4)
+    for axis, twist in enumerate(np.eye(4)):
+        dt = 1e-4
+        q = np.asarray(start.q) + rates @ twist * dt
+        moved = kin.fk(q)
+        want = tool_pose(
+            (0.1 + twist[0] * dt, 0.5 + twist[1] * dt, 0.1 + twist[2] * dt), 1.2 + twist[3] * dt
+        )
+        error = np.linalg.norm((want.inverse() * moved).homogeneous - np.eye(4))
+        assert error < 1e-6, axis

@@ -326,3 +326,28 @@ def test_feedback_corrects_along_the_belt_but_never_the_height() -> None:
     ]
     assert corrections[-1][0] > 0.001  # pushes x on towards the setpoint
     assert all(c[2] == 0.0 for c in corrections)
+
+
+def test_an_acceleration_scale_slows_the_intercept_within_the_scaled_limits() -> None:
+    motion = MotionConfig(control_period_s=0.001)
+    half = MotionConfig(
+        control_period_s=0.001, max_acceleration=tuple(0.5 * a for a in motion.max_acceleration)
+    )
+    caught = []
+    for scale in (1.0, 0.5):
+        planner = CartesianPlanner(motion, CartesianState(position=(0.0, 0.45, 0.3, 1.57)))
+        states = [planner.state]
+        for k in range(3000):
+            step = planner.step(
+                CartesianTarget(position=(0.2, 0.55, 0.05, 1.57)), acceleration_scale=scale
+            )
+            states.append(step.state)
+            if step.finished:
+                caught.append(k)
+                break
+        _limits_respected(states, half if scale == 0.5 else motion)
+    assert caught[1] > caught[0]
+    with pytest.raises(PlanningError, match="acceleration_scale"):
+        CartesianPlanner(motion, CartesianState(position=(0.0, 0.45, 0.3, 1.57))).step(
+            CartesianTarget(position=(0.2, 0.55, 0.05, 1.57)), acceleration_scale=0.0
+        )
