@@ -279,6 +279,8 @@ class ControllerEndpoint:
         self._acked_commands = 0
         self._last_control_tick = -1
         self._last_update_s = -math.inf
+        self.tick_time_s = 0.0
+        """Lockstep: the sim time of the last tick handled."""
         self._last_q_cmd: FloatArray | None = None
         self._last_tool_command: float | None = None
         self._last_target_key: tuple[int, str] | None = None
@@ -432,6 +434,7 @@ class ControllerEndpoint:
                 return
             self._ticks.popleft()
             self._consume(limits_ns)
+            self.tick_time_s = msg_stamp_s(tick.stamp)
             k = int(tick.tick)
             if k > self._last_control_tick and k % self._steps_per_update == 0:
                 self._last_control_tick = k
@@ -616,15 +619,16 @@ class ControllerNode(Node, ControllerEndpoint):
     def __init__(
         self, config: ControllerConfig, *, lockstep: bool, node_name: str = "controller"
     ) -> None:
-        """Create publishers and subscriptions; ``use_sim_time`` is always true. Lockstep: a
-        steady-clock timer re-checks the matching every 5 ms until it holds
-        (:meth:`~ControllerEndpoint.try_match`)."""
+        """Create publishers and subscriptions. Realtime: ``use_sim_time`` (the node's clock
+        follows ``/clock``). Lockstep: time is the ticks' (no ``/clock`` subscription, one
+        message a step fewer to carry), and a steady-clock timer re-checks the matching every
+        5 ms until it holds (:meth:`~ControllerEndpoint.try_match`)."""
         namespace = config.station.namespace
         Node.__init__(
             self,
             node_name,
             namespace=f"/{namespace}" if namespace else "",
-            parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)],
+            parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, not lockstep)],
         )
         self._wire = RosWire(self)
         self._log = self.get_logger()
@@ -639,7 +643,10 @@ class ControllerNode(Node, ControllerEndpoint):
             self._match_timer.cancel()
 
     def sim_time_s(self) -> float:
-        """The node's clock (``/clock`` with ``use_sim_time``), seconds."""
+        """Sim time, seconds: the last tick handled in lockstep, the node's clock (``/clock``
+        with ``use_sim_time``) in realtime."""
+        if self.lockstep:
+            return self.tick_time_s
         return float(self.get_clock().now().nanoseconds) * 1e-9
 
 

@@ -403,7 +403,6 @@ def _serve(
 
     from interfaces.fileio import write_atomic
     from twin.episode_log import tracking_summary, write_status, write_summary
-    from twin.ros_node import run_loop
 
     scenario = twin.scenario
     gui = getattr(args, "gui", False)
@@ -418,24 +417,7 @@ def _serve(
     wants = view.wants if recording is None and view is not None else None
     node, executor, detach = _endpoint(args, twin, fan_out(writers), peers, wants)
     wall0 = time.perf_counter()
-    stepping: list[float] = []
-    interrupted = False
-    try:
-        run_loop(
-            node,
-            StoppableExecutor(executor, stop),
-            ack_timeout_s=args.ack_timeout,
-            on_first_step=lambda: stepping.append(time.perf_counter()),
-        )
-    except EpisodeStopped:
-        interrupted = True
-    finally:
-        if peers is not None:
-            detach()
-            executor.spin_once(timeout_sec=0.0)  # the last tick, as over ROS 2
-            peers.finish()
-    end = time.perf_counter()
-    first = stepping[0] if stepping else end
+    interrupted, first, end = _step(args, node, StoppableExecutor(executor, stop), peers, detach)
     wall = end - first
     if recording is not None:
         recording.close()
@@ -490,6 +472,41 @@ def _serve(
     if peers is None:
         try_shutdown()
     return interrupted
+
+
+def _step(
+    args: argparse.Namespace,
+    node: TwinEndpoint,
+    executor: StoppableExecutor,
+    peers: InprocPeers | None,
+    detach: Callable[[], None],
+) -> tuple[bool, float, float]:
+    """Run the step loop; whether a stop signal ended it, and the ``perf_counter`` times of
+    the first step and of the end. In process, the controllers are then handed the last tick
+    (as over ROS 2) and write their stats, also when the loop failed."""
+    from twin.ros_node import run_loop
+
+    stepping: list[float] = []
+    interrupted = False
+    try:
+        run_loop(
+            node,
+            executor,
+            ack_timeout_s=args.ack_timeout,
+            on_first_step=lambda: stepping.append(time.perf_counter()),
+        )
+    except EpisodeStopped:
+        interrupted = True
+    except BaseException:
+        if peers is not None:
+            peers.finish()  # what the controllers counted until the failure
+        raise
+    if peers is not None:
+        detach()
+        executor.executor.spin_once(timeout_sec=0.0)  # the last tick, as over ROS 2
+        peers.finish()
+    end = time.perf_counter()
+    return interrupted, stepping[0] if stepping else end, end
 
 
 def _endpoint(
