@@ -50,7 +50,6 @@ from cdw_interfaces.msg import (
     Detection,
     DetectionArray,
     LockstepTick,
-    ObjectState,
     ObjectStateArray,
     PickTarget,
     Ping,
@@ -70,6 +69,7 @@ from std_msgs.msg import Float64, String
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
+from interfaces import cdr
 from interfaces import contract as c
 from interfaces.class_colours import class_rgb, dataset_class_rgb
 from interfaces.contract import Topic
@@ -318,6 +318,17 @@ class TwinEndpoint:
         publisher.publish(data if self._wire_takes_bytes else msg)
         self._tap(publisher.topic_name, data, time.time_ns())
 
+    def _send_cdr(self, publisher: Any, data: bytes, build: Callable[[], Any]) -> None:
+        """Publish a message written as its CDR bytes (:mod:`interfaces.cdr`): over ROS 2 the
+        bytes as they are; on the in-process bus the message ``build()`` gives, for the
+        subscribers there are (the same values); the tap gets the bytes."""
+        if self._wire_takes_bytes:
+            publisher.publish(data)
+        elif publisher.get_subscription_count() > 0:
+            publisher.publish(build())
+        if self._tap is not None:
+            self._tap(publisher.topic_name, data, time.time_ns())
+
     def _taken(self, publisher: Any) -> bool:
         """Whether a message of a volatile topic reaches anyone (:meth:`_wanted`); nobody else
         would ever see it, so it need not be built."""
@@ -531,7 +542,8 @@ class TwinEndpoint:
         stamp = time_msg(twin.time_s)
         stamp_ns = msg_stamp_ns(stamp)
         if self._taken(self.pub_clock):
-            self._send(self.pub_clock, Clock(clock=stamp))
+            data = cdr.clock_cdr(stamp.sec, stamp.nanosec)
+            self._send_cdr(self.pub_clock, data, lambda: Clock(clock=stamp))
         wall_s = time.perf_counter()
         self.telemetry.on_step(twin.time_s, wall_s)
         self.telemetry.on_state_published(twin.time_s, wall_s)
@@ -565,41 +577,68 @@ class TwinEndpoint:
         station = link.station
         q, qd = station.robot.joint_state()
         tool_q, tool_qd = station.tool.joint_report()
-        joints = JointState()
-        joints.header.stamp = stamp
-        joints.name = link.joint_names
-        joints.position = [float(v) for v in q] + tool_q
-        joints.velocity = [float(v) for v in qd] + tool_qd
-        self._send(link.pub_joints, joints)
+        position = [float(v) for v in q] + tool_q
+        velocity = [float(v) for v in qd] + tool_qd
+        sec, nanosec = stamp.sec, stamp.nanosec
+
+        def joint_state() -> JointState:
+            joints = JointState(name=link.joint_names, position=position, velocity=velocity)
+            joints.header.stamp = stamp
+            return joints
+
+        data = cdr.joint_state_cdr(sec, nanosec, link.joint_names, position, velocity)
+        self._send_cdr(link.pub_joints, data, joint_state)
         if not self._taken(link.pub_tcp):
             return
         pos, orn = self.twin.tcp_pose(station.index)
-        pose = PoseStamped()
-        pose.header.stamp = stamp
-        pose.header.frame_id = "world"
-        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = pos
-        o = pose.pose.orientation
-        o.x, o.y, o.z, o.w = orn
-        self._send(link.pub_tcp, pose)
+        pos3 = (float(pos[0]), float(pos[1]), float(pos[2]))
+        quat = (float(orn[0]), float(orn[1]), float(orn[2]), float(orn[3]))
+
+        def pose_stamped() -> PoseStamped:
+            pose = PoseStamped()
+            pose.header.stamp = stamp
+            pose.header.frame_id = "world"
+            pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = pos3
+            o = pose.pose.orientation
+            o.x, o.y, o.z, o.w = quat
+            return pose
+
+        data = cdr.pose_stamped_cdr(sec, nanosec, "world", pos3, quat)
+        self._send_cdr(link.pub_tcp, data, pose_stamped)
 
     def _publish_tick(self, step: int, stamp: Any) -> None:
         counts, last = self._tick_counts, self._last_stamp_ns
         joints, belt, detections, claims = (t.name for t in c.COUNTED)
-        self._send(
-            self.pub_tick,
-            LockstepTick(
-                tick=step,
-                stamp=stamp,
-                n_joint_states=counts[joints],
-                n_belt_states=counts[belt],
-                n_detections=counts[detections],
-                n_claims=counts[claims],
-                last_joint_state_ns=last.get(joints, -1),
-                last_belt_state_ns=last.get(belt, -1),
-                last_detections_ns=last.get(detections, -1),
-                last_claims_ns=last.get(claims, -1),
-            ),
+        values = cdr.TickValues(
+            tick=step,
+            sec=stamp.sec,
+            nanosec=stamp.nanosec,
+            n_joint_states=counts[joints],
+            n_belt_states=counts[belt],
+            n_detections=counts[detections],
+            n_claims=counts[claims],
+            last_joint_state_ns=last.get(joints, -1),
+            last_belt_state_ns=last.get(belt, -1),
+            last_detections_ns=last.get(detections, -1),
+            last_claims_ns=last.get(claims, -1),
         )
+
+        def tick() -> LockstepTick:
+            v = values
+            return LockstepTick(
+                tick=v.tick,
+                stamp=stamp,
+                n_joint_states=v.n_joint_states,
+                n_belt_states=v.n_belt_states,
+                n_detections=v.n_detections,
+                n_claims=v.n_claims,
+                last_joint_state_ns=v.last_joint_state_ns,
+                last_belt_state_ns=v.last_belt_state_ns,
+                last_detections_ns=v.last_detections_ns,
+                last_claims_ns=v.last_claims_ns,
+            )
+
+        self._send_cdr(self.pub_tick, cdr.lockstep_tick_cdr(values), tick)
 
     def bins_message(self, link: StationLink) -> SortingBins:
         """A station's ``cell/bins``: its bins (``StationSpec.bins``), stamped now."""
@@ -659,13 +698,14 @@ class TwinEndpoint:
         self, stamp: Any, objects: tuple[GroundTruth, ...] | None = None
     ) -> None:
         """``/objects/ground_truth`` (evaluation only) of ``objects`` (default: now's)."""
-        msg = ObjectStateArray()
-        msg.header.stamp = stamp
-        msg.header.frame_id = "world"
-        for gt in self.twin.observe_objects() if objects is None else objects:
-            state = ObjectState(
+        values = [
+            cdr.ObjectStateValues(
                 id=gt.id,
                 class_name=gt.class_name,
+                position_m=gt.position_m,
+                orientation_xyzw=gt.orientation_xyzw,
+                linear_velocity_mps=gt.linear_velocity_mps,
+                angular_velocity_radps=gt.angular_velocity_radps,
                 length_m=gt.length_m,
                 width_m=gt.width_m,
                 height_m=gt.height_m,
@@ -677,14 +717,10 @@ class TwinEndpoint:
                 held=gt.held,
                 in_bin=gt.in_bin,
             )
-            p, o = state.pose.position, state.pose.orientation
-            p.x, p.y, p.z = gt.position_m
-            o.x, o.y, o.z, o.w = gt.orientation_xyzw
-            lin, ang = state.twist.linear, state.twist.angular
-            lin.x, lin.y, lin.z = gt.linear_velocity_mps
-            ang.x, ang.y, ang.z = gt.angular_velocity_radps
-            msg.objects.append(state)
-        self._send(self.pub_gt, msg)
+            for gt in (self.twin.observe_objects() if objects is None else objects)
+        ]
+        data = cdr.object_state_array_cdr(stamp.sec, stamp.nanosec, "world", values)
+        self._send_cdr(self.pub_gt, data, lambda: deserialize_message(data, ObjectStateArray))
 
     # -- the scene --------------------------------------------------------------------------
     def scene_wanted(self) -> bool:

@@ -22,15 +22,14 @@ through its TCP's last positions). Large meshes are decimated by vertex clusteri
 from __future__ import annotations
 
 import math
-import struct
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
-from functools import lru_cache
 
 import numpy as np
 
+from interfaces.cdr import CdrWriter
 from interfaces.cell import BinSpec, Cell
 from interfaces.class_colours import RGB
 
@@ -150,44 +149,21 @@ def station_frames(namespace: str, links: Mapping[str, Pose], tcp: Pose) -> list
     return world_frames([*named, (tcp_frame(namespace), tcp)])
 
 
-CDR_HEADER = b"\x00\x01\x00\x00"
-"""The encapsulation header of little-endian plain CDR, as rclpy's serialized messages start."""
-_STAMP = struct.Struct("<iI")
-_POSE = struct.Struct("<7d")
-_LENGTH = struct.Struct("<I")
-
-
 def tf_message_cdr(frames: Sequence[Frame], sec: int, nanosec: int) -> bytes:
     """The serialized ``tf2_msgs/msg/TFMessage`` (CDR, as rclpy serializes it) of ``frames``,
     every transform stamped ``(sec, nanosec)``.
 
-    Written directly rather than through rclpy's message objects: the scene sends some forty
-    transforms 30 times a second, and building them as Python messages costs far more than the
-    rest of a step's publishing.
+    Written directly (:mod:`interfaces.cdr`) rather than through rclpy's message objects: the
+    scene sends some forty transforms 30 times a second, and building them as Python messages
+    costs far more than the rest of a step's publishing.
     """
-    out = bytearray(CDR_HEADER)
-    out += _LENGTH.pack(len(frames))
-    stamp = _STAMP.pack(sec, nanosec)
+    w = CdrWriter()
+    w.u32(len(frames))
     for frame in frames:
-        out += b"\x00" * (-(len(out) - 4) % 4)
-        out += stamp
-        _cdr_string(out, frame.parent)
-        _cdr_string(out, frame.child)
-        out += b"\x00" * (-(len(out) - 4) % 8)
-        out += _POSE.pack(*frame.position_m, *frame.orientation_xyzw)
-    return bytes(out)
-
-
-def _cdr_string(out: bytearray, text: str) -> None:
-    """Append a CDR string (4-aligned length including the terminating NUL, bytes, NUL)."""
-    out += b"\x00" * (-(len(out) - 4) % 4)
-    out += _cdr_string_bytes(text)
-
-
-@lru_cache(maxsize=4096)
-def _cdr_string_bytes(text: str) -> bytes:
-    data = text.encode("utf-8")
-    return _LENGTH.pack(len(data) + 1) + data + b"\x00"
+        w.header(sec, nanosec, frame.parent)
+        w.string(frame.child)
+        w.f64s((*frame.position_m, *frame.orientation_xyzw))
+    return w.bytes()
 
 
 def _vec3(v: Sequence[float]) -> Vec3:

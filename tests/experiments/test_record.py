@@ -37,9 +37,9 @@ from experiments.record import (
 
 RELIABLE_TWIN_TOPICS = ("/joint_states", "/conveyor/state", "/objects/detections")
 START_TIMEOUT_S = 60.0
-EPISODE = (
+EPISODE = (  # long enough that the recorder is killed while the episode runs
     "--duration",
-    "3",
+    "10",
     "--speed",
     "0.4",
     "--prefill",
