@@ -67,34 +67,33 @@ def validate_joint_command(
         return Rejected(
             "wrong_joint_count", f"{len(velocities)} velocities for {len(positions)} positions"
         )
-    order = [list(names).index(j) for j in arm_joints]
-    q = np.array([positions[i] for i in order], dtype=float)
-    if not np.all(np.isfinite(q)):
-        return Rejected("not_finite", f"positions {q.tolist()} contain NaN or inf")
+    # plain floats, not numpy: a 7-joint check at the control rate costs more in numpy's calls
+    index = {name: i for i, name in enumerate(names)}
+    q = [float(positions[index[j]]) for j in arm_joints]
+    if not all(math.isfinite(v) for v in q):
+        return Rejected("not_finite", f"positions {q} contain NaN or inf")
     tol = 1e-6
-    bad = np.nonzero((q < lower - tol) | (q > upper + tol))[0]
-    if bad.size:
-        j = int(bad[0])
-        return Rejected(
-            "beyond_limits",
-            f"{arm_joints[j]} position {q[j]:.4f} rad outside its limits"
-            f" [{lower[j]:.4f}, {upper[j]:.4f}]",
-        )
-    qd: tuple[float, ...] | None = None
-    if velocities:
-        v = np.array([velocities[i] for i in order], dtype=float)
-        if not np.all(np.isfinite(v)):
-            return Rejected("not_finite", f"velocities {v.tolist()} contain NaN or inf")
-        over = np.nonzero(np.abs(v) > velocity_limit + tol)[0]
-        if over.size:
-            j = int(over[0])
+    for j, v in enumerate(q):
+        if v < lower[j] - tol or v > upper[j] + tol:
             return Rejected(
                 "beyond_limits",
-                f"{arm_joints[j]} velocity {v[j]:.4f} rad/s outside its limit"
-                f" [-{velocity_limit[j]:.4f}, {velocity_limit[j]:.4f}]",
+                f"{arm_joints[j]} position {v:.4f} rad outside its limits"
+                f" [{lower[j]:.4f}, {upper[j]:.4f}]",
             )
-        qd = tuple(float(x) for x in v)
-    return JointTarget(positions=tuple(float(x) for x in q), velocities=qd)
+    qd: tuple[float, ...] | None = None
+    if velocities:
+        v_all = [float(velocities[index[j]]) for j in arm_joints]
+        if not all(math.isfinite(v) for v in v_all):
+            return Rejected("not_finite", f"velocities {v_all} contain NaN or inf")
+        for j, v in enumerate(v_all):
+            if abs(v) > velocity_limit[j] + tol:
+                return Rejected(
+                    "beyond_limits",
+                    f"{arm_joints[j]} velocity {v:.4f} rad/s outside its limit"
+                    f" [-{velocity_limit[j]:.4f}, {velocity_limit[j]:.4f}]",
+                )
+        qd = tuple(v_all)
+    return JointTarget(positions=tuple(q), velocities=qd)
 
 
 def validate_gripper(width_m: float, max_opening_m: float) -> float | Rejected:
