@@ -318,10 +318,14 @@ class TwinEndpoint:
         publisher.publish(data if self._wire_takes_bytes else msg)
         self._tap(publisher.topic_name, data, time.time_ns())
 
-    def _send_cdr(self, publisher: Any, data: bytes, build: Callable[[], Any]) -> None:
-        """Publish a message written as its CDR bytes (:mod:`interfaces.cdr`): over ROS 2 the
-        bytes as they are; on the in-process bus the message ``build()`` gives, for the
-        subscribers there are (the same values); the tap gets the bytes."""
+    def _send_cdr(
+        self, publisher: Any, encode: Callable[[], bytes], build: Callable[[], Any]
+    ) -> None:
+        """Publish a message written as its CDR bytes (``encode()``, :mod:`interfaces.cdr`):
+        over ROS 2 the bytes as they are; on the in-process bus the message ``build()`` gives
+        (the same values), for the subscribers there are; the tap gets the bytes. Nothing is
+        encoded that nobody takes."""
+        data = encode() if self._wire_takes_bytes or self._tap is not None else b""
         if self._wire_takes_bytes:
             publisher.publish(data)
         elif publisher.get_subscription_count() > 0:
@@ -542,8 +546,11 @@ class TwinEndpoint:
         stamp = time_msg(twin.time_s)
         stamp_ns = msg_stamp_ns(stamp)
         if self._taken(self.pub_clock):
-            data = cdr.clock_cdr(stamp.sec, stamp.nanosec)
-            self._send_cdr(self.pub_clock, data, lambda: Clock(clock=stamp))
+            self._send_cdr(
+                self.pub_clock,
+                partial(cdr.clock_cdr, stamp.sec, stamp.nanosec),
+                lambda: Clock(clock=stamp),
+            )
         wall_s = time.perf_counter()
         self.telemetry.on_step(twin.time_s, wall_s)
         self.telemetry.on_state_published(twin.time_s, wall_s)
@@ -586,8 +593,8 @@ class TwinEndpoint:
             joints.header.stamp = stamp
             return joints
 
-        data = cdr.joint_state_cdr(sec, nanosec, link.joint_names, position, velocity)
-        self._send_cdr(link.pub_joints, data, joint_state)
+        encode = partial(cdr.joint_state_cdr, sec, nanosec, link.joint_names, position, velocity)
+        self._send_cdr(link.pub_joints, encode, joint_state)
         if not self._taken(link.pub_tcp):
             return
         pos, orn = self.twin.tcp_pose(station.index)
@@ -603,8 +610,8 @@ class TwinEndpoint:
             o.x, o.y, o.z, o.w = quat
             return pose
 
-        data = cdr.pose_stamped_cdr(sec, nanosec, "world", pos3, quat)
-        self._send_cdr(link.pub_tcp, data, pose_stamped)
+        encode = partial(cdr.pose_stamped_cdr, sec, nanosec, "world", pos3, quat)
+        self._send_cdr(link.pub_tcp, encode, pose_stamped)
 
     def _publish_tick(self, step: int, stamp: Any) -> None:
         counts, last = self._tick_counts, self._last_stamp_ns
@@ -638,7 +645,7 @@ class TwinEndpoint:
                 last_claims_ns=v.last_claims_ns,
             )
 
-        self._send_cdr(self.pub_tick, cdr.lockstep_tick_cdr(values), tick)
+        self._send_cdr(self.pub_tick, partial(cdr.lockstep_tick_cdr, values), tick)
 
     def bins_message(self, link: StationLink) -> SortingBins:
         """A station's ``cell/bins``: its bins (``StationSpec.bins``), stamped now."""
@@ -720,7 +727,9 @@ class TwinEndpoint:
             for gt in (self.twin.observe_objects() if objects is None else objects)
         ]
         data = cdr.object_state_array_cdr(stamp.sec, stamp.nanosec, "world", values)
-        self._send_cdr(self.pub_gt, data, lambda: deserialize_message(data, ObjectStateArray))
+        self._send_cdr(
+            self.pub_gt, lambda: data, lambda: deserialize_message(data, ObjectStateArray)
+        )
 
     # -- the scene --------------------------------------------------------------------------
     def scene_wanted(self) -> bool:
