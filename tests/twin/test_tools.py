@@ -327,3 +327,44 @@ def test_the_suction_cups_stem_touching_an_object_not_under_it_is_unintended(
     assert [(e.object_id, e.data["link"]) for e in unintended][:1] == [(obj.id, "suction_cup_stem")]
     assert not _of(events, EventType.TCP_OVERLAP_START)
     assert np.isfinite(top)
+
+
+def test_the_tcp_acceleration_spreads_a_one_step_velocity_jump_over_its_window() -> None:
+    """Sampled every physics step (a tool does it from its ``tick``), a velocity jump within one
+    step, as when an object is fixed to the TCP, counts as that jump over the 20 ms window (not
+    over the 4 ms step, five times as much); a steady acceleration is measured as it is."""
+    from twin.tools import ACCELERATION_WINDOW_S, TcpAccelerometer
+
+    client = pb.connect(pb.DIRECT)
+    try:
+        body = pb.createMultiBody(
+            baseMass=0.0,
+            linkMasses=[1.0],
+            linkCollisionShapeIndices=[-1],
+            linkVisualShapeIndices=[-1],
+            linkPositions=[[0.0, 0.0, 0.0]],
+            linkOrientations=[[0.0, 0.0, 0.0, 1.0]],
+            linkInertialFramePositions=[[0.0, 0.0, 0.0]],
+            linkInertialFrameOrientations=[[0.0, 0.0, 0.0, 1.0]],
+            linkParentIndices=[0],
+            linkJointTypes=[pb.JOINT_PRISMATIC],
+            linkJointAxis=[[1.0, 0.0, 0.0]],
+            physicsClientId=client,
+        )
+        meter = TcpAccelerometer(body, 0, client)
+        dt_s = 1.0 / 240.0
+        for k in range(12):  # steady at 0.3 m/s
+            pb.resetJointState(body, 0, 0.0, 0.3, physicsClientId=client)
+            meter.sample(k * dt_s)
+        pb.resetJointState(body, 0, 0.0, 0.4, physicsClientId=client)  # one step: +0.1 m/s
+        jump = meter.magnitude(12 * dt_s)
+        assert jump == pytest.approx(0.1 / ACCELERATION_WINDOW_S, rel=0.25)
+        assert jump < 0.5 * 0.1 / dt_s
+        for k in range(13, 40):  # then 2 m/s^2, steadily
+            pb.resetJointState(body, 0, 0.0, 0.4 + 2.0 * (k - 12) * dt_s, physicsClientId=client)
+            steady = meter.magnitude(k * dt_s)
+        assert steady == pytest.approx(2.0, rel=1e-6)
+        meter.reset()
+        assert meter.magnitude(40 * dt_s) == 0.0
+    finally:
+        pb.disconnect(physicsClientId=client)

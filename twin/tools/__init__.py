@@ -164,8 +164,13 @@ as accelerations no object in the tool would feel."""
 
 class TcpAccelerometer:
     """The TCP's measured acceleration: the change of the TCP link's velocity (PyBullet) over
-    the last :data:`ACCELERATION_WINDOW_S`, sampled once per physics step (what the carry
-    checks load the held object with)."""
+    the last :data:`ACCELERATION_WINDOW_S`, what the carry checks load the held object with.
+
+    The tool samples it every physics step (:meth:`sample`, from its ``tick``), held or not, so
+    the window is full from the first step of a carry: fixing the object to the TCP makes the
+    arm's velocity jump within one step, and a difference over that step alone would load the
+    object with an acceleration no object in the tool would feel.
+    """
 
     def __init__(self, body: int, link: int, client: int) -> None:
         self.body, self.link, self.client = body, link, client
@@ -175,8 +180,9 @@ class TcpAccelerometer:
         """Forget the samples (the next acceleration is 0)."""
         self._samples.clear()
 
-    def magnitude(self, time_s: float) -> float:
-        """``|a|`` (m/s^2) at ``time_s``: over the window, or since the first sample."""
+    def sample(self, time_s: float) -> None:
+        """Record the TCP's velocity at ``time_s`` (once per time; samples older than the
+        window needs are dropped)."""
         state = pb.getLinkState(
             self.body, self.link, computeLinkVelocity=1, physicsClientId=self.client
         )
@@ -184,11 +190,18 @@ class TcpAccelerometer:
         samples = self._samples
         while len(samples) > 1 and samples[1][0] <= time_s - ACCELERATION_WINDOW_S + 1e-9:
             samples.popleft()
+        if samples and samples[-1][0] == time_s:
+            samples.pop()
         samples.append((time_s, velocity))
-        t0, v0 = samples[0]
-        if time_s <= t0:
+
+    def magnitude(self, time_s: float) -> float:
+        """``|a|`` (m/s^2) at ``time_s``: over the window, or since the first sample."""
+        self.sample(time_s)
+        t0, v0 = self._samples[0]
+        t1, v1 = self._samples[-1]
+        if t1 <= t0:
             return 0.0
-        return math.dist(velocity, v0) / (time_s - t0)
+        return math.dist(v1, v0) / (t1 - t0)
 
 
 def link_pose(body: int, link: int, client: int) -> Pose:

@@ -98,6 +98,7 @@ class ParallelJaw:
             pb.resetJointState(self.body, j, q, 0.0, physicsClientId=self.client)
         self._target_m = self.spec.max_opening_m
         self._applied_m = math.nan
+        self._accelerometer.reset()
         self.release()
         if self._slipped:
             self._slipped = False
@@ -170,7 +171,9 @@ class ParallelJaw:
         return self._target_m - self.measured()
 
     def tick(self, time_s: float) -> None:
-        """After a slip: the pads get their friction back once the jaw has opened."""
+        """After a slip: the pads get their friction back once the jaw has opened. The TCP's
+        velocity is sampled for the carry's acceleration."""
+        self._accelerometer.sample(time_s)
         if self._slipped and self.releases():
             self._slipped = False
             self._pad_friction(PAD_FRICTION)
@@ -194,9 +197,7 @@ class ParallelJaw:
         self._held = held
         force = self.spec.grip_force_N
         self._capacity_N = None if force is None else 2.0 * held.friction * force
-        if self._capacity_N is not None:
-            self._accelerometer.reset()
-            self._accelerometer.magnitude(time_s)
+        del time_s
 
     def carry(self, time_s: float) -> str | None:
         """``released`` once the gripper no longer presses; ``slipped`` once the load exceeds

@@ -186,6 +186,7 @@ class SuctionCup:
         self._seal_id = None
         self._seal_seen_s = -math.inf
         self._lost = False
+        self._accelerometer.reset()
         self.release()
 
     def command(self, value: float) -> None:
@@ -222,7 +223,9 @@ class SuctionCup:
 
     def tick(self, time_s: float) -> None:
         """The vacuum at ``time_s``: building up on a seal seen at the last step (or full on a
-        held object), venting with the vacuum off, none on an open cup."""
+        held object), venting with the vacuum off, none on an open cup; the TCP's velocity
+        sampled for the carry's acceleration."""
+        self._accelerometer.sample(time_s)
         dt_s = max(time_s - self._now_s, 0.0)
         sealed = self._seal_id is not None and self._seal_seen_s >= self._now_s - 1e-9
         self._now_s = time_s
@@ -258,11 +261,10 @@ class SuctionCup:
         return candidate.time_s - self._seal_since_s >= self.spec.build_up_s - 1e-9
 
     def hold(self, held: HeldObject, time_s: float) -> None:
-        """Start carrying ``held``: where the lip sits on it, the first acceleration sample."""
+        """Start carrying ``held``: where the lip sits on it."""
+        del time_s
         self._held = held
         self._lip_in_object = self._lip_on(held)
-        self._accelerometer.reset()
-        self._accelerometer.magnitude(time_s)
 
     def carry(self, time_s: float) -> str | None:
         """``seal_lost``, ``suction_overload`` or (vacuum off) ``released`` once the holding
