@@ -146,6 +146,20 @@ def test_shipped_throughput_file_changes_only_tuning() -> None:
     assert throughput.tracking == default.tracking
 
 
+def test_the_suction_throughput_file_keeps_its_moves_to_what_the_ur10_can_follow() -> None:
+    """The suction throughput benchmark's parameters, on its UR10: throughput first (the next
+    target met from the bin, the quickest cycle first, no retry at the point that did not seal),
+    the Cartesian moves within what the joints can follow, the reach of the UR10."""
+    cell = load_cell("suction_ur10")
+    config = load_config(CONFIG_DIR / "suction_throughput.yaml", cell=cell)
+    assert config.robot.name == "ur10"
+    assert config.motion.posture_acceleration_margin == 0.8
+    assert (config.pick.approach_space, config.scheduler.rank) == ("joint", "cycle")
+    assert config.pick.grip_retries == 0
+    assert config.scheduler.max_reach_m > 1.0
+    assert config.tracking == ControllerConfig().tracking
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [

@@ -31,6 +31,7 @@ EXPECTED = {
     "fault_controller_restart",
     "line",
     "suction",
+    "suction_throughput",
     "wide_gripper",
 }
 GRIDS = SCENARIOS.parent / "grids"
@@ -88,6 +89,8 @@ def test_every_scenario_file_loads_and_round_trips(tmp_path: Path) -> None:
     assert Scenario.load(SCENARIOS / "fault_belt_stall.yaml").faults.belt_stall
     assert Scenario.load(SCENARIOS / "fault_controller_restart.yaml").faults.controller_restart_at_s
     assert Scenario.load(SCENARIOS / "throughput.yaml").controller == "throughput"
+    suction = Scenario.load(SCENARIOS / "suction_throughput.yaml")
+    assert (suction.controller, suction.cell) == ("suction_throughput", "suction_ur10")
     assert Scenario.load(SCENARIOS / "default.yaml").controller == "default"
 
 
@@ -131,6 +134,7 @@ def test_belt_stall_stops_the_belt_and_dropout_silences_the_camera(builtin_meshe
         ("wide_gripper", "wide_gripper"),
         ("default", "default"),
         ("throughput", "default"),
+        ("suction_throughput", "suction_ur10"),
     ],
 )
 def test_the_line_and_each_tool_have_a_scenario_on_their_own_cell(
@@ -142,7 +146,7 @@ def test_the_line_and_each_tool_have_a_scenario_on_their_own_cell(
 
     scenario = Scenario.load(SCENARIOS / f"{name}.yaml")
     assert scenario.cell == cell
-    if name != "throughput":
+    if name not in ("throughput", "suction_throughput"):
         assert (scenario.dataset, scenario.duration_s) == ("builtin", 60.0)
         assert scenario.system.belt_speed_mps == 0.4
     assert (CELLS_DIR / f"{cell}.yaml").is_file()

@@ -66,7 +66,8 @@ def test_the_default_cell_is_the_reference_cell() -> None:
 
 
 @pytest.mark.parametrize(
-    ("name", "tool"), [("suction", "suction_cup"), ("wide_gripper", "wide_gripper")]
+    ("name", "tool"),
+    [("suction", "suction_cup"), ("suction_ur10", "suction_cup"), ("wide_gripper", "wide_gripper")],
 )
 def test_each_tool_has_a_shipped_cell_of_one_station_that_sorts_every_class(
     name: str, tool: str
