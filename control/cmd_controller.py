@@ -13,8 +13,9 @@ namespace, come from there. ``--params-file`` is the controller's tuning.
 The node keeps sim time: ``/clock`` in realtime, the ticks' stamps in lockstep. On shutdown
 it writes its counters (pick statistics, rejected detections, skipped commands, control-loop
 timing) as JSON to ``--stats-out`` (atomically: a temporary file renamed into place, with the
-permissions an ordinary ``open`` gives, 0666 minus the umask). Started by ``cdw-twin run`` (the environment
-names the runner in ``CDW_TWIN_PARENT_PID``), it gets SIGTERM when the runner dies.
+permissions an ordinary ``open`` gives, 0666 minus the umask). Started by ``cdw-twin run``
+(the environment names the runner in ``CDW_TWIN_PARENT_PID``), it gets SIGTERM when the runner
+dies.
 """
 
 from __future__ import annotations
