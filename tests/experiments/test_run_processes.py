@@ -130,7 +130,7 @@ def test_kill_9_of_the_runner_leaves_no_process_behind(
             f"scenarios: [long.yaml]\nseeds: [0, 1]\ndataset: {builtin_meshes}\n",
             encoding="utf-8",
         )
-        runner = _run("sweep", grid, "--workers", 2, "--out", tmp_path / "sweep")
+        runner = _run("sweep", grid, "--workers", 2, "--record", "--out", tmp_path / "sweep")
         out = tmp_path / "sweep" / "long"
     try:
         _wait(runner, _stepping_with_controller(out / "ep000"), "lockstep stepping")
@@ -238,14 +238,14 @@ def test_a_sweep_leaves_a_failed_episode_out_of_its_intervals(
 ) -> None:
     _needs_ros()
     (tmp_path / "short.yaml").write_text(
-        "name: short\nduration_s: 8.0\nsystem: {prefill_m: 1.0}\n", encoding="utf-8"
+        "name: short\nduration_s: 15.0\nsystem: {prefill_m: 1.0}\n", encoding="utf-8"
     )
     grid = tmp_path / "grid.yaml"
     grid.write_text(
         f"scenarios: [short.yaml]\nseeds: [0, 1]\ndataset: {builtin_meshes}\n", encoding="utf-8"
     )
     out = tmp_path / "sweep"
-    sweep = _run("sweep", grid, "--workers", 2, "--out", out, "--json")
+    sweep = _run("sweep", grid, "--workers", 2, "--record", "--out", out, "--json")
     try:
         _wait(sweep, _stepping_with_controller(out / "short" / "ep000"), "lockstep stepping")
         os.kill(_pid_of(str(out / "short" / "ep000"), "controller"), signal.SIGKILL)
