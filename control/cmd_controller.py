@@ -42,12 +42,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="cell file: a path or a shipped cell's name (default: the reference cell)",
     )
     parser.add_argument("--station", help="the station to drive (default: the cell's first)")
-    parser.add_argument(
-        "--params-file",
-        type=Path,
-        default=DEFAULT_PARAMS,
-        help="controller tuning, ROS 2 parameter YAML (default: control/config/default.yaml)",
-    )
+    add_params_option(parser)
     parser.add_argument(
         "--lockstep",
         action="store_true",
@@ -56,6 +51,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stats-out", type=Path, help="write the counters as JSON on shutdown")
     parser.add_argument(
         "--duration", type=float, help="stop once /clock passes this many seconds of sim time"
+    )
+
+
+def add_params_option(parser: argparse.ArgumentParser) -> None:
+    """``--params-file``: the controller's tuning (also the in-process episode's)."""
+    parser.add_argument(
+        "--params-file",
+        type=Path,
+        default=DEFAULT_PARAMS,
+        help="controller tuning, ROS 2 parameter YAML (default: control/config/default.yaml)",
     )
 
 

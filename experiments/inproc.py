@@ -34,17 +34,12 @@ if TYPE_CHECKING:
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """The twin node's options, the controllers' parameter file and their stats files."""
-    from control.cmd_controller import DEFAULT_PARAMS
+    from control.cmd_controller import add_params_option
     from twin.cmd_node import configure as configure_node
 
     configure_node(parser)
     parser.set_defaults(mode="lockstep")
-    parser.add_argument(
-        "--params-file",
-        type=Path,
-        default=DEFAULT_PARAMS,
-        help="controller tuning, ROS 2 parameter YAML (default: control/config/default.yaml)",
-    )
+    add_params_option(parser)
     parser.add_argument(
         "--controller-stats",
         action="append",

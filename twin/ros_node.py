@@ -41,7 +41,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Any, Protocol
+from typing import Any, Protocol, TypedDict, Unpack
 
 from cdw_interfaces.msg import (
     BeltState,
@@ -101,6 +101,16 @@ way, in the twin's process (see ``twin-node --record``)."""
 TapWants = Callable[[str], bool]
 """Whether the tap takes a topic (its wire name) now. The live view alone takes only what a
 client subscribed to: the node then builds the ground truth and the scene only for a client."""
+
+
+class EndpointOptions(TypedDict, total=False):
+    """The twin endpoint's options besides the twin and the mode (:meth:`TwinEndpoint._setup`)."""
+
+    state_every: int
+    ground_truth_every: int
+    tap: Tap | None
+    tap_wants: TapWants | None
+    scene: bool
 
 
 @dataclass
@@ -833,58 +843,22 @@ class TwinEndpoint:
 class TwinNode(Node, TwinEndpoint):
     """The twin's side of the contract as a ROS 2 node (``cdw_twin``)."""
 
-    def __init__(
-        self,
-        twin: Twin,
-        *,
-        lockstep: bool,
-        state_every: int = 4,
-        ground_truth_every: int = 8,
-        tap: Tap | None = None,
-        tap_wants: TapWants | None = None,
-        scene: bool = True,
-    ) -> None:
+    def __init__(self, twin: Twin, *, lockstep: bool, **options: Unpack[EndpointOptions]) -> None:
         Node.__init__(self, "cdw_twin")
         self._wire = RosWire(self)
         self._log = self.get_logger()
-        self._setup(
-            twin,
-            lockstep=lockstep,
-            state_every=state_every,
-            ground_truth_every=ground_truth_every,
-            tap=tap,
-            tap_wants=tap_wants,
-            scene=scene,
-        )
+        self._setup(twin, lockstep=lockstep, **options)
 
 
 class InprocTwin(TwinEndpoint):
     """The twin's side of the contract on the in-process bus (``--transport inproc``): the same
     topics, messages and lockstep handshake as :class:`TwinNode`, without DDS."""
 
-    def __init__(
-        self,
-        twin: Twin,
-        bus: Bus,
-        *,
-        state_every: int = 4,
-        ground_truth_every: int = 8,
-        tap: Tap | None = None,
-        tap_wants: TapWants | None = None,
-        scene: bool = True,
-    ) -> None:
+    def __init__(self, twin: Twin, bus: Bus, **options: Unpack[EndpointOptions]) -> None:
         self._wire = bus
         self._log = InprocLogger("cdw_twin")
         self._subscriptions: list[Any] = []
-        self._setup(
-            twin,
-            lockstep=True,
-            state_every=state_every,
-            ground_truth_every=ground_truth_every,
-            tap=tap,
-            tap_wants=tap_wants,
-            scene=scene,
-        )
+        self._setup(twin, lockstep=True, **options)
 
     _wire_takes_bytes = False
 
