@@ -325,11 +325,33 @@ class SchedulerConfig:
     min_confidence: float = 0.3
     clearance_m: float = 0.008
     rank: Literal["urgency", "cycle"] = "urgency"
+    class_density_kg_m3: dict[str, float] = field(default_factory=dict)
+    fill_fraction: float = 0.85
+    carry_acceleration_mps2: float = 10.0
 
     def __post_init__(self) -> None:
         """Validate every field."""
         _require(
             self.rank in RANKS, "scheduler.rank", self.rank, f"must be one of {', '.join(RANKS)}"
+        )
+        for name, value in self.class_density_kg_m3.items():
+            _require(
+                value > 0.0 and math.isfinite(value),
+                f"scheduler.class_density_kg_m3.{name}",
+                value,
+                "must be finite and > 0",
+            )
+        _require(
+            0.0 < self.fill_fraction <= 1.0,
+            "scheduler.fill_fraction",
+            self.fill_fraction,
+            "must be in (0, 1]",
+        )
+        _require(
+            self.carry_acceleration_mps2 >= 0.0 and math.isfinite(self.carry_acceleration_mps2),
+            "scheduler.carry_acceleration_mps2",
+            self.carry_acceleration_mps2,
+            "must be finite and >= 0",
         )
         _require(
             self.clearance_m >= 0.0 and math.isfinite(self.clearance_m),
@@ -465,6 +487,13 @@ class ControllerConfig:
                 name in classes,
                 f"scheduler.class_priorities.{name}",
                 self.scheduler.class_priorities[name],
+                f"not a class of the cell (its classes: {', '.join(classes)})",
+            )
+        for name in self.scheduler.class_density_kg_m3:
+            _require(
+                name in classes,
+                f"scheduler.class_density_kg_m3.{name}",
+                self.scheduler.class_density_kg_m3[name],
                 f"not a class of the cell (its classes: {', '.join(classes)})",
             )
         priorities = {c: self.scheduler.class_priorities.get(c, 1.0) for c in classes}

@@ -1,7 +1,8 @@
 """Choose the next object to pick, and say why every other object is not picked.
 
 An object is a candidate when its class has a bin at this station, the tool can grasp an object
-of its size (:meth:`~control.tools.ControllerTool.misfit`), the line's allocation lets this
+of its size (:meth:`~control.tools.ControllerTool.misfit`) and carry its estimated mass
+(:func:`holds_estimate`), the line's allocation lets this
 station have it (:mod:`control.allocation`), the arm can intercept it inside the station's pick
 window and hold it before it leaves the window (:attr:`~control.tools.GraspTiming.held_after_s`:
 a grasp outside the window does not count), its grasp point stays within reach (between
@@ -29,6 +30,7 @@ UNTARGETED_REASONS: tuple[str, ...] = (
     "too_wide",
     "too_flat",
     "too_small",
+    "too_heavy",
     "excluded",
     "claimed_by_other",
     "left_for_downstream",
@@ -305,6 +307,26 @@ def carry_time_s(track: Track, meet_s: float, config: ControllerConfig) -> float
     )
 
 
+def estimated_mass_kg(track: Track, config: ControllerConfig) -> float | None:
+    """The track's mass from its seen box and its class's density
+    (``scheduler.class_density_kg_m3``, times ``scheduler.fill_fraction``); None for a class
+    with no density."""
+    density = config.scheduler.class_density_kg_m3.get(track.class_name)
+    if density is None:
+        return None
+    volume_m3 = track.length_m * track.width_m * track.height_m * config.scheduler.fill_fraction
+    return volume_m3 * density
+
+
+def holds_estimate(track: Track, config: ControllerConfig) -> bool:
+    """Whether the tool can carry the track's estimated mass (:func:`estimated_mass_kg`) at
+    ``scheduler.carry_acceleration_mps2``; True without an estimate."""
+    mass_kg = estimated_mass_kg(track, config)
+    if mass_kg is None:
+        return True
+    return config.tool.holds(track.class_name, mass_kg, config.scheduler.carry_acceleration_mps2)
+
+
 def _static_reason(
     track: Track, config: ControllerConfig, excluded_ids: Collection[int]
 ) -> str | None:
@@ -322,6 +344,8 @@ def _static_reason(
     )
     if misfit is not None:
         return misfit
+    if not holds_estimate(track, config):
+        return "too_heavy"
     if track.track_id in excluded_ids:
         return "excluded"
     return None

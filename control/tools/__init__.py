@@ -136,6 +136,12 @@ class ControllerTool(Protocol):
         better."""
         ...
 
+    def holds(self, class_name: str, mass_kg: float, acceleration_mps2: float) -> bool:
+        """Whether the tool can carry an object of ``class_name`` and ``mass_kg`` at
+        ``acceleration_mps2`` on top of gravity (a tool that holds by force checks it; a
+        gripper with no such model says True)."""
+        ...
+
     def grasp_height_m(self, height_m: float, pick: PickConfig) -> float:
         """Height of the grasp point (the TCP at the grasp) above the underside of an object
         ``height_m`` tall."""

@@ -101,6 +101,12 @@ class ParallelJaw:
         room = self.spec.max_opening_m - width_margin_m - min(width_m, length_m)
         return min(room, height_m - self.spec.pad_height_m)
 
+    def holds(self, class_name: str, mass_kg: float, acceleration_mps2: float) -> bool:
+        """True: the controller has no model of the jaws' friction on the object (the twin
+        checks a gripper with a grip force for slip)."""
+        del class_name, mass_kg, acceleration_mps2
+        return True
+
     def grasp_height_m(self, height_m: float, pick: PickConfig) -> float:
         """``pick.grasp_below_top_m`` below the top, but not below
         ``pick.grasp_height_fraction`` of the height nor ``pick.min_grasp_height_m``."""

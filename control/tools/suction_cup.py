@@ -35,6 +35,8 @@ VACUUM_ON = 1.0
 """The command that turns the vacuum on."""
 VACUUM_OFF = 0.0
 """The command that turns it off (and vents the cup)."""
+STANDARD_GRAVITY_MPS2 = 9.81
+"""The gravity a carried object's weight is reckoned with."""
 VACUUM_FULL = 0.99
 """The vacuum fraction at which the build-up is complete and the cup holds the object (a
 vacuum switch's "part present")."""
@@ -112,6 +114,13 @@ class SuctionCup:
         """The narrow side's room around the lip (less ``width_margin_m``)."""
         del height_m
         return min(width_m, length_m) - self.spec.cup_diameter_m - width_margin_m
+
+    def holds(self, class_name: str, mass_kg: float, acceleration_mps2: float) -> bool:
+        """The sealed cup's holding force on ``class_name`` (vacuum x lip area x the class's
+        seal efficiency, as the twin checks it) carries ``mass_kg`` at gravity plus
+        ``acceleration_mps2``."""
+        load = mass_kg * (STANDARD_GRAVITY_MPS2 + acceleration_mps2)
+        return self.spec.holding_force(class_name) >= load
 
     def grasp_height_m(self, height_m: float, pick: PickConfig) -> float:
         """``pick.top_press_m`` below the top (not below the underside)."""

@@ -15,6 +15,7 @@ from control.scheduler import (
     approach_time_s,
     blocked_by,
     descend_after_s,
+    estimated_mass_kg,
     grasp_height_m,
     grasp_z_m,
     move_time_s,
@@ -23,6 +24,7 @@ from control.scheduler import (
 )
 from control.tracking import Track
 from interfaces.cell import load_cell
+from interfaces.tools import SuctionCupSpec
 
 TCP = (0.0, 0.45, 0.30)
 
@@ -299,3 +301,34 @@ def test_an_object_nearer_the_base_than_the_least_reach_is_out_of_reach() -> Non
     target = schedule([far], now_s=0.0, tcp_position_m=TCP, config=config).target
     assert target is not None
     assert target.track_id == 2
+
+
+def test_a_cup_leaves_an_object_it_could_not_carry() -> None:
+    """With the classes' densities, a cup leaves (``too_heavy``) an object whose estimated mass
+    (seen box x fill x density) its holding force on that class could not carry at gravity
+    plus the carry's acceleration; a lighter one it targets. Without densities it targets
+    both (no estimate)."""
+    base = ControllerConfig(cell=load_cell("suction"))
+    cup = base.station.tool
+    assert isinstance(cup, SuctionCupSpec)
+    dense = replace(
+        base.scheduler,
+        class_density_kg_m3={"brick": 1900.0},
+        fill_fraction=1.0,
+        carry_acceleration_mps2=10.0,
+    )
+    config = replace(base, scheduler=dense)
+    most_kg = cup.holding_force("brick") / (9.81 + 10.0)
+    box_m3 = 0.12 * 0.08  # the tracks' footprint: 12 x 8 cm
+    light_h, heavy_h = 0.9 * most_kg / 1900.0 / box_m3, 1.1 * most_kg / 1900.0 / box_m3
+    light = _track(1, -0.1, width=0.08, height=light_h)
+    heavy = _track(2, -0.1, width=0.08, height=heavy_h)
+    assert estimated_mass_kg(heavy, config) == pytest.approx(1.1 * most_kg)
+    assert estimated_mass_kg(heavy, base) is None
+    result = schedule([heavy], now_s=0.0, tcp_position_m=TCP, config=config)
+    assert result.target is None
+    assert _reasons(result.untargeted) == {2: "too_heavy"}
+    target = schedule([light], now_s=0.0, tcp_position_m=TCP, config=config).target
+    assert target is not None
+    assert target.track_id == 1
+    assert schedule([heavy], now_s=0.0, tcp_position_m=TCP, config=base).target is not None
