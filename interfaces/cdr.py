@@ -166,6 +166,43 @@ def lockstep_tick_cdr(t: TickValues) -> bytes:
     return w.bytes()
 
 
+_F32 = struct.Struct("<f")
+
+
+def float32(value: float) -> float:
+    """``value`` as a ``float32`` field carries it (rounded to single precision)."""
+    return float(_F32.unpack(_F32.pack(value))[0])
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectionValues:
+    """The fields of one ``cdw_interfaces/msg/Detection``, in the message's order."""
+
+    class_name: str
+    confidence: float
+    position_m: Vec3
+    yaw_rad: float
+    length_m: float
+    width_m: float
+    height_m: float
+
+
+def detection_array_cdr(
+    sec: int, nanosec: int, frame_id: str, detections: Iterable[DetectionValues]
+) -> bytes:
+    """``cdw_interfaces/msg/DetectionArray`` (``confidence`` is a ``float32``)."""
+    w = CdrWriter()
+    w.header(sec, nanosec, frame_id)
+    items = list(detections)
+    w.u32(len(items))
+    for d in items:
+        w.string(d.class_name)
+        w.align(4)
+        w.out += _F32.pack(d.confidence)
+        w.f64s((*d.position_m, d.yaw_rad, d.length_m, d.width_m, d.height_m))
+    return w.bytes()
+
+
 @dataclass(frozen=True, kw_only=True)
 class ObjectStateValues:
     """The fields of one ``cdw_interfaces/msg/ObjectState``, in the message's order."""
@@ -220,9 +257,12 @@ def object_state_array_cdr(
 __all__ = [
     "CDR_HEADER",
     "CdrWriter",
+    "DetectionValues",
     "ObjectStateValues",
     "TickValues",
     "clock_cdr",
+    "detection_array_cdr",
+    "float32",
     "joint_state_cdr",
     "lockstep_tick_cdr",
     "object_state_array_cdr",

@@ -29,6 +29,14 @@ from interfaces.contract import Qos
 Callback = Callable[[Any], None]
 
 
+@dataclass(frozen=True)
+class WireExact:
+    """A message its publisher built with the values its wire bytes carry (``float32`` fields
+    already rounded): subscribers take it as it is, with no CDR round trip."""
+
+    msg: Any
+
+
 _WIRE_COPY: dict[Any, bool] = {}
 
 
@@ -222,6 +230,8 @@ def _as_received(sub: _Sub, msg: Any) -> Any:
     message (deserialized from bytes, or through CDR where the wire changes values)."""
     if isinstance(msg, bytes | bytearray | memoryview):
         return bytes(msg) if sub.raw else deserialize_message(bytes(msg), sub.msg_type)
+    if isinstance(msg, WireExact):
+        return serialize_message(msg.msg) if sub.raw else msg.msg
     if sub.raw:
         return serialize_message(msg)
     if needs_wire_copy(type(msg)):
@@ -229,4 +239,11 @@ def _as_received(sub: _Sub, msg: Any) -> Any:
     return msg
 
 
-__all__ = ["Bus", "InprocLogger", "InprocPublisher", "InprocSubscription", "needs_wire_copy"]
+__all__ = [
+    "Bus",
+    "InprocLogger",
+    "InprocPublisher",
+    "InprocSubscription",
+    "WireExact",
+    "needs_wire_copy",
+]

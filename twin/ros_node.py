@@ -74,7 +74,7 @@ from interfaces import contract as c
 from interfaces.class_colours import class_rgb, dataset_class_rgb
 from interfaces.contract import Topic
 from interfaces.events import Event
-from interfaces.inproc import Bus, InprocLogger
+from interfaces.inproc import Bus, InprocLogger, WireExact
 from interfaces.ros import RosWire, message_class, msg_stamp_ns, msg_stamp_s, time_msg
 from twin import scene as sc
 from twin.commands import (
@@ -333,13 +333,14 @@ class TwinEndpoint:
     ) -> None:
         """Publish a message written as its CDR bytes (``encode()``, :mod:`interfaces.cdr`):
         over ROS 2 the bytes as they are; on the in-process bus the message ``build()`` gives
-        (the same values), for the subscribers there are; the tap gets the bytes. Nothing is
-        encoded that nobody takes."""
+        (the values the bytes carry, ``float32`` fields rounded: the bus hands it over as it
+        is), for the subscribers there are; the tap gets the bytes. Nothing is encoded that
+        nobody takes."""
         data = encode() if self._wire_takes_bytes or self._tap is not None else b""
         if self._wire_takes_bytes:
             publisher.publish(data)
         elif publisher.get_subscription_count() > 0:
-            publisher.publish(build())
+            publisher.publish(WireExact(build()))
         if self._tap is not None:
             self._tap(publisher.topic_name, data, time.time_ns())
 
@@ -694,22 +695,40 @@ class TwinEndpoint:
 
     def publish_detections(self, frame: DetectionFrame) -> None:
         """``/objects/detections``: one released frame, stamped with its capture time."""
-        msg = DetectionArray()
-        msg.header.stamp = time_msg(frame.capture_time_s)
-        msg.header.frame_id = "world"
-        for d in frame.detections:
-            det = Detection(
+        stamp = time_msg(frame.capture_time_s)
+        values = [
+            cdr.DetectionValues(
                 class_name=d.class_name,
-                confidence=d.confidence,
+                confidence=cdr.float32(d.confidence),  # the field is a float32
+                position_m=(d.x_m, d.y_m, d.z_m),
                 yaw_rad=d.yaw_rad,
                 length_m=d.length_m,
                 width_m=d.width_m,
                 height_m=d.height_m,
             )
-            det.position.x, det.position.y, det.position.z = d.x_m, d.y_m, d.z_m
-            msg.detections.append(det)
-        self._send(self.pub_det, msg)
-        self._count(c.DETECTIONS, c.DETECTIONS.name, msg_stamp_ns(msg.header.stamp))
+            for d in frame.detections
+        ]
+
+        def detections() -> DetectionArray:
+            msg = DetectionArray()
+            msg.header.stamp = stamp
+            msg.header.frame_id = "world"
+            for v in values:
+                det = Detection(
+                    class_name=v.class_name,
+                    confidence=v.confidence,
+                    yaw_rad=v.yaw_rad,
+                    length_m=v.length_m,
+                    width_m=v.width_m,
+                    height_m=v.height_m,
+                )
+                det.position.x, det.position.y, det.position.z = v.position_m
+                msg.detections.append(det)
+            return msg
+
+        encode = partial(cdr.detection_array_cdr, stamp.sec, stamp.nanosec, "world", values)
+        self._send_cdr(self.pub_det, encode, detections)
+        self._count(c.DETECTIONS, c.DETECTIONS.name, msg_stamp_ns(stamp))
 
     def publish_ground_truth(
         self, stamp: Any, objects: tuple[GroundTruth, ...] | None = None

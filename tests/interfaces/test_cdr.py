@@ -11,7 +11,13 @@ import pytest
 pytest.importorskip("cdw_interfaces")
 
 from builtin_interfaces.msg import Time
-from cdw_interfaces.msg import LockstepTick, ObjectState, ObjectStateArray
+from cdw_interfaces.msg import (
+    Detection,
+    DetectionArray,
+    LockstepTick,
+    ObjectState,
+    ObjectStateArray,
+)
 from geometry_msgs.msg import PoseStamped
 from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
@@ -147,3 +153,43 @@ def test_object_state_array(count: int) -> None:
         ang.x, ang.y, ang.z = v.angular_velocity_radps
         msg.objects.append(state)
     _same(cdr.object_state_array_cdr(9, 1, "world", values), msg)
+
+
+@pytest.mark.parametrize("count", [0, 1, 4])
+def test_detection_array(count: int) -> None:
+    values = [
+        cdr.DetectionValues(
+            class_name=("brick", "wood", "concrete", "rubber")[i],
+            confidence=cdr.float32(0.9 - 0.13 * i),
+            position_m=(-1.0 + 0.1 * i, 0.45, 0.003),
+            yaw_rad=0.3 * i,
+            length_m=0.2,
+            width_m=0.05,
+            height_m=0.03,
+        )
+        for i in range(count)
+    ]
+    msg = DetectionArray()
+    msg.header.stamp = Time(sec=2, nanosec=33_333_333)
+    msg.header.frame_id = "world"
+    for v in values:
+        det = Detection(
+            class_name=v.class_name,
+            confidence=v.confidence,
+            yaw_rad=v.yaw_rad,
+            length_m=v.length_m,
+            width_m=v.width_m,
+            height_m=v.height_m,
+        )
+        det.position.x, det.position.y, det.position.z = v.position_m
+        msg.detections.append(det)
+    _same(cdr.detection_array_cdr(2, 33_333_333, "world", values), msg)
+
+
+def test_float32_is_what_the_wire_carries() -> None:
+    from rclpy.serialization import serialize_message
+
+    msg = DetectionArray(detections=[Detection(confidence=0.1)])
+    wire = deserialize_message(serialize_message(msg), DetectionArray).detections[0].confidence
+    assert cdr.float32(0.1) == wire != 0.1
+    assert cdr.float32(wire) == wire
