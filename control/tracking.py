@@ -238,8 +238,14 @@ class _TrackState:
         self, stamp_s: float, position_m: tuple[float, float], position_var_m2: float
     ) -> Track:
         """The track at ``stamp_s``, at ``position_m`` with position variance
-        ``position_var_m2`` per axis."""
-        return Track(
+        ``position_var_m2`` per axis.
+
+        Built by filling a new instance's ``__dict__``, what the generated ``__init__`` of the
+        frozen dataclass does field by field through ``object.__setattr__`` (it validates
+        nothing): every track is snapshot at every control update, and that ``__init__`` was
+        most of :meth:`Tracker.predict_to`'s cost."""
+        track = object.__new__(Track)
+        track.__dict__.update(
             track_id=self.track_id,
             stamp_s=stamp_s,
             class_name=self.class_name,
@@ -256,6 +262,7 @@ class _TrackState:
             last_update_s=self.last_update_s,
             base_z_m=self.base_z_m,
         )
+        return track
 
 
 def _normalised(detection: Detection) -> Detection:

@@ -425,3 +425,22 @@ def test_min_cost_assignment_is_the_optimum(shape: tuple[int, int]) -> None:
         # the gated pairs (what the tracker keeps) are the same; gated-out ones may tie
         expected = [(i, j) for i, j in zip(rows.tolist(), cols.tolist(), strict=True)]
         assert [p for p in pairs if cost[p] < 1e12] == [p for p in expected if cost[p] < 1e12]
+
+
+def test_a_snapshot_is_the_track_its_constructor_gives() -> None:
+    """Tracks are built without the dataclass's ``__init__`` (for speed): they must equal,
+    hash, print and be replaced as those built through it."""
+    rng = np.random.default_rng(5)
+    tracker = Tracker(TrackingConfig(), classes=CLASSES)
+    for k in range(6):
+        t_s = k / RATE_HZ
+        tracker.update(t_s, [_detection(t_s, -0.5 + 0.4 * t_s, 0.45, rng)], (0.4, 0.0))
+    (track,) = tracker.predict_to(0.3)
+    fields = {f.name: getattr(track, f.name) for f in dataclasses.fields(Track)}
+    built = Track(**fields)
+    assert track == built
+    assert hash(track) == hash(built)
+    assert repr(track) == repr(built)
+    assert dataclasses.replace(track, hits=99).hits == 99
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        track.hits = 1  # type: ignore[misc]
