@@ -22,7 +22,8 @@ unknown (evicted from the ring, or never published) are counted, not measured.
     }
 
 ``step_rate`` has one row per wall-clock second (``wall_s`` is the window's end; ``rtf`` is sim
-seconds per wall second in that window); ``belt`` is sampled every :data:`BELT_PERIOD_S` of sim
+seconds per wall second in that window) and a last row for the unfinished window at the end, so
+an episode shorter than a window still has a rate; ``belt`` is sampled every :data:`BELT_PERIOD_S` of sim
 time.
 """
 
@@ -88,6 +89,8 @@ class TelemetryRecorder:
         self._window_wall_s: float | None = None
         self._window_sim_s = 0.0
         self._window_steps = 0
+        self._last_wall_s = 0.0
+        self._last_sim_s = 0.0
         self.steps = 0
         self.belt_sim_s: list[float] = []
         self.belt_setpoint_mps: list[float] = []
@@ -128,6 +131,7 @@ class TelemetryRecorder:
         """One physics step finished at ``wall_s``, the twin now at ``sim_s``."""
         wall0 = self._origin(wall_s)
         self.steps += 1
+        self._last_wall_s, self._last_sim_s = wall_s, sim_s
         if self._window_wall_s is None:
             self._window_wall_s, self._window_sim_s, self._window_steps = wall_s, sim_s, 0
             return
@@ -138,6 +142,17 @@ class TelemetryRecorder:
             self.rate_steps_per_s.append(self._window_steps / elapsed)
             self.rate_rtf.append((sim_s - self._window_sim_s) / elapsed)
             self._window_wall_s, self._window_sim_s, self._window_steps = wall_s, sim_s, 0
+
+    def _rate_rows(self) -> tuple[list[float], list[float], list[float]]:
+        """The closed windows plus the unfinished one at the end (when it holds a step)."""
+        wall, steps, rtf = list(self.rate_wall_s), list(self.rate_steps_per_s), list(self.rate_rtf)
+        start = self._window_wall_s
+        if start is not None and self._window_steps > 0 and self._last_wall_s > start:
+            elapsed = self._last_wall_s - start
+            wall.append(self._last_wall_s - self._origin(self._last_wall_s))
+            steps.append(self._window_steps / elapsed)
+            rtf.append((self._last_sim_s - self._window_sim_s) / elapsed)
+        return wall, steps, rtf
 
     # -- belt -------------------------------------------------------------------------------
     def on_belt(self, sim_s: float, setpoint_mps: float, speed_mps: float) -> None:
@@ -153,7 +168,7 @@ class TelemetryRecorder:
     def summary(self) -> dict[str, Any]:
         """``latency`` block (ms) and mean step rate, for the episode's ``summary.json``."""
         rtt = self.rtt_ms
-        rates = self.rate_steps_per_s
+        rates = self._rate_rows()[1]
         return {
             "latency": {
                 "rtt_ms_p50": percentile_ms(rtt, 50),
@@ -167,6 +182,7 @@ class TelemetryRecorder:
 
     def to_json(self) -> str:
         """The whole record as ``telemetry.json`` text (layout in the module docstring)."""
+        rate_wall, rate_steps, rate_rtf = self._rate_rows()
         data = {
             "version": 1,
             "rtt": {
@@ -175,9 +191,9 @@ class TelemetryRecorder:
                 "rtt_ms": [round(v, 4) for v in self.rtt_ms],
             },
             "step_rate": {
-                "wall_s": [round(v, 4) for v in self.rate_wall_s],
-                "steps_per_s": [round(v, 3) for v in self.rate_steps_per_s],
-                "rtf": [round(v, 5) for v in self.rate_rtf],
+                "wall_s": [round(v, 4) for v in rate_wall],
+                "steps_per_s": [round(v, 3) for v in rate_steps],
+                "rtf": [round(v, 5) for v in rate_rtf],
             },
             "belt": {
                 "sim_s": [round(v, 6) for v in self.belt_sim_s],

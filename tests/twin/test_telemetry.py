@@ -88,6 +88,18 @@ def test_step_rate_rows_per_wall_second() -> None:
     assert rec.summary()["step_rate_hz_mean"] == pytest.approx(480.0)
 
 
+def test_an_episode_shorter_than_a_window_still_has_its_step_rate() -> None:
+    rec = TelemetryRecorder()
+    # 0.6 wall seconds at 400 steps per second, each 1/240 s of sim: rtf 400/240
+    for k in range(241):
+        rec.on_step(k * DT_S, 5.0 + k / 400.0)
+    assert rec.rate_wall_s == []
+    assert rec.summary()["step_rate_hz_mean"] == pytest.approx(400.0)
+    rows = json.loads(rec.to_json())["step_rate"]
+    assert rows["wall_s"] == pytest.approx([0.6])
+    assert rows["rtf"] == pytest.approx([400.0 / 240.0], rel=1e-4)
+
+
 def test_belt_is_sampled_every_period_of_sim_time() -> None:
     rec = TelemetryRecorder(belt_period_s=0.1)
     for k in range(240 * 2):
