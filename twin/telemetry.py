@@ -23,8 +23,8 @@ unknown (evicted from the ring, or never published) are counted, not measured.
 
 ``step_rate`` has one row per wall-clock second (``wall_s`` is the window's end; ``rtf`` is sim
 seconds per wall second in that window) and a last row for the unfinished window at the end, so
-an episode shorter than a window still has a rate; ``belt`` is sampled every :data:`BELT_PERIOD_S` of sim
-time.
+an episode shorter than a window still has a rate; ``belt`` is sampled every
+:data:`BELT_PERIOD_S` of sim time.
 """
 
 from __future__ import annotations
