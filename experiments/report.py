@@ -288,9 +288,18 @@ def load_runs(paths: Sequence[Path]) -> RunData:
 
 
 # -- per-episode numbers ----------------------------------------------------------------------
-COUNT_KEYS = ("picked", "placed_correct", "targeted", "missed", "processed", "spawned")
+COUNT_KEYS = (
+    "picked",
+    "placed_correct",
+    "targeted",
+    "missed",
+    "processed",
+    "spawned",
+    "entered",
+    "recovered",
+)
 """The counts the report pools: the rates' (``success_rate``, ``miss_rate``,
-``recovery_rate``) and picks."""
+``recovery_rate``: recovered / entered, the complete cohort), picks and the objects spawned."""
 
 
 def _counts(ep: Episode, station: str | None = None) -> dict[str, int] | None:
@@ -926,13 +935,15 @@ def _line_section(data: RunData) -> str:
     return (
         '<h2 id="recovery-stations">Recovery against the number of stations</h2>'
         "<p>Line recovery (objects placed in their class's bin / objects that entered the "
-        "belt): the mean over the episodes (seeds) with its 95 % Student t interval, and the "
-        "pooled counts with a Wilson interval.</p>"
+        "belt, both over the complete cohort: every object spawned before the first one still "
+        "undecided at the end of the episode): the mean over the episodes (seeds) with its "
+        "95 % Student t interval, and the pooled counts with a Wilson interval.</p>"
         f"{_table(recovery_by_stations(data), STATIONS_COLUMNS)}"
         '<h2 id="per-class">Per class: recovery and purity</h2>'
         "<p>Recovery: objects of the class placed in its bin / objects of the class that "
-        "entered. Purity: objects of the class / all objects that came to rest in the bins "
-        f"sorting it, over every station.</p>{_table(class_rows(data), CLASS_COLUMNS)}"
+        "entered (those of the complete cohort, cut over every class). Purity: objects of the "
+        "class / all objects that came to rest in the bins sorting it, over every station.</p>"
+        f"{_table(class_rows(data), CLASS_COLUMNS)}"
         '<h2 id="per-bin">Per bin: purity</h2>'
         "<p>Objects of the bin's class / all objects that came to rest in it (bins nothing "
         f"came to rest in are left out).</p>{_table(bin_rows(data), BIN_COLUMNS)}"

@@ -31,7 +31,8 @@ def _wilson(successes: int, trials: int) -> tuple[float, float] | None:
 def recovery_by_stations(data: RunData) -> list[dict[str, Any]]:
     """One row per number of stations and belt speed: episodes, the mean line recovery over
     them with its 95 % Student t interval (None for fewer than two), and the pooled recovery
-    (placed correct / spawned) with its Wilson interval."""
+    (recovered / entered, summed over the episodes: the table's ``recovery_rate`` of the
+    pooled counts) with its Wilson interval."""
     groups: dict[tuple[int, float], list[Episode]] = {}
     for ep in data.episodes:
         if ep.metrics is not None and ep.speed_mps is not None:
@@ -40,8 +41,8 @@ def recovery_by_stations(data: RunData) -> list[dict[str, Any]]:
     for (n, speed), eps in sorted(groups.items()):
         values = [float(ep.metrics["recovery_rate"]) for ep in eps if ep.metrics]
         mean, low, high = stats.student_t_interval(values)
-        placed = sum(int((ep.metrics or {}).get("placed_correct") or 0) for ep in eps)
-        spawned = sum(int((ep.metrics or {}).get("spawned") or 0) for ep in eps)
+        total = _sum_blocks(((ep.metrics or {}) for ep in eps), ("recovered", "entered"))
+        pooled, wilson = _pooled("recovery_rate", total)
         rows.append(
             {
                 "stations": n,
@@ -49,12 +50,8 @@ def recovery_by_stations(data: RunData) -> list[dict[str, Any]]:
                 "episodes": len(values),
                 "recovery_mean": mean,
                 "recovery_ci95": None if low is None or high is None else (low, high),
-                "recovery_pooled": rate(
-                    "recovery_rate", {"placed_correct": placed, "spawned": spawned}
-                )
-                if spawned
-                else None,
-                "recovery_wilson": _wilson(placed, spawned),
+                "recovery_pooled": pooled,
+                "recovery_wilson": wilson,
             }
         )
     return rows
@@ -82,16 +79,17 @@ def _pooled(name: str, total: dict[str, int]) -> tuple[float | None, tuple[float
 
 
 def class_rows(data: RunData) -> list[dict[str, Any]]:
-    """One row per cell, belt speed and object class: objects of the class that entered, those
-    placed in their bin, recovery; objects of any class in the class's bins, purity (pooled
-    over the episodes, Wilson 95 % intervals)."""
+    """One row per cell, belt speed and object class: objects of the class that entered (the
+    complete cohort's) and those of them placed in their bin, recovery; objects of the class
+    in its bins and those of any class, purity (pooled over the episodes, Wilson 95 %
+    intervals)."""
     rows = []
     for cell, speed in data.groups():
         eps = data.in_group(cell, speed)
         names = sorted({c for ep in eps for c in ((ep.metrics or {}).get("classes") or {})})
         for name in names:
             blocks = [((ep.metrics or {}).get("classes") or {}).get(name) or {} for ep in eps]
-            total = _sum_blocks(blocks, ("spawned", "placed_correct", "binned"))
+            total = _sum_blocks(blocks, ("entered", "recovered", "placed_correct", "binned"))
             recovery, recovery_ci = _pooled("recovery_rate", total)
             purity, purity_ci = _pooled("purity", total)
             rows.append(
@@ -194,10 +192,11 @@ CLASS_COLUMNS = (
     ("speed_mps", "speed (m/s)"),
     ("class", "class"),
     ("episodes", "episodes"),
-    ("spawned", "entered"),
-    ("placed_correct", "in its bin"),
+    ("entered", "entered"),
+    ("recovered", "recovered"),
     ("recovery_rate", "recovery"),
     ("recovery_ci95", "recovery 95% CI"),
+    ("placed_correct", "in its bins"),
     ("binned", "in its bins (any class)"),
     ("purity", "purity"),
     ("purity_ci95", "purity 95% CI"),

@@ -21,13 +21,20 @@ counts (with a Wilson interval), never the mean of the ratios.
 The reference's equations: (1) success rate = picked / processed, (2) miss rate = missed /
 processed, (3) throughput = picked per minute. Every ratio is 0 when its denominator is 0.
 
-Line scores: ``recovery_rate`` (per class: objects placed in their class's bin / objects of that
-class that entered), ``purity`` (of each bin, :func:`bin_scores`; per class over the line: the
-share of the class's own objects among all objects that came to rest in the bins sorting it),
-the line's ``miss_rate`` (the most downstream station's misses), ``pick_throughput_per_min``
-per station and for the line; drops by reason (``dropped_by_reason``, :data:`DROP_REASONS`) and
-the controllers' allocation decisions per station (``untargeted`` by reason,
-:func:`untargeted_scores`).
+Line scores: ``recovery_rate`` per class and for the line, ``recovered`` / ``entered``:
+objects placed in their class's bin / objects that entered, over the *complete cohort*
+(:func:`complete_cohort`): in spawn order, every object spawned before the first one still
+undecided when the episode ends, so every one of them has a fate. An object still on its way
+along the belt, and every one spawned after it, is left out of both counts: the figure neither
+falls with the share of the stream still in flight at the end (``placed_correct`` /
+``spawned`` would) nor rises with it (with ``processed`` as denominator the objects in flight
+an upstream station already picked would count, those it let pass would not). Per class, the
+cohort's objects of that class, the cut taken over the whole stream. Then ``purity`` (of each
+bin, :func:`bin_scores`; per class over the line: the share of the class's own objects among
+all objects that came to rest in the bins sorting it), the line's ``miss_rate`` (the most
+downstream station's misses), ``pick_throughput_per_min`` per station and for the line; drops
+by reason (``dropped_by_reason``, :data:`DROP_REASONS`) and the controllers' allocation
+decisions per station (``untargeted`` by reason, :func:`untargeted_scores`).
 """
 
 from __future__ import annotations
@@ -81,6 +88,16 @@ METRICS: tuple[Metric, ...] = (
         scopes=EVENT_SCOPES,
     ),
     Metric(
+        name="entered",
+        unit="objects",
+        formula="objects of the complete cohort: in spawn order (for a station: the order they "
+        "entered its pick window), every object before the first one still undecided (no fate) "
+        "when the episode ended, or every spawned object when none is; for a class, the "
+        "cohort's objects of that class, the cut taken over every class",
+        kind="count",
+        scopes=EVENT_SCOPES,
+    ),
+    Metric(
         name="processed",
         unit="objects",
         formula="objects whose fate is decided: picked + missed + lost",
@@ -123,6 +140,15 @@ METRICS: tuple[Metric, ...] = (
         formula="objects that came to rest in their class's bin",
         kind="count",
         scopes=BIN_SCOPES,
+    ),
+    Metric(
+        name="recovered",
+        unit="objects",
+        formula="objects of the complete cohort (`entered`) that came to rest in their class's "
+        "bin; one picked but still carried or falling into a bin at the end counts in "
+        "`entered`, not here",
+        kind="count",
+        scopes=EVENT_SCOPES,
     ),
     Metric(
         name="binned",
@@ -216,9 +242,9 @@ METRICS: tuple[Metric, ...] = (
     Metric(
         name="recovery_rate",
         unit="1",
-        formula="placed_correct / spawned",
+        formula="recovered / entered",
         kind="rate",
-        ratio_of=("placed_correct", "spawned"),
+        ratio_of=("recovered", "entered"),
         scopes=EVENT_SCOPES,
     ),
     Metric(
@@ -319,21 +345,30 @@ def in_scope(scope: Scope) -> tuple[str, ...]:
 
 @dataclass(frozen=True, kw_only=True)
 class Counts:
-    """What the events of one episode (of one station, or of one class) add up to."""
+    """What the events of one episode (of one station, or of one class) add up to.
+
+    ``entered`` and ``recovered`` count the complete cohort (:func:`complete_cohort`), their
+    ``_by_class`` mappings the same per object class; ``spawned`` and ``placed_correct`` count
+    every object.
+    """
 
     spawned: int = 0
+    entered: int = 0
     processed: int = 0
     picked: int = 0
     missed: int = 0
     lost: int = 0
     placed: int = 0
     placed_correct: int = 0
+    recovered: int = 0
     binned: int = 0
     dropped: int = 0
     unintended_contacts: int = 0
     duration_s: float = 0.0
     placed_correct_by_class: Mapping[str, int] = field(default_factory=dict)
     spawned_by_class: Mapping[str, int] = field(default_factory=dict)
+    entered_by_class: Mapping[str, int] = field(default_factory=dict)
+    recovered_by_class: Mapping[str, int] = field(default_factory=dict)
     dropped_by_reason: Mapping[str, int] = field(default_factory=dict)
 
 
@@ -372,6 +407,7 @@ class _Tally:
     """The running state of :func:`count_events`."""
 
     spawned: dict[int, str] = field(default_factory=dict)
+    spawned_at_s: dict[int, float] = field(default_factory=dict)
     fate: dict[int, str] = field(default_factory=dict)
     placed: set[int] = field(default_factory=set)
     placed_correct: dict[int, str] = field(default_factory=dict)
@@ -385,8 +421,10 @@ def _count_fate(tally: _Tally, event: Event, *, station: str | None, line_exit: 
     oid, kind = event.object_id, event.type
     if kind is EventType.SPAWNED and station is None:
         tally.spawned[oid] = event.class_name
+        tally.spawned_at_s.setdefault(oid, event.time_s)
     elif kind is EventType.ENTERED_WORKSPACE and station is not None:
         tally.spawned.setdefault(oid, event.class_name)
+        tally.spawned_at_s.setdefault(oid, event.time_s)
     elif kind is EventType.PICK_SUCCESS:
         tally.fate[oid] = "picked"
     elif kind is EventType.MISSED:
@@ -403,6 +441,34 @@ def _count_fate(tally: _Tally, event: Event, *, station: str | None, line_exit: 
             tally.placed_correct[oid] = event.class_name
     elif kind is EventType.UNINTENDED_CONTACT:
         tally.unintended += 1
+
+
+def _cohort_of(tally: _Tally) -> set[int]:
+    """The complete cohort of a tally's spawned objects (:func:`complete_cohort`)."""
+    order = sorted(tally.spawned, key=tally.spawned_at_s.__getitem__)
+    for position, oid in enumerate(order):
+        if oid not in tally.fate:
+            return set(order[:position])
+    return set(order)
+
+
+def complete_cohort(
+    events: Iterable[Event], *, station: str | None = None, line_exit: str | None = None
+) -> set[int]:
+    """The objects of the complete cohort: those whose recovery an episode can judge.
+
+    The spawned objects (with ``station``: those that entered its pick window) in spawn order
+    (the time of their ``spawned`` event, or of their first ``entered_workspace`` at the
+    station; equal times in the order of the events), up to, not including, the first one that
+    is undecided when the events end (no fate, by the rules of :func:`count_events`, with
+    ``line_exit`` for the line). Every object of the cohort has a fate; none after the cut
+    counts, even one already placed. Every spawned object when none is undecided. Taken over
+    every class, so a class's share of the cohort is consistent with the line's.
+    """
+    tally = _Tally()
+    for event in _selected(events, station, None):
+        _count_fate(tally, event, station=station, line_exit=line_exit)
+    return _cohort_of(tally)
 
 
 def count_events(
@@ -425,31 +491,47 @@ def count_events(
     an object missed for the line; an object an upstream station missed is still on its way to
     the next window (undecided) unless it is picked, lost or missed there. Without it every
     ``missed`` event counts, which is exact for a cell of one station.
+
+    ``entered`` and ``recovered`` count the complete cohort (:func:`complete_cohort`, its cut
+    taken over every class even with ``class_name``): its objects, and those of them that came
+    to rest in their class's bin. An object picked but still carried, or still falling into a
+    bin, when the episode ends is decided (picked): it counts in ``entered``, not in
+    ``recovered``.
     """
     tally = _Tally()
+    stream = tally if class_name is None else _Tally()
     for event in _selected(events, station, None):
         if event.type is EventType.PLACED_IN_BIN and (
             class_name is None or event.data.get("bin") == class_name
         ):
             tally.binned.add(event.object_id)
+        if stream is not tally:
+            _count_fate(stream, event, station=station, line_exit=line_exit)
         if class_name is not None and event.class_name != class_name:
             continue
         _count_fate(tally, event, station=station, line_exit=line_exit)
+    cohort = _cohort_of(stream)
+    entered = {oid: name for oid, name in tally.spawned.items() if oid in cohort}
+    recovered = [name for oid, name in tally.placed_correct.items() if oid in entered]
     outcomes = list(tally.fate.values())
     return Counts(
         spawned=len(tally.spawned),
+        entered=len(entered),
         processed=len(tally.fate),
         picked=outcomes.count("picked"),
         missed=outcomes.count("missed"),
         lost=outcomes.count("lost"),
         placed=len(tally.placed),
         placed_correct=len(tally.placed_correct),
+        recovered=len(recovered),
         binned=len(tally.binned),
         dropped=len(tally.drops),
         unintended_contacts=tally.unintended,
         duration_s=duration_s,
         placed_correct_by_class=_tally(tally.placed_correct.values()),
         spawned_by_class=_tally(tally.spawned.values()),
+        entered_by_class=_tally(entered.values()),
+        recovered_by_class=_tally(recovered),
         dropped_by_reason=_tally(tally.drops),
     )
 
@@ -480,28 +562,34 @@ def rate(name: str, counts: Mapping[str, float]) -> float:
 def _count_values(counts: Counts) -> dict[str, float]:
     return {
         "spawned": counts.spawned,
+        "entered": counts.entered,
         "processed": counts.processed,
         "picked": counts.picked,
         "missed": counts.missed,
         "lost": counts.lost,
         "placed": counts.placed,
         "placed_correct": counts.placed_correct,
+        "recovered": counts.recovered,
         "binned": counts.binned,
     }
 
 
 def event_scores(counts: Counts) -> dict[str, Any]:
-    """The metrics the events alone give (the twin's ``summary.json`` ``scores``)."""
+    """The metrics the events alone give (the twin's ``summary.json`` ``scores``), with
+    ``recovery_by_class``: ``recovery_rate`` of every class that spawned (0 for one with
+    nothing in the complete cohort) and ``dropped_by_reason``."""
     minutes = counts.duration_s / 60.0
     values = _count_values(counts)
     return {
         "spawned": counts.spawned,
+        "entered": counts.entered,
         "processed": counts.processed,
         "picked": counts.picked,
         "missed": counts.missed,
         "lost": counts.lost,
         "placed": counts.placed,
         "placed_correct": counts.placed_correct,
+        "recovered": counts.recovered,
         "binned": counts.binned,
         "dropped": counts.dropped,
         "pick_success_rate": rate("pick_success_rate", values),
@@ -516,9 +604,12 @@ def event_scores(counts: Counts) -> dict[str, Any]:
         "recovery_by_class": {
             name: rate(
                 "recovery_rate",
-                {"placed_correct": counts.placed_correct_by_class.get(name, 0), "spawned": n},
+                {
+                    "recovered": counts.recovered_by_class.get(name, 0),
+                    "entered": counts.entered_by_class.get(name, 0),
+                },
             )
-            for name, n in sorted(counts.spawned_by_class.items())
+            for name in sorted(counts.spawned_by_class)
         },
         "dropped_by_reason": dict(sorted(counts.dropped_by_reason.items())),
     }

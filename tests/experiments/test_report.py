@@ -234,8 +234,10 @@ def test_the_report_counts_as_the_run_does_and_adds_a_table_per_station(tmp_path
 def _line_sweep(root: Path) -> Path:
     """A sweep folder written by hand: the first 1 and 2 stations of a line at 0.2 and
     0.4 m/s, two seeds each. Episode (k stations, speed, seed): 10 bricks and 1 wood enter;
-    ``k + seed`` bricks come to rest in the last station's brick bin (recovery (k + seed) / 11)
-    and the wood in the first station's brick bin."""
+    ``k + seed`` bricks come to rest in the last station's brick bin, the other bricks are
+    missed by it, and the wood comes to rest in the first station's brick bin; a 12th object, a
+    brick, is still on the belt at the end: undecided, out of the complete cohort (recovery
+    (k + seed) / 11)."""
     from experiments.sweep import first_stations
     from interfaces.cell import load_cell
 
@@ -257,8 +259,15 @@ def _line_sweep(root: Path) -> Path:
                     events.append(
                         _event("placed_in_bin", oid, bin="brick", correct=True, station=names[-1])
                     )
+                events += [
+                    _event("missed", oid, station=names[-1]) for oid in range(k + seed + 1, 11)
+                ]
+                wood = _event("pick_success", 11, station=names[0])
                 wrong = _event("placed_in_bin", 11, bin="brick", correct=False, station=names[0])
-                events.append(wrong.replace('"brick", "data"', '"wood", "data"'))
+                events += [
+                    raw.replace('"brick", "data"', '"wood", "data"') for raw in (wood, wrong)
+                ]
+                events.append(_event("spawned", 12))
                 episode = run / f"ep{seed - 1:03d}"
                 (episode / "twin").mkdir(parents=True)
                 summary = {"belt_speed_mps": speed, "seed": seed, "sim_seconds": 60.0}
@@ -300,15 +309,20 @@ def test_the_report_of_a_line_sweep_draws_recovery_against_stations_and_purity_t
             (row["recovery_mean"] - half, row["recovery_mean"] + half)
         )
         assert row["recovery_pooled"] == pytest.approx((2 * k + 3) / 22)
-    assert [(r["cell"], r["stations"]) for r in speed_rows(data)] == [
+    speeds = speed_rows(data)
+    assert [(r["cell"], r["stations"]) for r in speeds] == [
         ("line_standin_first1", 1),
         ("line_standin_first1", 1),
         ("line_standin_first2", 2),
         ("line_standin_first2", 2),
     ]
+    # two episodes of 12 spawned objects, 11 of each in the complete cohort, 3 + 4 recovered
+    assert (speeds[-1]["spawned_total"], speeds[-1]["entered_total"]) == (24, 22)
+    assert speeds[-1]["recovery_rate"] == pytest.approx(7 / 22)
     by_class = {(r["cell"], r["speed_mps"], r["class"]): r for r in class_rows(data)}
     brick = by_class[("line_standin_first2", 0.4, "brick")]
-    assert (brick["spawned"], brick["placed_correct"], brick["binned"]) == (20, 7, 9)
+    assert (brick["entered"], brick["recovered"]) == (20, 7)
+    assert (brick["placed_correct"], brick["binned"]) == (7, 9)
     assert brick["recovery_rate"] == pytest.approx(7 / 20)
     assert brick["purity"] == pytest.approx(7 / 9)
     assert by_class[("line_standin_first2", 0.4, "wood")]["recovery_rate"] == 0.0

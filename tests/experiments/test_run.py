@@ -421,7 +421,9 @@ def test_an_episode_row_gives_bin_purity_drops_and_allocation_per_station(
     assert "unfit_share" not in row  # a station's figure: a line counts an object per station
     assert (row["binned"], row["purity"]) == (2, 0.5)
     assert row["classes"]["brick"]["purity"] == 1.0
-    assert row["classes"]["brick"]["recovery_rate"] == 0.25
+    # 4 entered the upstream window with no fate at the end: the cohort is 1-3, 1 recovered
+    assert (row["entered"], row["recovered"], row["spawned"]) == (3, 1, 4)
+    assert row["classes"]["brick"]["recovery_rate"] == pytest.approx(1 / 3)
 
 
 TWO_STATIONS = """\

@@ -366,12 +366,21 @@ def _reason_row(untargeted: dict, drops: dict, spawned: int) -> dict:
     station |= {"untargeted_unfit": untargeted.get("too_wide", 0), "dropped_by_reason": drops}
     classes = {
         "brick": {
-            "spawned": spawned,
-            "placed_correct": 2,
+            "spawned": spawned + 1,
+            "entered": spawned,
+            "placed_correct": 3,
+            "recovered": 2,
             "binned": 4,
             "recovery_rate": 2 / spawned,
         },
-        "wood": {"spawned": 1, "placed_correct": 1, "binned": 1, "recovery_rate": 1.0},
+        "wood": {
+            "spawned": 1,
+            "entered": 1,
+            "placed_correct": 1,
+            "recovered": 1,
+            "binned": 1,
+            "recovery_rate": 1.0,
+        },
     }
     return {
         "untargeted": untargeted,
@@ -409,7 +418,8 @@ def test_the_sweep_gives_each_reason_and_each_class_a_mean_and_interval() -> Non
     assert aggregate_reasons([], "untargeted") == {}
     classes = aggregate_classes(rows)
     assert list(classes) == ["brick", "wood"]
-    assert classes["brick"]["wilson"]["purity"]["pooled"] == pytest.approx(6 / 12)
+    # each episode: 3 bricks in their bins of 4 objects there, 2 of them in the complete cohort
+    assert classes["brick"]["wilson"]["purity"]["pooled"] == pytest.approx(9 / 12)
     assert classes["brick"]["wilson"]["recovery_rate"]["pooled"] == pytest.approx(6 / 40)
     assert classes["wood"]["metrics"]["recovery_rate"]["mean"] == 1.0
 

@@ -36,6 +36,10 @@ def _e(kind: EventType, oid: int, cls: str = "brick", /, **data: object) -> Even
     return Event(time_s=0.0, step=0, type=kind, object_id=oid, class_name=cls, data=dict(data))
 
 
+def _at(time_s: float, kind: EventType, oid: int, cls: str = "brick", /, **data: object) -> Event:
+    return Event(time_s=time_s, step=0, type=kind, object_id=oid, class_name=cls, data=dict(data))
+
+
 def _page_rows() -> list[list[str]]:
     lines = PAGE.read_text(encoding="utf-8").splitlines()
     return [
@@ -115,10 +119,12 @@ def test_count_events_gives_every_fate_of_the_line() -> None:
     assert scores["pick_success_rate"] == pytest.approx(3 / 5)
     assert scores["miss_rate"] == pytest.approx(1 / 5)
     assert scores["pick_throughput_per_min"] == pytest.approx(1.5)
-    assert scores["recovery_rate"] == pytest.approx(1 / 6)
+    # 6 has no fate (still on the belt): the complete cohort is 1-5, of which 1 is recovered
+    assert (counts.entered, counts.recovered) == (5, 1)
+    assert scores["recovery_rate"] == pytest.approx(1 / 5)
     assert scores["correct_bin_ratio"] == pytest.approx(1 / 2)
     assert scores["time_per_object_s"] == pytest.approx(40.0)
-    assert scores["recovery_by_class"] == {"brick": pytest.approx(1 / 5), "wood": 0.0}
+    assert scores["recovery_by_class"] == {"brick": pytest.approx(1 / 4), "wood": 0.0}
     for metric in RATES:
         if metric.name in scores:
             assert scores[metric.name] == rate(metric.name, scores), metric.name
@@ -219,10 +225,136 @@ def test_count_events_per_class() -> None:
     per_class = class_scores(events, 60.0)
     assert list(per_class) == ["brick", "concrete"]
     assert set(per_class["brick"]) == set(in_scope("class"))
-    assert per_class["brick"]["recovery_rate"] == pytest.approx(1 / 4)
+    # 5 (brick) never reached a window: undecided, the cut; bricks 1-3 entered, 1 recovered
+    assert per_class["brick"]["recovery_rate"] == pytest.approx(1 / 3)
     assert per_class["concrete"]["recovery_rate"] == 1.0
     assert per_class["brick"]["miss_rate"] == pytest.approx(1 / 3)
     assert class_scores(events, 60.0, station="upstream")["concrete"]["lost"] == 1
+
+
+def _placed(time_s: float, oid: int, cls: str = "brick", /, **station: object) -> list[Event]:
+    return [
+        _at(time_s, E.PICK_SUCCESS, oid, cls, **station),
+        _at(time_s + 1.0, E.PLACED_IN_BIN, oid, cls, bin=cls, correct=True, **station),
+    ]
+
+
+def test_an_undecided_object_cuts_the_cohort_before_itself_and_every_later_one() -> None:
+    """Object 3 is still on the belt at the end: it and every object spawned after it (4, 5,
+    although placed in their bins) are left out of ``entered`` and ``recovered``; the cohort
+    follows the spawn times, not the order of the events."""
+    from interfaces.metrics import complete_cohort
+
+    spawns = [_at(float(i), E.SPAWNED, i, "wood" if i == 5 else "brick") for i in range(1, 6)]
+    fates = [
+        *_placed(10.0, 1),
+        _at(11.0, E.MISSED, 2),
+        *_placed(12.0, 4),
+        *_placed(13.0, 5, "wood"),
+    ]
+    for events in ([*spawns, *fates], [*reversed(spawns), *fates]):
+        counts = count_events(events, 60.0)
+        assert (counts.spawned, counts.processed, counts.placed_correct) == (5, 4, 3)
+        assert (counts.entered, counts.recovered) == (2, 1)
+        assert complete_cohort(events) == {1, 2}
+        assert (counts.entered_by_class, counts.recovered_by_class) == ({"brick": 2}, {"brick": 1})
+        scores = event_scores(counts)
+        assert (scores["entered"], scores["recovered"]) == (2, 1)
+        assert scores["recovery_rate"] == pytest.approx(1 / 2)
+        assert scores["recovery_by_class"] == {"brick": pytest.approx(1 / 2), "wood": 0.0}
+
+
+def test_with_nothing_undecided_every_spawned_object_entered() -> None:
+    """Every object has a fate: the cohort is the whole stream. One picked but still carried at
+    the end (3) is decided: it entered, but is not recovered."""
+    events = [
+        *(_at(float(i), E.SPAWNED, i) for i in range(1, 4)),
+        *_placed(10.0, 1),
+        _at(11.0, E.MISSED, 2),
+        _at(12.0, E.PICK_SUCCESS, 3),
+    ]
+    counts = count_events(events, 60.0)
+    assert (counts.spawned, counts.entered, counts.placed_correct, counts.recovered) == (3, 3, 1, 1)
+    assert event_scores(counts)["recovery_rate"] == pytest.approx(1 / 3)
+    line = count_events(_sorting_line(), 60.0, line_exit="downstream")
+    assert (line.entered, line.recovered) == (line.spawned, line.placed_correct) == (8, 3)
+    assert line.entered_by_class == line.spawned_by_class
+
+
+def test_per_class_the_cut_is_the_whole_streams() -> None:
+    """Brick 3 is undecided: the cut falls there for every class. Wood 5, spawned after it and
+    missed, is out of the wood cohort too (cut over wood alone it would count: 1 / 2)."""
+    events = [
+        *(_at(float(i), E.SPAWNED, i, "wood" if i in (2, 5) else "brick") for i in range(1, 6)),
+        *_placed(10.0, 1),
+        *_placed(11.0, 2, "wood"),
+        *_placed(12.0, 4),
+        _at(13.0, E.MISSED, 5, "wood"),
+    ]
+    line = count_events(events, 60.0)
+    assert (line.entered, line.recovered) == (2, 2)
+    assert line.entered_by_class == {"brick": 1, "wood": 1}
+    assert sum(line.recovered_by_class.values()) == line.recovered
+    wood = count_events(events, 60.0, class_name="wood")
+    assert (wood.spawned, wood.missed, wood.entered, wood.recovered) == (2, 1, 1, 1)
+    per_class = class_scores(events, 60.0)
+    assert per_class["wood"]["recovery_rate"] == 1.0
+    assert (per_class["brick"]["entered"], per_class["brick"]["recovered"]) == (1, 1)
+    assert {k: v["recovery_rate"] for k, v in per_class.items()} == event_scores(line)[
+        "recovery_by_class"
+    ]
+
+
+def test_on_a_line_an_object_missed_upstream_is_undecided_until_the_exit() -> None:
+    """Object 2, missed upstream and not yet at the exit station's window, is undecided for the
+    line and cuts the cohort there (3, placed upstream, is left out); once the exit station
+    misses it, the cohort is the whole stream."""
+    up, down = {"station": "upstream"}, {"station": "downstream"}
+    events = [
+        *(_at(float(i), E.SPAWNED, i) for i in range(1, 4)),
+        _at(5.0, E.ENTERED_WORKSPACE, 1, **up),
+        *_placed(6.0, 1, **up),
+        _at(7.0, E.ENTERED_WORKSPACE, 2, **up),
+        _at(8.0, E.MISSED, 2, **up),
+        _at(9.0, E.ENTERED_WORKSPACE, 3, **up),
+        *_placed(10.0, 3, **up),
+    ]
+    line = count_events(events, 60.0, line_exit="downstream")
+    assert (line.spawned, line.entered, line.recovered) == (3, 1, 1)
+    naive = count_events(events, 60.0)  # every miss counts: exact for one station only
+    assert (naive.entered, naive.recovered) == (3, 2)
+    upstream = count_events(events, 60.0, station="upstream", line_exit="downstream")
+    assert (upstream.entered, upstream.recovered) == (3, 2)  # missed there: decided for it
+    events += [_at(20.0, E.ENTERED_WORKSPACE, 2, **down), _at(21.0, E.MISSED, 2, **down)]
+    line = count_events(events, 60.0, line_exit="downstream")
+    assert (line.entered, line.recovered) == (3, 2)
+    assert event_scores(line)["recovery_rate"] == pytest.approx(2 / 3)
+
+
+def test_a_stations_cohort_follows_its_own_window_and_fates() -> None:
+    """Upstream, 3 is still in the window at the end: its cohort is 1 and 2 (4, placed there,
+    is left out); downstream only 2 entered the window, picked there; for the line the cut is 3
+    too (2 was picked downstream)."""
+    up, down = {"station": "upstream"}, {"station": "downstream"}
+    events = [
+        *(_at(float(i), E.SPAWNED, i) for i in range(1, 5)),
+        _at(5.0, E.ENTERED_WORKSPACE, 1, **up),
+        *_placed(5.5, 1, **up),
+        _at(6.0, E.ENTERED_WORKSPACE, 2, **up),
+        _at(6.5, E.MISSED, 2, **up),
+        _at(7.0, E.ENTERED_WORKSPACE, 3, **up),
+        _at(8.0, E.ENTERED_WORKSPACE, 4, **up),
+        *_placed(8.5, 4, **up),
+        _at(9.0, E.ENTERED_WORKSPACE, 2, **down),
+        *_placed(9.5, 2, **down),
+    ]
+    upstream = count_events(events, 60.0, station="upstream")
+    assert (upstream.spawned, upstream.entered, upstream.recovered) == (4, 2, 1)
+    assert event_scores(upstream)["recovery_rate"] == pytest.approx(1 / 2)
+    downstream = count_events(events, 60.0, station="downstream")
+    assert (downstream.spawned, downstream.entered, downstream.recovered) == (1, 1, 1)
+    line = count_events(events, 60.0, line_exit="downstream")
+    assert (line.spawned, line.entered, line.recovered) == (4, 2, 2)
 
 
 def test_targeted_subtracts_the_landing_objects_per_station() -> None:
