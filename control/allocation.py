@@ -109,6 +109,7 @@ class StationView:
             width_m=track.width_m,
             height_m=track.height_m,
             width_margin_m=width_margin_m,
+            face_radius_m=track.suction_radius_m,
         )
 
     def can_take(self, track: Track, width_margin_m: float) -> bool:
@@ -118,6 +119,7 @@ class StationView:
             width_m=track.width_m,
             height_m=track.height_m,
             width_margin_m=width_margin_m,
+            face_radius_m=track.suction_radius_m,
         )
         return track.class_name in self.classes and misfit is None
 

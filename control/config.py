@@ -236,6 +236,14 @@ class PickConfig:
     dwell, waits its build-up plus ``seal_margin_s`` for the seal and vents for its ``vent_s``
     plus ``vent_margin_s`` over the bin.
 
+    Seal search (a tool that measures its grasp, a suction cup, with ``seal_search_m`` > 0):
+    while the cup reads no vacuum at all during its close, nothing touches the lip yet, so the
+    close waits (its deadlines move on, up to ``seal_search_max_s`` in all) and, once the
+    measured TCP is within ``seal_search_settled_m`` of the setpoint's height (the arm has
+    caught up), the setpoint goes down at ``seal_search_speed_mps``, at most ``seal_search_m``
+    below the grasp point: as a picker lowers its bellows cup until its vacuum switch reacts,
+    for an arm still on its way down or a top lower than seen.
+
     Grip check (skipped when ``joint_states`` carries no tool joints): when the close ends,
     and through the lift, a tool that holds nothing by its measurement (a gripper measured within
     ``grip_check_margin_m`` of its grasp command, a cup whose vacuum did not build up) aborts the
@@ -266,6 +274,10 @@ class PickConfig:
     top_press_m: float = 0.003
     seal_margin_s: float = 0.05
     vent_margin_s: float = 0.05
+    seal_search_m: float = 0.0
+    seal_search_speed_mps: float = 0.04
+    seal_search_max_s: float = 0.3
+    seal_search_settled_m: float = 0.002
 
     def __post_init__(self) -> None:
         """Validate every field."""

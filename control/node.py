@@ -124,25 +124,40 @@ def joint_sample(
     )
 
 
+def _suction_point(d: Any) -> tuple[float, float, float]:
+    """A detection's suction point ``(x, y)`` and radius; NaN when its radius is not above 0
+    (a camera that reports none leaves the message's default 0)."""
+    radius_m = float(d.suction_radius_m)
+    if not radius_m > 0.0:
+        return math.nan, math.nan, math.nan
+    point = d.suction_point
+    return float(point.x), float(point.y), radius_m
+
+
 def detections_of(msg: Any) -> tuple[float, list[Detection]]:
     """Capture time and detections of one camera frame (validation is the tracker's job)."""
     stamp_s = msg_stamp_s(msg.header.stamp)
-    detections = [
-        Detection(
-            stamp_s=stamp_s,
-            class_name=str(d.class_name),
-            confidence=float(d.confidence),
-            x_m=float(d.position.x),
-            y_m=float(d.position.y),
-            yaw_rad=float(d.yaw_rad),
-            length_m=float(d.length_m),
-            width_m=float(d.width_m),
-            height_m=float(d.height_m),
-            base_z_m=float(d.position.z),
-        )
-        for d in msg.detections
-    ]
+    detections = [_detection(stamp_s, d, *_suction_point(d)) for d in msg.detections]
     return stamp_s, detections
+
+
+def _detection(stamp_s: float, d: Any, sx_m: float, sy_m: float, radius_m: float) -> Detection:
+    """One camera detection as the tracker takes it, with its suction point (NaN: none)."""
+    return Detection(
+        stamp_s=stamp_s,
+        class_name=str(d.class_name),
+        confidence=float(d.confidence),
+        x_m=float(d.position.x),
+        y_m=float(d.position.y),
+        yaw_rad=float(d.yaw_rad),
+        length_m=float(d.length_m),
+        width_m=float(d.width_m),
+        height_m=float(d.height_m),
+        base_z_m=float(d.position.z),
+        suction_x_m=sx_m,
+        suction_y_m=sy_m,
+        suction_radius_m=radius_m,
+    )
 
 
 def claims_of(msg: Any) -> tuple[list[Claim], int]:

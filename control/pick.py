@@ -200,6 +200,10 @@ class _Pursuit:
     lift_target: CartesianTarget | None = None
     counted: bool = False
     """Whether this pick counted its target as a new one (a grip retry does not)."""
+    seal_depth_m: float = 0.0
+    """How far below the grasp point the seal search has taken the setpoint."""
+    seal_wait_s: float = 0.0
+    """How long the close has waited for a seal to start (its deadlines move on by it)."""
 
 
 @dataclass(kw_only=True, eq=False)
@@ -537,7 +541,7 @@ class PickController:
         that is not measured, lift after ``close_s``.
         """
         timing = self._cfg.timing
-        elapsed_s = now.t_s - self._phase_start_s
+        elapsed_s = now.t_s - self._phase_start_s - self._seal_search()
         if elapsed_s >= timing.close_s:
             if self._holds_nothing():
                 self._abort("grip_missed", now.t_s)
@@ -548,8 +552,34 @@ class PickController:
             if elapsed_s >= timing.close_max_s:
                 self._abort("grip_missed", now.t_s)
                 return Transition(phase=self._phase, tracks=())
-        target, aim = self._following_target(now.t_s, now.belt_velocity_mps, 0.0)
+        depth_m = self._pursuit.seal_depth_m
+        target, aim = self._following_target(now.t_s, now.belt_velocity_mps, -depth_m)
         return Goal(target=target, aim_m=aim)
+
+    def _seal_search(self) -> float:
+        """One control period of the seal search (:class:`~control.config.PickConfig`): the
+        seconds the close has waited so far for a seal to start. A cup that reads any vacuum
+        has sealed (the search stops where it is); one that reads none waits, and goes lower
+        once the arm has caught up with the setpoint's height."""
+        pick, pursuit = self._cfg.pick, self._pursuit
+        measured = self._measured.tool_measured
+        if (
+            pick.seal_search_m <= 0.0
+            or self._cfg.timing.close_max_s is None
+            or not math.isfinite(measured)
+            or measured > 0.0
+        ):
+            return pursuit.seal_wait_s
+        period_s = self._cfg.motion.control_period_s
+        if pursuit.seal_wait_s + period_s > pick.seal_search_max_s:
+            return pursuit.seal_wait_s
+        pursuit.seal_wait_s += period_s
+        lag_m = self._measured.position_m[2] - self._planner.state.position[2]
+        if abs(lag_m) <= pick.seal_search_settled_m:
+            pursuit.seal_depth_m = min(
+                pick.seal_search_m, pursuit.seal_depth_m + pick.seal_search_speed_mps * period_s
+            )
+        return pursuit.seal_wait_s
 
     def _on_lift(self, now: TickInput) -> Goal | Transition:
         """Up from the belt; then the carry (holding the object) or the return."""
@@ -595,6 +625,9 @@ class PickController:
     def _set_phase(self, phase: Phase, t_s: float) -> None:
         self._phase = phase
         self._phase_start_s = t_s
+        if phase == Phase.CLOSE:
+            self._pursuit.seal_depth_m = 0.0
+            self._pursuit.seal_wait_s = 0.0
         if phase in (Phase.CARRY, Phase.RETURN):
             self._motion.joint_remaining_s = math.inf  # until the new joint move's first step
 
@@ -827,8 +860,9 @@ class PickController:
         if unseen and all(math.isfinite(v) for v in belt_velocity_mps):
             velocity = belt_velocity_mps
         dt_s = t_s - track.stamp_s
-        x = track.position_m[0] + velocity[0] * dt_s
-        y = track.position_m[1] + velocity[1] * dt_s
+        dx_m, dy_m = self._cfg.tool.grasp_offset_m(track)
+        x = track.position_m[0] + dx_m + velocity[0] * dt_s
+        y = track.position_m[1] + dy_m + velocity[1] * dt_s
         return (x, y, grasp_height_m(track, self._cfg)), (velocity[0], velocity[1], 0.0)
 
     def _track_target(self, t_s: float, tracks: Sequence[Track]) -> bool:

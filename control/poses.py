@@ -14,7 +14,7 @@ from control.config import ControllerConfig
 from control.errors import PlanningError
 from control.ik import Kinematics, tool_pose, yaw_of
 from control.planner import JointPlanner
-from control.scheduler import grasp_height_m, nearest_grasp_yaw
+from control.scheduler import grasp_height_m, grasp_xy_at, nearest_grasp_yaw
 from control.tracking import Track
 
 FloatArray = NDArray[np.float64]
@@ -112,12 +112,12 @@ def solve_meeting(
     near = nearest_grasp_yaw(track.yaw_rad, tcp_yaw_rad, period_rad)
     yaws: tuple[float, ...] = (near, near + period_rad)
     if period_rad == 0.0:
-        x, y = track.position_at(t_s + dt_s)
+        x, y = grasp_xy_at(track, config, t_s + dt_s)
         yaws = (yaw_of(kinematics.fk(_turned_ready(kinematics, config, q_ready, x, y))),)
     q_goal: FloatArray | None = None
     yaw_goal = near
     for _ in range(5):
-        x, y = track.position_at(t_s + dt_s)
+        x, y = grasp_xy_at(track, config, t_s + dt_s)
         seed = _turned_ready(kinematics, config, q_ready, x, y) if q_goal is None else q_goal
         best = _best_pose(kinematics, (x, y, z), yaws, seed, q_now)
         if best is None:
@@ -133,7 +133,7 @@ def solve_meeting(
         if abs(dt_s - previous_s) < 0.005:
             break
     assert q_goal is not None  # the first iteration returned or set it
-    x, y = track.position_at(t_s + dt_s)
+    x, y = grasp_xy_at(track, config, t_s + dt_s)
     result = kinematics.solve(tool_pose((x, y, z), yaw_goal), q_goal)
     if not result.success:
         return None

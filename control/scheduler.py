@@ -94,6 +94,15 @@ def grasp_z_m(height_m: float, config: ControllerConfig) -> float:
     return config.belt.surface_z_m + config.tool.grasp_height_m(height_m, config.pick)
 
 
+def grasp_xy_at(track: Track, config: ControllerConfig, t_s: float) -> tuple[float, float]:
+    """Where the tool grasps the track at ``t_s`` (its constant-velocity prediction), world
+    ``(x, y)``: the track's position plus the tool's offset
+    (:meth:`~control.tools.ControllerTool.grasp_offset_m`)."""
+    x, y = track.position_at(t_s)
+    dx_m, dy_m = config.tool.grasp_offset_m(track)
+    return x + dx_m, y + dy_m
+
+
 def base_lift_m(track: Track, config: ControllerConfig) -> float:
     """How far the track's underside is above the belt surface (0 when unknown or below)."""
     if not math.isfinite(track.base_z_m):
@@ -266,6 +275,8 @@ def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) 
     ]
     radius = max(math.hypot(f.half_along_m, f.half_across_m) for f in footprints)
     x, y = track.position_m
+    grasp_xy = grasp_xy_at(track, config, track.stamp_s)
+    radius += math.dist(grasp_xy, (x, y))  # the disc about the grasp point, off the centre
     for other in others:
         if other.track_id == track.track_id:
             continue
@@ -278,7 +289,7 @@ def blocked_by(track: Track, others: Sequence[Track], config: ControllerConfig) 
             if min_top_z is not None and not top_z >= min_top_z:
                 continue  # too low to reach this part of the tool
             hit = (
-                _disc_overlap(track.position_m, area.half_along_m, footprint)
+                _disc_overlap(grasp_xy, area.half_along_m, footprint)
                 if area.disc
                 else _overlap(corners, footprint)
             )
@@ -341,6 +352,7 @@ def _static_reason(
         width_m=track.width_m,
         height_m=track.height_m,
         width_margin_m=sched.grasp_width_margin_m,
+        face_radius_m=track.suction_radius_m,
     )
     if misfit is not None:
         return misfit

@@ -60,7 +60,9 @@ class Detection:
     ``stamp_s`` is the capture time (not the arrival time). ``length_m >= width_m`` is not
     required; the tracker normalises the footprint so that ``yaw_rad`` is along the long side.
     ``base_z_m`` is the world z of the object's underside (the belt surface, or the top of the
-    object it lies on); NaN when the camera does not say.
+    object it lies on); NaN when the camera does not say. ``suction_x_m``, ``suction_y_m``: the
+    suction point the camera reports (where a round cup fits best on the top face), and
+    ``suction_radius_m`` the largest lip radius that fits there; NaN when it reports none.
     """
 
     stamp_s: float
@@ -73,9 +75,13 @@ class Detection:
     width_m: float
     height_m: float
     base_z_m: float = math.nan
+    suction_x_m: float = math.nan
+    suction_y_m: float = math.nan
+    suction_radius_m: float = math.nan
 
     def is_finite(self) -> bool:
-        """True when every numeric field is a finite number (``base_z_m`` may be NaN)."""
+        """True when every numeric field is a finite number (``base_z_m`` and the suction
+        point may be NaN)."""
         isfinite = math.isfinite
         return (
             isfinite(self.stamp_s)
@@ -97,6 +103,9 @@ class Track:
     the larger eigenvalue of the position covariance. ``length_m >= width_m`` and ``yaw_rad`` is
     the direction of the long side in ``[-pi/2, pi/2)``. ``base_z_m`` is the smoothed world z of
     the object's underside, NaN when no detection gave one (then it lies on the belt).
+    ``suction_offset_m`` is the smoothed ``(x, y)`` of the reported suction point less the
+    detected position (world frame: the suction point is ``position_m`` plus it), and
+    ``suction_radius_m`` its smoothed radius; NaN when no detection reported one.
     """
 
     track_id: int
@@ -114,6 +123,8 @@ class Track:
     confirmed: bool
     last_update_s: float
     base_z_m: float = math.nan
+    suction_offset_m: tuple[float, float] = (math.nan, math.nan)
+    suction_radius_m: float = math.nan
 
     def position_at(self, t_s: float) -> tuple[float, float]:
         """The constant-velocity prediction of the position at ``t_s``."""
@@ -145,6 +156,9 @@ class _TrackState:
         "p_pp",
         "p_pv",
         "p_vv",
+        "suction_dx_m",
+        "suction_dy_m",
+        "suction_radius_m",
         "track_id",
         "votes",
         "vx_mps",
@@ -180,6 +194,9 @@ class _TrackState:
         self.width_m = detection.width_m
         self.height_m = detection.height_m
         self.base_z_m = detection.base_z_m
+        self.suction_dx_m = detection.suction_x_m - detection.x_m
+        self.suction_dy_m = detection.suction_y_m - detection.y_m
+        self.suction_radius_m = detection.suction_radius_m
         self._refresh()
 
     def _refresh(self) -> None:
@@ -232,7 +249,21 @@ class _TrackState:
             known = math.isfinite(self.base_z_m)
             base = detection.base_z_m
             self.base_z_m = (1 - a) * self.base_z_m + a * base if known else base
+        if math.isfinite(detection.suction_radius_m):
+            self._fold_suction(detection, a)
         self._refresh()
+
+    def _fold_suction(self, detection: Detection, a: float) -> None:
+        """Smooth the suction point's offset from the position, and its radius, in."""
+        dx_m = detection.suction_x_m - detection.x_m
+        dy_m = detection.suction_y_m - detection.y_m
+        if math.isfinite(self.suction_radius_m):
+            self.suction_dx_m = (1 - a) * self.suction_dx_m + a * dx_m
+            self.suction_dy_m = (1 - a) * self.suction_dy_m + a * dy_m
+            self.suction_radius_m = (1 - a) * self.suction_radius_m + a * detection.suction_radius_m
+        else:
+            self.suction_dx_m, self.suction_dy_m = dx_m, dy_m
+            self.suction_radius_m = detection.suction_radius_m
 
     def snapshot(
         self, stamp_s: float, position_m: tuple[float, float], position_var_m2: float
@@ -261,6 +292,8 @@ class _TrackState:
             confirmed=self.confirmed,
             last_update_s=self.last_update_s,
             base_z_m=self.base_z_m,
+            suction_offset_m=(self.suction_dx_m, self.suction_dy_m),
+            suction_radius_m=self.suction_radius_m,
         )
         return track
 
@@ -284,6 +317,9 @@ def _normalised(detection: Detection) -> Detection:
         width_m=width,
         height_m=detection.height_m,
         base_z_m=detection.base_z_m,
+        suction_x_m=detection.suction_x_m,
+        suction_y_m=detection.suction_y_m,
+        suction_radius_m=detection.suction_radius_m,
     )
 
 

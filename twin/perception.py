@@ -8,7 +8,9 @@ the footprint centroid (its z at the object's underside: the belt surface, or th
 object it lies on), the long-axis yaw (modulo pi), length, width and height as seen from above
 (``twin.top_view``: an object that has tipped over shows a side), with Gaussian position and yaw
 noise, a per-object drop probability and a misclassification probability (a uniformly chosen
-other class). The frame is released ``latency_s`` after capture, stamped with its capture time.
+other class). With a ``suction_points`` finder (:mod:`twin.suction_point`) each detection also
+carries the suction point of the face turned up, shifted by the same position noise, and its
+radius. The frame is released ``latency_s`` after capture, stamped with its capture time.
 ``PerceptionConfig.zero_noise()`` gives the exact ground truth with no delay, drop or confusion.
 All randomness comes from the generator passed in (the scenario's seed tree).
 
@@ -29,7 +31,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -98,7 +100,9 @@ class PerceptionConfig:
 @dataclass(frozen=True)
 class Detection:
     """One detected object (world frame). ``z_m`` is its underside: the belt surface, or the top of
-    the object it lies on (what a depth camera sees around it)."""
+    the object it lies on (what a depth camera sees around it). ``suction_point_m`` and
+    ``suction_radius_m``: where a round cup fits best on its top face and the largest lip radius
+    that fits there (:mod:`twin.suction_point`), NaN when the camera reports none."""
 
     class_name: str
     confidence: float
@@ -109,6 +113,8 @@ class Detection:
     length_m: float
     width_m: float
     height_m: float
+    suction_point_m: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    suction_radius_m: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -147,6 +153,8 @@ class Perception:
         *,
         camera: CameraSpec | None = None,
         dropout_windows_s: Iterable[tuple[float, float]] = (),
+        suction_points: Callable[[GroundTruth], tuple[tuple[float, float, float], float]]
+        | None = None,
     ) -> None:
         self.config = config
         self.camera = camera if camera is not None else CameraSpec()
@@ -158,6 +166,7 @@ class Perception:
         self.rng = rng
         (self._confidence_rng,) = rng.spawn(1)  # its own stream: the others stay as they were
         self._queue: deque[DetectionFrame] = deque()
+        self._suction_points = suction_points
 
     def capture_due(self, step: int) -> bool:
         """Whether a frame is captured at this step."""
@@ -190,17 +199,25 @@ class Perception:
                 others = [c for c in self.classes if c != name]
                 name = others[int(pick * len(others))]
             confidence = cfg.draw_confidence(self._confidence_rng, correct=name == obj.class_name)
+            dx_m = cfg.position_noise_m * float(noise[0])
+            dy_m = cfg.position_noise_m * float(noise[1])
+            suction_m, suction_radius_m = (math.nan, math.nan, math.nan), math.nan
+            if self._suction_points is not None:
+                (sx, sy, sz), suction_radius_m = self._suction_points(obj)
+                suction_m = (sx + dx_m, sy + dy_m, sz)
             detections.append(
                 Detection(
                     class_name=name,
                     confidence=confidence,
-                    x_m=x + cfg.position_noise_m * float(noise[0]),
-                    y_m=y + cfg.position_noise_m * float(noise[1]),
+                    x_m=x + dx_m,
+                    y_m=y + dy_m,
                     z_m=max(self.surface_z_m, obj.position_m[2] - seen.below_m),
                     yaw_rad=wrap_half_pi(seen.yaw_rad + cfg.yaw_noise_rad * float(noise[2])),
                     length_m=seen.length_m,
                     width_m=seen.width_m,
                     height_m=seen.height_m,
+                    suction_point_m=suction_m,
+                    suction_radius_m=suction_radius_m,
                 )
             )
         frame = DetectionFrame(

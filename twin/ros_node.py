@@ -87,6 +87,7 @@ from twin.commands import (
 )
 from twin.link_visuals import link_visuals
 from twin.monitor import GroundTruth
+from twin.perception import Detection as PerceivedDetection
 from twin.perception import DetectionFrame
 from twin.sim import ArmCommand, Twin
 from twin.station import Station
@@ -205,6 +206,23 @@ class Wire(Protocol):
     def count_subscribers(self, name: str) -> int:
         """Subscriptions of ``name``."""
         ...
+
+
+def _detection_values(d: PerceivedDetection) -> cdr.DetectionValues:
+    """One perceived detection as the message carries it: a suction point only with a radius
+    above 0 (else the message's default, zeros: none)."""
+    has_point = d.suction_radius_m > 0.0  # False for NaN
+    return cdr.DetectionValues(
+        class_name=d.class_name,
+        confidence=cdr.float32(d.confidence),  # the field is a float32
+        position_m=(d.x_m, d.y_m, d.z_m),
+        yaw_rad=d.yaw_rad,
+        length_m=d.length_m,
+        width_m=d.width_m,
+        height_m=d.height_m,
+        suction_point_m=d.suction_point_m if has_point else (0.0, 0.0, 0.0),
+        suction_radius_m=d.suction_radius_m if has_point else 0.0,
+    )
 
 
 class TwinEndpoint:
@@ -696,18 +714,7 @@ class TwinEndpoint:
     def publish_detections(self, frame: DetectionFrame) -> None:
         """``/objects/detections``: one released frame, stamped with its capture time."""
         stamp = time_msg(frame.capture_time_s)
-        values = [
-            cdr.DetectionValues(
-                class_name=d.class_name,
-                confidence=cdr.float32(d.confidence),  # the field is a float32
-                position_m=(d.x_m, d.y_m, d.z_m),
-                yaw_rad=d.yaw_rad,
-                length_m=d.length_m,
-                width_m=d.width_m,
-                height_m=d.height_m,
-            )
-            for d in frame.detections
-        ]
+        values = [_detection_values(d) for d in frame.detections]
 
         def detections() -> DetectionArray:
             msg = DetectionArray()
@@ -721,8 +728,11 @@ class TwinEndpoint:
                     length_m=v.length_m,
                     width_m=v.width_m,
                     height_m=v.height_m,
+                    suction_radius_m=v.suction_radius_m,
                 )
                 det.position.x, det.position.y, det.position.z = v.position_m
+                point = det.suction_point
+                point.x, point.y, point.z = v.suction_point_m
                 msg.detections.append(det)
             return msg
 

@@ -56,6 +56,7 @@ from twin.perception import DetectionFrame, Perception, PerceptionConfig
 from twin.scenario import PerturbationLevel, Scenario, scenario_cell, seed_tree
 from twin.station import ArmCommand, Station
 from twin.stream import ImageBatch, Stream
+from twin.suction_point import SuctionPoints
 from twin.target_metric import TrackingResult
 from twin.world import World
 
@@ -295,6 +296,7 @@ class Twin:
             seeds.perception,
             camera=self.cell.camera,
             dropout_windows_s=self.scenario.faults.detection_dropout,
+            suction_points=SuctionPoints(lambda object_id: self.object_mesh(object_id)[0]),
         )
         self._released = []
         self._spawn_due()

@@ -10,6 +10,7 @@ what kind of tool it is.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
@@ -19,6 +20,7 @@ from interfaces.tools import ParallelJawSpec, SuctionCupSpec, ToolSpec
 
 if TYPE_CHECKING:
     from control.config import PickConfig
+    from control.tracking import Track
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -87,6 +89,11 @@ class ControllerTool(Protocol):
         """The tool's joints in ``joint_states`` (empty when it reports none)."""
         ...
 
+    def grasp_offset_m(self, track: Track) -> tuple[float, float]:
+        """Where on the object the tool grasps: ``(dx, dy)`` from the track's position, world
+        frame (a gripper: its centre; a suction cup: the suction point the camera reports)."""
+        ...
+
     @property
     def urdf_joint_names(self) -> tuple[str, ...]:
         """Those of :attr:`joint_names` that are joints of the station's URDF (a gripper's
@@ -122,14 +129,27 @@ class ControllerTool(Protocol):
         ...
 
     def misfit(
-        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+        self,
+        *,
+        length_m: float,
+        width_m: float,
+        height_m: float,
+        width_margin_m: float,
+        face_radius_m: float = math.nan,
     ) -> str | None:
         """Why an object of this size cannot be grasped (one of
-        :data:`control.scheduler.UNTARGETED_REASONS`), or None."""
+        :data:`control.scheduler.UNTARGETED_REASONS`), or None. ``face_radius_m`` is the
+        radius of the largest disc on its top face the camera reports (NaN: none)."""
         ...
 
     def fit_margin_m(
-        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+        self,
+        *,
+        length_m: float,
+        width_m: float,
+        height_m: float,
+        width_margin_m: float,
+        face_radius_m: float = math.nan,
     ) -> float:
         """How much room the tool has on the object's tightest dimension, m (negative: it does
         not fit); comparable between tools, for leaving an object to the one that fits it

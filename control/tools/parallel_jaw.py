@@ -25,6 +25,7 @@ from interfaces.tools import ParallelJawSpec
 
 if TYPE_CHECKING:
     from control.config import PickConfig
+    from control.tracking import Track
 
 
 @dataclass(frozen=True)
@@ -83,21 +84,40 @@ class ParallelJaw:
         return False
 
     def misfit(
-        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+        self,
+        *,
+        length_m: float,
+        width_m: float,
+        height_m: float,
+        width_margin_m: float,
+        face_radius_m: float = math.nan,
     ) -> str | None:
         """``too_wide`` when the narrow side does not fit the opening less ``width_margin_m``;
         ``too_flat`` when the object is lower than the finger pads; else None."""
+        del face_radius_m
         if min(width_m, length_m) > (self.spec.max_opening_m - width_margin_m):
             return "too_wide"
         if height_m < self.spec.pad_height_m:
             return "too_flat"
         return None
 
+    def grasp_offset_m(self, track: Track) -> tuple[float, float]:
+        """The jaws close about the object's centre."""
+        del track
+        return (0.0, 0.0)
+
     def fit_margin_m(
-        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+        self,
+        *,
+        length_m: float,
+        width_m: float,
+        height_m: float,
+        width_margin_m: float,
+        face_radius_m: float = math.nan,
     ) -> float:
         """The lesser of the opening's room around the narrow side (less ``width_margin_m``)
         and the object's height above the finger pads."""
+        del face_radius_m
         room = self.spec.max_opening_m - width_margin_m - min(width_m, length_m)
         return min(room, height_m - self.spec.pad_height_m)
 

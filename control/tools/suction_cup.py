@@ -5,9 +5,11 @@ the nominal vacuum, as the joint ``<name>_vacuum`` of ``joint_states``; a sealed
 least the seal efficiency of the leakiest surface once the vacuum has built up, an unsealed one
 about 0, so a cup that reads less than half of that least efficiency after the build-up (and
 through the lift) holds nothing. The cup grasps an object on its top face: the TCP is the
-centre of the lip, lowered ``pick.top_press_m`` into the top so that the soft lip seals. An
-object fits when its narrow side holds the lip's disc with ``width_margin_m`` to spare (less
-is ``too_small``); nothing is too flat or too wide for it. Only the stem's disc comes down
+centre of the lip, lowered ``pick.top_press_m`` into the top so that the soft lip seals, at the
+suction point the camera reports (where the largest disc fits on the top face) or, where it
+reports none, at the footprint's centre. An object fits when that disc (or, without one, the
+narrow side) holds the lip's disc with ``width_margin_m`` to spare (less is ``too_small``);
+nothing is too flat or too wide for it. Only the stem's disc comes down
 around the grasp point. The sequence does not dwell: the vacuum goes on as the descent to the
 top starts (the cup seals as the lip touches), the TCP waits at the top for the seal (the
 build-up, plus ``pick.seal_margin_s``; a seal made late, up to another build-up, once the
@@ -30,6 +32,7 @@ from interfaces.tools import SuctionCupSpec
 
 if TYPE_CHECKING:
     from control.config import PickConfig
+    from control.tracking import Track
 
 VACUUM_ON = 1.0
 """The command that turns the vacuum on."""
@@ -99,21 +102,48 @@ class SuctionCup:
         return math.isfinite(measured) and measured >= VACUUM_FULL
 
     def misfit(
-        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+        self,
+        *,
+        length_m: float,
+        width_m: float,
+        height_m: float,
+        width_margin_m: float,
+        face_radius_m: float = math.nan,
     ) -> str | None:
-        """``too_small`` when the narrow side is less than the cup's diameter plus
-        ``width_margin_m``; else None."""
-        del height_m
-        if min(width_m, length_m) < self.spec.cup_diameter_m + width_margin_m:
-            return "too_small"
-        return None
+        """``too_small`` when the top has no room for the lip's disc with ``width_margin_m``
+        to spare (:meth:`fit_margin_m` negative); else None."""
+        margin_m = self.fit_margin_m(
+            length_m=length_m,
+            width_m=width_m,
+            height_m=height_m,
+            width_margin_m=width_margin_m,
+            face_radius_m=face_radius_m,
+        )
+        return "too_small" if margin_m < 0.0 else None
+
+    def grasp_offset_m(self, track: Track) -> tuple[float, float]:
+        """The suction point the camera reports, from the track's position; none reported:
+        the centre."""
+        dx_m, dy_m = track.suction_offset_m
+        if not (math.isfinite(dx_m) and math.isfinite(dy_m)):
+            return (0.0, 0.0)
+        return (dx_m, dy_m)
 
     def fit_margin_m(
-        self, *, length_m: float, width_m: float, height_m: float, width_margin_m: float
+        self,
+        *,
+        length_m: float,
+        width_m: float,
+        height_m: float,
+        width_margin_m: float,
+        face_radius_m: float = math.nan,
     ) -> float:
-        """The narrow side's room around the lip (less ``width_margin_m``)."""
+        """The room around the lip (less ``width_margin_m``): across the largest disc on the
+        top face where the camera reports one (``face_radius_m``; on a concave or bent piece
+        much less than its narrow side), else across the narrow side."""
         del height_m
-        return min(width_m, length_m) - self.spec.cup_diameter_m - width_margin_m
+        room_m = 2.0 * face_radius_m if math.isfinite(face_radius_m) else min(width_m, length_m)
+        return room_m - self.spec.cup_diameter_m - width_margin_m
 
     def holds(self, class_name: str, mass_kg: float, acceleration_mps2: float) -> bool:
         """The sealed cup's holding force on ``class_name`` (vacuum x lip area x the class's

@@ -413,6 +413,57 @@ def test_a_cup_lifts_only_once_its_vacuum_is_full() -> None:
     assert Phase.CARRY in [c.phase for c in commands]
 
 
+def _searching_cup(search_m: float) -> ControllerConfig:
+    config = _station_config("panda", "suction_cup")
+    return replace(config, pick=replace(config.pick, seal_search_m=search_m))
+
+
+def test_a_cup_that_finds_no_top_where_it_was_seen_goes_lower_until_it_seals() -> None:
+    """The top lies 8 mm below where it was seen: the cup reads no vacuum at the grasp point.
+    With a 12 mm seal search the setpoint goes down (the arm has caught up: the measured TCP
+    is the commanded one here) until the lip touches, then stops there and lifts once the
+    vacuum is full: a pick, not a miss; never more than the search's depth lower."""
+    config = _searching_cup(0.012)
+    controller = PickController(config)
+    start: list[float] = []
+    touched: list[float] = []
+
+    def vacuum_at(t_s: float, commands: list[Command]) -> float:
+        last = commands[-1]
+        if last.phase != Phase.CLOSE and not touched:
+            return 0.0
+        if not start:
+            assert last.grasp_point_m is not None
+            start.append(last.grasp_point_m[2])
+        if not touched and last.setpoint.position[2] <= start[0] - 0.008:
+            touched.append(t_s)
+        return 0.0 if not touched else min(1.0, (t_s - touched[0]) / 0.15)
+
+    commands = _drive_cup(controller, lambda t: (_slab(t),), 600, vacuum_at)
+    closing = [c.setpoint.position[2] for c in commands if c.phase == Phase.CLOSE]
+    assert start
+    lowest_below_m = start[0] - min(closing)
+    assert 0.008 <= lowest_below_m <= 0.010  # the lip's touch is read a tick or two later
+    assert controller.stats().aborted == {}
+    assert Phase.CARRY in [c.phase for c in commands]
+
+
+def test_a_cup_that_never_seals_searches_at_most_its_depth_and_time_then_misses() -> None:
+    config = _searching_cup(0.012)
+    controller = PickController(config)
+    commands = _drive_cup(controller, lambda t: (_slab(t),), 600, lambda t, c: 0.0)
+    closing = [c for c in commands if c.phase == Phase.CLOSE]
+    assert controller.stats().aborted == {"grip_missed": 1}
+    grasp = closing[0].grasp_point_m
+    assert grasp is not None
+    depth_m = grasp[2] - min(c.setpoint.position[2] for c in closing)
+    assert 0.010 <= depth_m <= 0.012 + 1e-4
+    close_s = closing[-1].t_s - closing[0].t_s
+    pick = config.pick
+    assert close_s <= config.timing.close_s + pick.seal_search_max_s + 2.0 / 120.0
+    assert close_s >= config.timing.close_s + pick.seal_search_max_s - 2.0 / 120.0
+
+
 def test_a_cup_that_holds_the_object_lifts_it_and_carries_it_to_its_bin_whatever_else() -> None:
     """The vacuum is full during the descent (the lip sealed as it touched): the cup lifts at
     once, without waiting for the close; and the object, held, is carried to its bin, never

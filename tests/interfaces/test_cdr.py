@@ -166,6 +166,9 @@ def test_detection_array(count: int) -> None:
             length_m=0.2,
             width_m=0.05,
             height_m=0.03,
+            # the last one without a suction point (the message's default: none)
+            suction_point_m=(-0.99 + 0.1 * i, 0.44, 0.033) if i < 3 else (0.0, 0.0, 0.0),
+            suction_radius_m=0.021 if i < 3 else 0.0,
         )
         for i in range(count)
     ]
@@ -180,8 +183,10 @@ def test_detection_array(count: int) -> None:
             length_m=v.length_m,
             width_m=v.width_m,
             height_m=v.height_m,
+            suction_radius_m=v.suction_radius_m,
         )
         det.position.x, det.position.y, det.position.z = v.position_m
+        det.suction_point.x, det.suction_point.y, det.suction_point.z = v.suction_point_m
         msg.detections.append(det)
     _same(cdr.detection_array_cdr(2, 33_333_333, "world", values), msg)
 
