@@ -342,3 +342,29 @@ def test_two_controllers_share_a_brick_through_the_relayed_claims(tmp_path: Path
         [["a", whole["stations"]["s1"]["claims"][0]["id"], state]]
         for state in ("claimed", "picked")
     ]
+
+
+def test_a_detection_without_a_suction_point_reaches_the_tracker_without_one() -> None:
+    """A camera that fills no suction point leaves the message's zeros: the tracker gets NaN
+    (no point), not a point at the origin with no room; a filled one arrives as it was sent."""
+    from cdw_interfaces.msg import Detection, DetectionArray
+
+    from control.node import detections_of
+
+    msg = DetectionArray()
+    msg.header.stamp.sec = 3
+    plain = Detection(class_name="wood", confidence=0.9, length_m=0.2, width_m=0.06, height_m=0.03)
+    plain.position.x, plain.position.y = -1.0, 0.45
+    pointed = Detection(
+        class_name="brick", confidence=0.8, length_m=0.1, width_m=0.08, height_m=0.04
+    )
+    pointed.position.x, pointed.position.y = -0.8, 0.5
+    pointed.suction_point.x, pointed.suction_point.y, pointed.suction_point.z = -0.82, 0.51, 0.04
+    pointed.suction_radius_m = 0.03
+    msg.detections = [plain, pointed]
+    stamp_s, (first, second) = detections_of(msg)
+    assert stamp_s == 3.0
+    assert all(
+        math.isnan(v) for v in (first.suction_x_m, first.suction_y_m, first.suction_radius_m)
+    )
+    assert (second.suction_x_m, second.suction_y_m, second.suction_radius_m) == (-0.82, 0.51, 0.03)

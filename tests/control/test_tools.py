@@ -122,3 +122,22 @@ def test_a_tool_kind_the_controller_does_not_know_is_refused() -> None:
     unknown = replace(XARM, kind="suction_cup")  # type: ignore[arg-type]
     with pytest.raises(ControlConfigError, match=r"tool\.kind = 'suction_cup'"):
         make_tool(unknown)
+
+
+def test_a_cup_fits_by_the_disc_the_camera_reports_on_the_top_and_grasps_at_its_centre() -> None:
+    """A concave piece: its narrow side (6 cm) holds a 40 mm lip with the 15 mm margin, but
+    the largest disc on its top is 3.5 cm across: too small. The cup aims at that disc's
+    centre; without a reported disc it judges by the narrow side and aims at the centre."""
+    cup = make_tool(tool_from_data("suction_cup", "tool"))
+    size = {"length_m": 0.2, "width_m": 0.06, "height_m": 0.03, "width_margin_m": 0.015}
+    assert cup.misfit(**size) is None
+    assert cup.misfit(**size, face_radius_m=0.0175) == "too_small"
+    assert cup.misfit(**size, face_radius_m=0.028) is None
+    assert cup.misfit(**{**size, "width_m": 0.05}) == "too_small"
+    assert cup.fit_margin_m(**size, face_radius_m=0.03) == pytest.approx(0.06 - 0.04 - 0.015)
+    track = replace(_track(1, 0.5), suction_offset_m=(-0.03, 0.01), suction_radius_m=0.03)
+    assert cup.grasp_offset_m(track) == (-0.03, 0.01)
+    assert cup.grasp_offset_m(_track(1, 0.5)) == (0.0, 0.0)
+    jaws = make_tool(XARM)
+    assert jaws.grasp_offset_m(track) == (0.0, 0.0)
+    assert jaws.misfit(**size, face_radius_m=0.001) == jaws.misfit(**size)

@@ -76,6 +76,33 @@ def test_the_underside_the_camera_reports_reaches_the_track(swapped: bool) -> No
     assert track.base_z_m == pytest.approx(0.04)
 
 
+@pytest.mark.parametrize("swapped", [False, True])
+def test_the_suction_point_reaches_the_track_as_an_offset_from_its_position(swapped: bool) -> None:
+    """The camera's suction point, 3 cm behind and 1 cm beside the detected centre, reaches the
+    track as that offset (so it moves with the track's prediction), with its radius, whichever
+    side the camera reports as length; a camera that reports none leaves both NaN."""
+    rng = np.random.default_rng(5)
+    tracker = Tracker(TrackingConfig(), classes=CLASSES)
+    plain = Tracker(TrackingConfig(), classes=CLASSES)
+    size = {"length_m": 0.05, "width_m": 0.15} if swapped else {}
+    for k in range(20):
+        t_s = k / RATE_HZ
+        detection = _detection(t_s, -0.5 + 0.4 * t_s, 0.45, rng, **size)
+        point = {
+            "suction_x_m": detection.x_m - 0.03,
+            "suction_y_m": detection.y_m + 0.01,
+            "suction_radius_m": 0.024,
+        }
+        tracker.update(t_s, [dataclasses.replace(detection, **point)], (0.4, 0.0))
+        plain.update(t_s, [detection], (0.4, 0.0))
+    (track,) = tracker.predict_to(1.0)
+    assert track.suction_offset_m == pytest.approx((-0.03, 0.01), abs=1e-9)
+    assert track.suction_radius_m == pytest.approx(0.024)
+    (other,) = plain.predict_to(1.0)
+    assert all(math.isnan(v) for v in (*other.suction_offset_m, other.suction_radius_m))
+    assert other.position_m == track.position_m  # the point changes nothing else
+
+
 def test_identities_kept_through_crossing() -> None:
     rng = np.random.default_rng(3)
     tracker = Tracker(TrackingConfig(), classes=CLASSES)

@@ -1,0 +1,84 @@
+"""The suction point a pick-point detector reports: the pole of the upturned face, world frame."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import trimesh
+from shapely.geometry import Point, Polygon, box
+
+from twin.monitor import GroundTruth
+from twin.suction_point import SuctionPoints
+from twin.top_view import TopView
+
+HEIGHT_M = 0.04
+# A 10 cm square with a 2 cm wide bar 30 cm long to its right: the footprint's centroid lies on
+# the bar (1 cm from its edges), the square's centre is where a cup fits (5 cm from every edge).
+OUTLINE = box(-0.05, -0.05, 0.05, 0.05).union(box(0.05, -0.01, 0.35, 0.01))
+
+
+def _triangles(outline: Polygon) -> np.ndarray:
+    mesh = trimesh.creation.extrude_polygon(outline, HEIGHT_M)
+    return np.asarray(mesh.triangles, dtype=float)
+
+
+def _truth(position_m: tuple[float, float, float], quat_xyzw: tuple[float, ...]) -> GroundTruth:
+    return GroundTruth(
+        id=7,
+        source_id="o7",
+        class_name="brick",
+        position_m=position_m,
+        orientation_xyzw=quat_xyzw,  # type: ignore[arg-type]
+        linear_velocity_mps=(0.4, 0.0, 0.0),
+        angular_velocity_radps=(0.0, 0.0, 0.0),
+        top_view=TopView(yaw_rad=0.0, length_m=0.4, width_m=0.1, height_m=HEIGHT_M, below_m=0.0),
+        length_m=0.4,
+        width_m=0.1,
+        area_m2=OUTLINE.area,
+        volume_m3=OUTLINE.area * HEIGHT_M,
+        height_m=HEIGHT_M,
+        mass_kg=1.0,
+        on_belt=True,
+        in_workspace=False,
+        held=False,
+        in_bin=False,
+    )
+
+
+def test_the_pole_of_a_concave_top_is_where_the_cup_fits_not_the_centroid() -> None:
+    calls: list[int] = []
+
+    def mesh_of(object_id: int) -> np.ndarray:
+        calls.append(object_id)
+        return _triangles(OUTLINE)
+
+    points = SuctionPoints(mesh_of)
+    yaw = 0.7
+    quat = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+    (x, y, z), radius_m = points(_truth((1.0, 0.5, 0.2), quat))
+    # the square's centre, turned by the yaw and moved to the position; z on the top
+    assert (x, y) == pytest.approx((1.0, 0.5), abs=1.5e-3)  # the pole is 0.5 mm right of it
+    assert z == pytest.approx(0.2 + HEIGHT_M, abs=1e-9)
+    assert radius_m == pytest.approx(0.05, abs=2e-4)
+    centroid = OUTLINE.centroid
+    assert OUTLINE.boundary.distance(Point(centroid.x, centroid.y)) < 0.011  # no room there
+    # moved on, the same object's point moves with it; its mesh is read once
+    (x2, _, _), _ = points(_truth((1.3, 0.5, 0.2), quat))
+    assert x2 == pytest.approx(x + 0.3, abs=1e-9)
+    assert calls == [7]
+
+
+def test_a_tipped_object_is_judged_by_the_face_turned_up() -> None:
+    points = SuctionPoints(lambda _: _triangles(box(-0.1, -0.03, 0.1, 0.03)))
+    upright = _truth((0.0, 0.5, 0.0), (0.0, 0.0, 0.0, 1.0))
+    assert points(upright)[1] == pytest.approx(0.03, abs=2e-4)  # the 6 cm wide top
+    # on its long side (a quarter turn about x): the up face is 20 cm x 4 cm
+    tipped = replace(
+        upright, orientation_xyzw=(math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4))
+    )
+    (_, _, z), radius_m = points(tipped)
+    assert radius_m == pytest.approx(HEIGHT_M / 2, abs=2e-4)
+    assert z == pytest.approx(0.03, abs=1e-9)  # the side that was at y = -0.03 is up
