@@ -327,6 +327,9 @@ class SchedulerConfig:
     in the window first, so that fewer objects pass) or ``cycle`` (the least time to meet the
     object and carry it to its bin first, so that more objects are picked per minute; objects
     near the end of the window are left to stations downstream).
+    ``replan_period_s``: a station that found no target looks again only that much later (0:
+    every control update); with joint-space approaches every candidate's meeting is an IK
+    solve and a joint plan, and the tracks change only with the camera's frames.
     """
 
     class_priorities: dict[str, float] = field(default_factory=dict)
@@ -340,9 +343,16 @@ class SchedulerConfig:
     class_density_kg_m3: dict[str, float] = field(default_factory=dict)
     fill_fraction: float = 0.85
     carry_acceleration_mps2: float = 10.0
+    replan_period_s: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field."""
+        _require(
+            self.replan_period_s >= 0.0 and math.isfinite(self.replan_period_s),
+            "scheduler.replan_period_s",
+            self.replan_period_s,
+            "must be finite and >= 0",
+        )
         _require(
             self.rank in RANKS, "scheduler.rank", self.rank, f"must be one of {', '.join(RANKS)}"
         )

@@ -278,6 +278,7 @@ class PickController:
         self._claims_out: list[Claim] = []
         self._meetings: dict[int, JointApproach | None] = {}
         self._meetings_t_s = math.nan
+        self._next_schedule_s = -math.inf
         self._phase = Phase.RETURN
         self._phase_start_s = -math.inf
         self._measured = TcpMeasurement(position_m=(math.nan,) * 3, yaw_rad=math.nan)
@@ -744,6 +745,8 @@ class PickController:
 
     # -- targets ------------------------------------------------------------------------------
     def _schedule(self, t_s: float, tracks: Sequence[Track]) -> None:
+        if t_s < self._next_schedule_s:
+            return  # found nothing a moment ago (``scheduler.replan_period_s``)
         estimate = None
         if self._cfg.pick.approach_space == "joint" and self._motion.joint_mode:
 
@@ -767,6 +770,8 @@ class PickController:
                 book.untargeted[item.track_id] = item.reason
         if result.target is not None:
             self._start_pick(result.target, result, t_s)
+        else:
+            self._next_schedule_s = t_s + self._cfg.scheduler.replan_period_s - 1e-9
 
     def _joint_meeting(self, track: Track, t_s: float) -> JointApproach | None:
         """:func:`~control.poses.solve_meeting` from the current joint state, cached per track

@@ -7,8 +7,9 @@ every station's controller (:class:`control.node.InprocController`) share the in
 so the events and metrics are the same, bit for bit, without DDS, its threads and the process
 switches. The options are the twin node's (:mod:`twin.cmd_node`: ``--scenario``, ``--cell``,
 ``--dataset``, ``--seed``, ``--out``, ``--record``, ...) and the controllers'
-``--params-file``; ``--controller-stats STATION=PATH`` names each station's stats file
-(default: ``controller.json`` or ``controller-<station>.json`` next to ``--out``). Lockstep
+``--params-file`` (default: the file the scenario's ``controller`` names, as ``cdw-twin run``
+takes it); ``--controller-stats STATION=PATH`` names each station's stats file (default:
+``controller.json`` or ``controller-<station>.json`` next to ``--out``). Lockstep
 only: realtime and a real cell need ROS 2 (``cdw-twin twin-node``, ``cdw-twin controller``).
 
 Example::
@@ -40,6 +41,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     configure_node(parser)
     parser.set_defaults(mode="lockstep")
     add_params_option(parser)
+    parser.set_defaults(params_file=None)  # the scenario's ``controller`` (see :func:`run`)
     parser.add_argument(
         "--controller-stats",
         action="append",
@@ -115,7 +117,21 @@ def run(args: argparse.Namespace) -> int:
     if args.mode != "lockstep":
         msg = f"--mode {args.mode}: the in-process transport runs lockstep only; use twin-node"
         raise CdwTwinError(msg)
-    return run_node(args, peers=Controllers(args.params_file, args.controller_stats, args.out))
+    params_file = args.params_file if args.params_file is not None else scenario_params(args)
+    return run_node(args, peers=Controllers(params_file, args.controller_stats, args.out))
+
+
+def scenario_params(args: argparse.Namespace) -> Path:
+    """Without ``--params-file``: the file the scenario's ``controller`` names (as ``cdw-twin
+    run`` takes it), or the default parameters without a scenario."""
+    from control.cmd_controller import DEFAULT_PARAMS
+    from experiments.run import controller_params
+    from twin.scenario import Scenario
+
+    if not args.scenario:
+        return DEFAULT_PARAMS
+    scenario = Scenario.load(args.scenario)
+    return controller_params(scenario.controller, Path(args.scenario).parent)
 
 
 __all__ = ["Controllers", "configure", "run", "stats_paths"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -537,3 +538,26 @@ def test_a_descent_near_the_base_keeps_to_what_the_joints_can_follow() -> None:
     descent is planned within what the joints can follow, and the commands stay on it."""
     assert _below_grasp_point_m(0.0) > 0.01
     assert _below_grasp_point_m(0.8) < 0.002
+
+
+def test_an_idle_station_that_found_nothing_looks_again_after_its_replan_period(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``scheduler.replan_period_s``: no target in sight, the scheduler runs once per period,
+    not at every control update; 0 (the default) keeps every update."""
+    import control.pick as pick_module
+
+    calls: list[float] = []
+    original = pick_module.schedule
+
+    def counting(*args: Any, **kwargs: Any) -> Any:
+        calls.append(float(kwargs["now_s"]))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(pick_module, "schedule", counting)
+    base = _station_config("panda", "suction_cup")
+    for period_s, expected in ((0.0, 120), (0.05, 20)):
+        config = replace(base, scheduler=replace(base.scheduler, replan_period_s=period_s))
+        calls.clear()
+        _drive_cup(PickController(config), lambda t: (), 120, lambda t, c: 0.0)
+        assert len(calls) == pytest.approx(expected, abs=1)

@@ -134,3 +134,17 @@ def test_a_sweep_refuses_inproc_for_a_cell_that_restarts_controllers(tmp_path: P
     out = tmp_path / "sweep"
     assert main(["sweep", str(grid), "--transport", "inproc", "--out", str(out)]) == 2
     assert not out.exists()
+
+
+def test_the_episode_takes_the_controller_parameters_its_scenario_names() -> None:
+    """Without ``--params-file``, ``cdw-twin episode`` tunes its controllers as ``cdw-twin run``
+    does: with the file the scenario's ``controller`` names; without a scenario, the default."""
+    import argparse
+
+    from control.cmd_controller import DEFAULT_PARAMS
+    from experiments.inproc import scenario_params
+
+    root = Path(__file__).resolve().parents[2]
+    line = argparse.Namespace(scenario=root / "experiments" / "scenarios" / "line.yaml")
+    assert scenario_params(line) == (root / "control" / "config" / "line.yaml").resolve()
+    assert scenario_params(argparse.Namespace(scenario=None)) == DEFAULT_PARAMS
