@@ -238,7 +238,7 @@ def test_interrupt_keeps_the_finished_episodes_and_says_incomplete(
 
 RESTART_SCENARIO = """\
 name: restarts
-duration_s: 20.0
+duration_s: 30.0
 objects: {max_width_m: 0.065, min_height_m: 0.02}
 system: {belt_speed_mps: 0.3, object_order: shuffled, image_gap_m: 0.0, prefill_m: 0.5}
 faults: {controller_restart_at_s: [4.0, 8.0]}
@@ -267,7 +267,7 @@ def test_a_controller_restarted_twice_mid_episode_recovers(
     assert row["controller_restarts"] == 2
     episode = out / "ep000"
     summary = _json(episode / "twin" / "summary.json")
-    assert summary["sim_seconds"] == pytest.approx(20.0)
+    assert summary["sim_seconds"] == pytest.approx(30.0)
     assert summary["lockstep_timeouts"] == 2
     events = [
         json.loads(line)
@@ -283,7 +283,7 @@ def test_a_controller_restarted_twice_mid_episode_recovers(
     assert 4.0 <= lost[0]["time_s"] < lost[1]["time_s"]
     # the last controller acknowledged every tick from its resumption to the end
     last = _json(episode / "controller_2.json")
-    end_step = round(20.0 * 240)
+    end_step = round(30.0 * 240)
     assert last["ticks_acked"] >= end_step - back[1]["step"]
     picks_after = [
         e for e in events if e["type"] == "pick_success" and e["time_s"] > back[1]["time_s"]
