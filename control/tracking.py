@@ -135,6 +135,12 @@ class Track:
         )
 
 
+def _fold(smoothed: float, value: float, a: float) -> float:
+    """``value`` smoothed into ``smoothed`` with weight ``a``; ``value`` itself while nothing is
+    known yet (``smoothed`` NaN)."""
+    return (1 - a) * smoothed + a * value if math.isfinite(smoothed) else value
+
+
 class _TrackState:
     """Mutable per-object state: the filter, the smoothed attributes and the class vote.
 
@@ -246,24 +252,12 @@ class _TrackState:
         self.width_m = (1 - a) * self.width_m + a * detection.width_m
         self.height_m = (1 - a) * self.height_m + a * detection.height_m
         if math.isfinite(detection.base_z_m):
-            known = math.isfinite(self.base_z_m)
-            base = detection.base_z_m
-            self.base_z_m = (1 - a) * self.base_z_m + a * base if known else base
+            self.base_z_m = _fold(self.base_z_m, detection.base_z_m, a)
         if math.isfinite(detection.suction_radius_m):
-            self._fold_suction(detection, a)
+            self.suction_dx_m = _fold(self.suction_dx_m, detection.suction_x_m - detection.x_m, a)
+            self.suction_dy_m = _fold(self.suction_dy_m, detection.suction_y_m - detection.y_m, a)
+            self.suction_radius_m = _fold(self.suction_radius_m, detection.suction_radius_m, a)
         self._refresh()
-
-    def _fold_suction(self, detection: Detection, a: float) -> None:
-        """Smooth the suction point's offset from the position, and its radius, in."""
-        dx_m = detection.suction_x_m - detection.x_m
-        dy_m = detection.suction_y_m - detection.y_m
-        if math.isfinite(self.suction_radius_m):
-            self.suction_dx_m = (1 - a) * self.suction_dx_m + a * dx_m
-            self.suction_dy_m = (1 - a) * self.suction_dy_m + a * dy_m
-            self.suction_radius_m = (1 - a) * self.suction_radius_m + a * detection.suction_radius_m
-        else:
-            self.suction_dx_m, self.suction_dy_m = dx_m, dy_m
-            self.suction_radius_m = detection.suction_radius_m
 
     def snapshot(
         self, stamp_s: float, position_m: tuple[float, float], position_var_m2: float
