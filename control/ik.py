@@ -34,6 +34,26 @@ def _frozen(values: FloatArray) -> FloatArray:
     return out
 
 
+def _reach(model: pin.Model, tcp_frame_id: int) -> tuple[FloatArray, float]:
+    """The first joint's origin in the base frame ``(3,)`` and an upper bound (m) of the TCP's
+    distance from it in any configuration: the sum of the lengths of the fixed offsets between
+    the following joints' origins and on to the TCP (the triangle inequality; every arm joint
+    is revolute, so the first joint's turn does not move its origin). Loose where the links
+    are offset sideways (a UR10's 1.75 m against its 1.3 m reach), but what lies beyond it can
+    never be reached."""
+    for joint_id in range(1, model.njoints):
+        if not model.joints[joint_id].shortname().startswith(("JointModelR", "JointModelRevolute")):
+            msg = f"joint {model.names[joint_id]!r} is not revolute: the reach bound needs it"
+            raise RobotModelError(msg)
+    origin = np.array(model.jointPlacements[1].translation, dtype=np.float64)
+    length_m = sum(
+        float(np.linalg.norm(model.jointPlacements[j].translation)) for j in range(2, model.njoints)
+    )
+    frame = model.frames[tcp_frame_id]
+    length_m += float(np.linalg.norm(frame.placement.translation))
+    return _frozen(origin), length_m + 1e-6
+
+
 def down_rotation(yaw_rad: float) -> FloatArray:
     """Rotation ``(3, 3) float`` of a tool pointing down (tool z = -world z), turned by yaw.
 
@@ -141,6 +161,9 @@ class Kinematics:
         self.oMbase = pin.SE3(base_rotation, np.asarray(base_position_m, dtype=np.float64))
         """World pose of the robot base."""
         self._baseMo = self.oMbase.inverse()
+        self.reach_origin_m, self.reach_m = _reach(model, self._tcp_id)
+        """The first joint's origin in the base frame ``(3,)`` and the farthest the TCP can be from
+        it (m, an upper bound): a pose beyond is refused by :meth:`solve` without iterating."""
 
     @classmethod
     def of_station(cls, station: StationSpec, ik: IkConfig | None = None) -> Kinematics:
@@ -209,6 +232,9 @@ class Kinematics:
         joint at a limit that the step would push beyond it is left out of that step's solve;
         iterations stop at ``tolerance``; the result is the last iterate, a ``success`` when its
         error is below ``accept_tolerance`` (near joint limits the last digits converge slowly).
+        A pose farther from the first joint than :attr:`reach_m` fails at once (no iterations):
+        a station's scheduler asks about every object the camera sees, most of them metres
+        away along the line.
         """
         cfg = self._ik
         model, data = self._model, self._data
@@ -221,13 +247,16 @@ class Kinematics:
                 iterations=0,
                 error_norm=math.inf,
             )
+        reach = baseMdes.translation - self.reach_origin_m
+        if float(reach @ reach) > self.reach_m * self.reach_m:
+            return IkResult(q=_frozen(q), success=False, iterations=0, error_norm=math.inf)
         damping = cfg.damping * np.eye(6)
         error_norm = math.inf
         for iteration in range(cfg.max_iterations + 1):
             pin.framesForwardKinematics(model, data, q)
             tcpMdes = data.oMf[self._tcp_id].actInv(baseMdes)  # noqa: N806
             err = pin.log6(tcpMdes).vector
-            error_norm = float(np.linalg.norm(err))
+            error_norm = math.sqrt(float(err @ err))
             if error_norm < cfg.tolerance:
                 return IkResult(
                     q=_frozen(q), success=True, iterations=iteration, error_norm=error_norm
@@ -237,10 +266,10 @@ class Kinematics:
             jac = pin.computeFrameJacobian(model, data, q, self._tcp_id, pin.LOCAL)
             jac = -pin.Jlog6(tcpMdes.inverse()) @ jac
             dq = cfg.step * self._step_within_limits(jac, err, damping, q)
-            largest = float(np.max(np.abs(dq)))
+            largest = float(np.abs(dq).max())
             if largest > cfg.max_joint_step_rad:
                 dq *= cfg.max_joint_step_rad / largest
-            q = np.clip(pin.integrate(model, q, dq), self.lower_rad, self.upper_rad)
+            q = np.minimum(np.maximum(pin.integrate(model, q, dq), self.lower_rad), self.upper_rad)
         return IkResult(
             q=_frozen(q),
             success=error_norm < cfg.accept_tolerance,
@@ -255,16 +284,18 @@ class Kinematics:
         again without the joints it would push beyond a limit they are at (an active set):
         a clipped step of such a joint is lost, and the others, solved as if it moved, leave
         the error to shrink only slowly."""
+        dq = np.asarray(-jac.T @ np.linalg.solve(jac @ jac.T + damping, err))
+        at_lower, at_upper = q <= self.lower_rad, q >= self.upper_rad
+        if not (at_lower.any() or at_upper.any()):
+            return dq  # no joint at a limit (the common case): nothing to leave out
         free = np.ones(q.shape, dtype=bool)
-        for _ in range(q.size):
-            masked = jac * free
-            dq = np.asarray(-masked.T @ np.linalg.solve(masked @ masked.T + damping, err))
-            blocked = free & (
-                ((q <= self.lower_rad) & (dq < 0.0)) | ((q >= self.upper_rad) & (dq > 0.0))
-            )
+        for _ in range(q.size - 1):
+            blocked = free & ((at_lower & (dq < 0.0)) | (at_upper & (dq > 0.0)))
             if not blocked.any():
                 break
             free &= ~blocked
+            masked = jac * free
+            dq = np.asarray(-masked.T @ np.linalg.solve(masked @ masked.T + damping, err))
         return dq
 
     def _jacobian_xyz_yaw(self, q: FloatArray) -> FloatArray:

@@ -111,14 +111,38 @@ def test_fk_and_ik_match_pybullet(client: int, arm: Arm) -> None:
 def test_ik_failure_is_flagged_and_stays_in_limits() -> None:
     kin = PANDA.kinematics(IkConfig(max_iterations=50))
     q0 = np.asarray(PANDA_SPEC.ready_joint_positions_rad)
-    result = kin.solve(tool_pose((2.0, 0.0, 0.3), 0.0), q0)
+    result = kin.solve(tool_pose((1.0, 0.0, 0.333), 0.0), q0)  # within the bound, too far
     assert not result.success
     assert result.iterations == 50
     assert result.error_norm > 0.1
     assert kin.within_limits(result.q)
+    far = kin.solve(tool_pose((2.0, 0.0, 0.3), 0.0), q0)  # beyond the reach bound
+    assert not far.success
+    assert far.iterations == 0
+    assert kin.within_limits(far.q)
     nan_result = kin.solve(tool_pose((np.nan, 0.0, 0.3), 0.0), q0)
     assert not nan_result.success
     assert kin.within_limits(nan_result.q)
+
+
+@pytest.mark.parametrize("name", ["panda", "iiwa", "line_ur10_cup", "line_ur10_gripper"])
+def test_reach_bound_holds_in_every_configuration(name: str) -> None:
+    """No configuration puts the TCP beyond ``reach_m`` from the first joint, and the bound is
+    not far above the farthest sampled TCP: a pose beyond it is rightly refused unsolved."""
+    if name.startswith("line"):
+        stations = load_cell("line").stations
+        station = stations[0] if name.endswith("cup") else stations[-1]
+        kin = Kinematics.of_station(station)
+    else:
+        kin = {"panda": PANDA, "iiwa": IIWA}[name].kinematics()
+    rng = np.random.default_rng(7)
+    base = kin.oMbase.translation + kin.oMbase.rotation @ np.asarray(kin.reach_origin_m)
+    farthest = 0.0
+    for _ in range(2000):
+        q = rng.uniform(kin.lower_rad, kin.upper_rad)
+        farthest = max(farthest, float(np.linalg.norm(kin.fk(q).translation - base)))
+    assert farthest <= kin.reach_m
+    assert kin.reach_m < 1.6 * farthest
 
 
 def test_warm_start_converges_in_few_iterations() -> None:

@@ -511,10 +511,11 @@ def _fast_cup_config(margin: float) -> ControllerConfig:
     return replace(config, motion=motion)
 
 
-def _below_grasp_point_m(margin: float) -> float:
-    """How far below the grasp point the joint commands go, in the descent and the seal, for
-    an object near the base (0.35 m out, where a vertical tool's height takes the shoulder's
-    and elbow's largest accelerations)."""
+def _below_grasp_point_m(margin: float) -> tuple[float, int]:
+    """How far below the grasp point the joint commands go, in the descent and the seal (NaN:
+    the cup never got to descend), for an object near the base (0.35 m out, where a vertical
+    tool's height takes the shoulder's and elbow's largest accelerations), and how many joint
+    commands were slowed to the velocity limits."""
     controller = PickController(_fast_cup_config(margin))
 
     def near_base(t_s: float) -> tuple[Track, ...]:
@@ -527,17 +528,23 @@ def _below_grasp_point_m(margin: float) -> float:
         for c in commands
         if c.phase in (Phase.DESCEND, Phase.CLOSE) and c.grasp_point_m is not None
     ]
-    assert below, "the cup never descended"
-    return max(below)
+    return (max(below) if below else math.nan), controller.stats().rate_limited
 
 
 def test_a_descent_near_the_base_keeps_to_what_the_joints_can_follow() -> None:
-    """Near the base a 5 m/s^2 descent asks the shoulder and elbow for more than their datasheet
-    accelerations: the joint commands lag, then overshoot the grasp point by centimetres
-    catching up (the lip presses the object into the belt). With the posture margin the
-    descent is planned within what the joints can follow, and the commands stay on it."""
-    assert _below_grasp_point_m(0.0) > 0.01
-    assert _below_grasp_point_m(0.8) < 0.002
+    """Near the base a 5 m/s^2 approach and descent ask the shoulder and elbow for more than
+    their datasheet accelerations: the joint commands are slowed to the limits and lag, and
+    then either overshoot the grasp point by centimetres catching up (the lip presses the
+    object into the belt) or never catch up with the object before it leaves the window (which
+    of the two depends on the last digits of the arithmetic). With the posture margin the
+    motion is planned within what the joints can follow: no command is slowed, and the
+    commands stay on the grasp point."""
+    below_m, slowed = _below_grasp_point_m(0.0)
+    assert slowed > 0
+    assert math.isnan(below_m) or below_m > 0.01
+    below_m, slowed = _below_grasp_point_m(0.8)
+    assert slowed == 0
+    assert below_m < 0.002
 
 
 def test_an_idle_station_that_found_nothing_looks_again_after_its_replan_period(
