@@ -124,14 +124,14 @@ def joint_sample(
     )
 
 
-def _suction_point(d: Any) -> tuple[float, float, float]:
-    """A detection's suction point ``(x, y)`` and radius; NaN when its radius is not above 0
+def _suction_point(d: Any) -> tuple[float, float, float, float]:
+    """A detection's suction point ``(x, y, z)`` and radius; NaN when its radius is not above 0
     (a camera that reports none leaves the message's default 0)."""
     radius_m = float(d.suction_radius_m)
     if not radius_m > 0.0:
-        return math.nan, math.nan, math.nan
+        return math.nan, math.nan, math.nan, math.nan
     point = d.suction_point
-    return float(point.x), float(point.y), radius_m
+    return float(point.x), float(point.y), float(point.z), radius_m
 
 
 def detections_of(msg: Any) -> tuple[float, list[Detection]]:
@@ -141,7 +141,9 @@ def detections_of(msg: Any) -> tuple[float, list[Detection]]:
     return stamp_s, detections
 
 
-def _detection(stamp_s: float, d: Any, sx_m: float, sy_m: float, radius_m: float) -> Detection:
+def _detection(
+    stamp_s: float, d: Any, sx_m: float, sy_m: float, sz_m: float, radius_m: float
+) -> Detection:
     """One camera detection as the tracker takes it, with its suction point (NaN: none)."""
     return Detection(
         stamp_s=stamp_s,
@@ -156,6 +158,7 @@ def _detection(stamp_s: float, d: Any, sx_m: float, sy_m: float, radius_m: float
         base_z_m=float(d.position.z),
         suction_x_m=sx_m,
         suction_y_m=sy_m,
+        suction_z_m=sz_m,
         suction_radius_m=radius_m,
     )
 

@@ -111,8 +111,11 @@ def base_lift_m(track: Track, config: ControllerConfig) -> float:
 
 
 def grasp_height_m(track: Track, config: ControllerConfig) -> float:
-    """World z of the grasp point of ``track``: :func:`grasp_z_m`, raised by what it lies on."""
-    return grasp_z_m(track.height_m, config) + base_lift_m(track, config)
+    """World z of the grasp point of ``track``: :func:`grasp_z_m`, raised by what it lies on and
+    lowered by where on its top the tool grasps (:meth:`~control.tools.ControllerTool.grasp_drop_m`:
+    a tipped piece's suction point lies below its top)."""
+    drop_m = config.tool.grasp_drop_m(track)
+    return grasp_z_m(track.height_m, config) + base_lift_m(track, config) - drop_m
 
 
 INTERCEPT_HORIZON_S = 5.0

@@ -61,8 +61,9 @@ class Detection:
     required; the tracker normalises the footprint so that ``yaw_rad`` is along the long side.
     ``base_z_m`` is the world z of the object's underside (the belt surface, or the top of the
     object it lies on); NaN when the camera does not say. ``suction_x_m``, ``suction_y_m``: the
-    suction point the camera reports (where a round cup fits best on the top face), and
-    ``suction_radius_m`` the largest lip radius that fits there; NaN when it reports none.
+    suction point the camera reports (where a round cup fits best on the top face), ``suction_z_m``
+    its height (on a tipped piece lower than the top) and ``suction_radius_m`` the largest lip
+    radius that fits there; NaN when it reports none.
     """
 
     stamp_s: float
@@ -77,6 +78,7 @@ class Detection:
     base_z_m: float = math.nan
     suction_x_m: float = math.nan
     suction_y_m: float = math.nan
+    suction_z_m: float = math.nan
     suction_radius_m: float = math.nan
 
     def is_finite(self) -> bool:
@@ -104,8 +106,11 @@ class Track:
     the direction of the long side in ``[-pi/2, pi/2)``. ``base_z_m`` is the smoothed world z of
     the object's underside, NaN when no detection gave one (then it lies on the belt).
     ``suction_offset_m`` is the smoothed ``(x, y)`` of the reported suction point less the
-    detected position (world frame: the suction point is ``position_m`` plus it), and
-    ``suction_radius_m`` its smoothed radius; NaN when no detection reported one.
+    detected position (world frame: the suction point is ``position_m`` plus it),
+    ``suction_below_top_m`` the smoothed depth of the suction point below the object's top (the
+    underside plus the height; a tipped piece's upturned face slopes down from its top) and
+    ``suction_radius_m`` its smoothed radius; NaN when no detection reported one (the depth also
+    when none said where the underside is).
     """
 
     track_id: int
@@ -124,6 +129,7 @@ class Track:
     last_update_s: float
     base_z_m: float = math.nan
     suction_offset_m: tuple[float, float] = (math.nan, math.nan)
+    suction_below_top_m: float = math.nan
     suction_radius_m: float = math.nan
 
     def position_at(self, t_s: float) -> tuple[float, float]:
@@ -162,6 +168,7 @@ class _TrackState:
         "p_pp",
         "p_pv",
         "p_vv",
+        "suction_below_top_m",
         "suction_dx_m",
         "suction_dy_m",
         "suction_radius_m",
@@ -202,6 +209,7 @@ class _TrackState:
         self.base_z_m = detection.base_z_m
         self.suction_dx_m = detection.suction_x_m - detection.x_m
         self.suction_dy_m = detection.suction_y_m - detection.y_m
+        self.suction_below_top_m = _below_top(detection)
         self.suction_radius_m = detection.suction_radius_m
         self._refresh()
 
@@ -256,6 +264,9 @@ class _TrackState:
         if math.isfinite(detection.suction_radius_m):
             self.suction_dx_m = _fold(self.suction_dx_m, detection.suction_x_m - detection.x_m, a)
             self.suction_dy_m = _fold(self.suction_dy_m, detection.suction_y_m - detection.y_m, a)
+            below_m = _below_top(detection)
+            if math.isfinite(below_m):
+                self.suction_below_top_m = _fold(self.suction_below_top_m, below_m, a)
             self.suction_radius_m = _fold(self.suction_radius_m, detection.suction_radius_m, a)
         self._refresh()
 
@@ -287,6 +298,7 @@ class _TrackState:
             last_update_s=self.last_update_s,
             base_z_m=self.base_z_m,
             suction_offset_m=(self.suction_dx_m, self.suction_dy_m),
+            suction_below_top_m=self.suction_below_top_m,
             suction_radius_m=self.suction_radius_m,
         )
         return track
@@ -313,8 +325,15 @@ def _normalised(detection: Detection) -> Detection:
         base_z_m=detection.base_z_m,
         suction_x_m=detection.suction_x_m,
         suction_y_m=detection.suction_y_m,
+        suction_z_m=detection.suction_z_m,
         suction_radius_m=detection.suction_radius_m,
     )
+
+
+def _below_top(detection: Detection) -> float:
+    """How far the detection's suction point lies below its top (underside plus height); NaN
+    when it reports no suction point or no underside."""
+    return detection.base_z_m + detection.height_m - detection.suction_z_m
 
 
 def min_cost_assignment(cost: list[list[float]]) -> list[tuple[int, int]]:

@@ -94,6 +94,12 @@ class ControllerTool(Protocol):
         frame (a gripper: its centre; a suction cup: the suction point the camera reports)."""
         ...
 
+    def grasp_drop_m(self, track: Track) -> float:
+        """How far below the object's top the tool grasps at its grasp point, before
+        :meth:`grasp_height_m` (a suction cup: the reported suction point's depth below the top,
+        where a tipped piece's upturned face slopes down; a gripper: 0)."""
+        ...
+
     @property
     def urdf_joint_names(self) -> tuple[str, ...]:
         """Those of :attr:`joint_names` that are joints of the station's URDF (a gripper's

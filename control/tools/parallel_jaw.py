@@ -106,6 +106,11 @@ class ParallelJaw:
         del track
         return (0.0, 0.0)
 
+    def grasp_drop_m(self, track: Track) -> float:
+        """The grasp height is measured from the top: no drop."""
+        del track
+        return 0.0
+
     def fit_margin_m(
         self,
         *,

@@ -129,6 +129,11 @@ class SuctionCup:
             return (0.0, 0.0)
         return (dx_m, dy_m)
 
+    def grasp_drop_m(self, track: Track) -> float:
+        """The reported suction point's depth below the top (not below 0); none reported: 0."""
+        below_m = track.suction_below_top_m
+        return max(below_m, 0.0) if math.isfinite(below_m) else 0.0
+
     def fit_margin_m(
         self,
         *,

@@ -9,7 +9,7 @@ import pytest
 
 from control.config import ControllerConfig
 from control.errors import ControlConfigError
-from control.scheduler import blocked_by, schedule
+from control.scheduler import blocked_by, grasp_height_m, schedule
 from control.tools import Footprint, make_tool
 from control.tracking import Track
 from interfaces.cell import default_cell
@@ -141,3 +141,17 @@ def test_a_cup_fits_by_the_disc_the_camera_reports_on_the_top_and_grasps_at_its_
     jaws = make_tool(XARM)
     assert jaws.grasp_offset_m(track) == (0.0, 0.0)
     assert jaws.misfit(**size, face_radius_m=0.001) == jaws.misfit(**size)
+
+
+def test_a_cup_goes_down_to_the_suction_point_on_a_tipped_piece_and_jaws_keep_the_top() -> None:
+    """On a tipped piece the suction point lies below the top (the upturned face slopes down
+    from it): the cup's grasp point is that much lower, never higher; a gripper's is the
+    same with or without it."""
+    cup = _config_with_tool(tool_from_data("suction_cup", "tool"))
+    jaws = _config_with_tool(XARM)
+    level = _track(1, 0.5)
+    tipped = replace(level, suction_radius_m=0.03, suction_below_top_m=0.012)
+    proud = replace(level, suction_radius_m=0.03, suction_below_top_m=-0.005)
+    assert grasp_height_m(tipped, cup) == pytest.approx(grasp_height_m(level, cup) - 0.012)
+    assert grasp_height_m(proud, cup) == grasp_height_m(level, cup)
+    assert grasp_height_m(tipped, jaws) == grasp_height_m(level, jaws)

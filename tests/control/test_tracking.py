@@ -103,6 +103,30 @@ def test_the_suction_point_reaches_the_track_as_an_offset_from_its_position(swap
     assert other.position_m == track.position_m  # the point changes nothing else
 
 
+def test_the_suction_points_depth_below_the_top_reaches_the_track() -> None:
+    """A tipped piece on a 4 cm high neighbour, 3 cm tall: its top is at 7 cm, and the camera
+    reports the suction point 12 mm lower, on the sloping upturned face. The track keeps that
+    depth (smoothed); without an underside height it has none."""
+    rng = np.random.default_rng(9)
+    tracker = Tracker(TrackingConfig(), classes=CLASSES)
+    blind = Tracker(TrackingConfig(), classes=CLASSES)
+    for k in range(20):
+        t_s = k / RATE_HZ
+        detection = _detection(t_s, -0.5 + 0.4 * t_s, 0.45, rng)
+        point = {
+            "suction_x_m": detection.x_m,
+            "suction_y_m": detection.y_m,
+            "suction_z_m": 0.07 - 0.012 + rng.normal(0.0, 0.001),
+            "suction_radius_m": 0.024,
+        }
+        tracker.update(t_s, [dataclasses.replace(detection, base_z_m=0.04, **point)], (0.4, 0.0))
+        blind.update(t_s, [dataclasses.replace(detection, **point)], (0.4, 0.0))
+    (track,) = tracker.predict_to(1.0)
+    assert track.suction_below_top_m == pytest.approx(0.012, abs=0.001)
+    (other,) = blind.predict_to(1.0)
+    assert math.isnan(other.suction_below_top_m)
+
+
 def test_identities_kept_through_crossing() -> None:
     rng = np.random.default_rng(3)
     tracker = Tracker(TrackingConfig(), classes=CLASSES)
