@@ -39,10 +39,10 @@ def _reach(model: pin.Model, tcp_frame_id: int) -> tuple[FloatArray, float]:
     distance from it in any configuration: the sum of the lengths of the fixed offsets between
     the following joints' origins and on to the TCP (the triangle inequality; every arm joint
     is revolute, so the first joint's turn does not move its origin). Loose where the links
-    are offset sideways (a UR10's 1.75 m against its 1.3 m reach), but what lies beyond it can
-    never be reached."""
+    are offset sideways (a UR10 with a cup: 1.9 m against its 1.3 m reach), but what lies
+    beyond it can never be reached."""
     for joint_id in range(1, model.njoints):
-        if not model.joints[joint_id].shortname().startswith(("JointModelR", "JointModelRevolute")):
+        if not model.joints[joint_id].shortname().startswith("JointModelR"):
             msg = f"joint {model.names[joint_id]!r} is not revolute: the reach bound needs it"
             raise RobotModelError(msg)
     origin = np.array(model.jointPlacements[1].translation, dtype=np.float64)
@@ -284,18 +284,19 @@ class Kinematics:
         again without the joints it would push beyond a limit they are at (an active set):
         a clipped step of such a joint is lost, and the others, solved as if it moved, leave
         the error to shrink only slowly."""
-        dq = np.asarray(-jac.T @ np.linalg.solve(jac @ jac.T + damping, err))
         at_lower, at_upper = q <= self.lower_rad, q >= self.upper_rad
-        if not (at_lower.any() or at_upper.any()):
-            return dq  # no joint at a limit (the common case): nothing to leave out
+        at_limit = bool(at_lower.any() or at_upper.any())  # else (the common case) one solve
         free = np.ones(q.shape, dtype=bool)
-        for _ in range(q.size - 1):
+        masked = jac
+        for _ in range(q.size):
+            dq = np.asarray(-masked.T @ np.linalg.solve(masked @ masked.T + damping, err))
+            if not at_limit:
+                break
             blocked = free & ((at_lower & (dq < 0.0)) | (at_upper & (dq > 0.0)))
             if not blocked.any():
                 break
             free &= ~blocked
             masked = jac * free
-            dq = np.asarray(-masked.T @ np.linalg.solve(masked @ masked.T + damping, err))
         return dq
 
     def _jacobian_xyz_yaw(self, q: FloatArray) -> FloatArray:
