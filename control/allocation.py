@@ -120,6 +120,7 @@ class StationView:
             height_m=track.height_m,
             width_margin_m=width_margin_m,
             face_radius_m=track.suction_radius_m,
+            face_tilt_rad=track.suction_tilt_rad,
         )
         return track.class_name in self.classes and misfit is None
 

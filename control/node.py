@@ -124,14 +124,14 @@ def joint_sample(
     )
 
 
-def _suction_point(d: Any) -> tuple[float, float, float, float]:
-    """A detection's suction point ``(x, y, z)`` and radius; NaN when its radius is not above 0
-    (a camera that reports none leaves the message's default 0)."""
+def _suction_point(d: Any) -> tuple[float, float, float, float, float]:
+    """A detection's suction point ``(x, y, z)``, radius and face tilt; NaN when its radius is
+    not above 0 (a camera that reports none leaves the message's default 0)."""
     radius_m = float(d.suction_radius_m)
     if not radius_m > 0.0:
-        return math.nan, math.nan, math.nan, math.nan
+        return math.nan, math.nan, math.nan, math.nan, math.nan
     point = d.suction_point
-    return float(point.x), float(point.y), float(point.z), radius_m
+    return float(point.x), float(point.y), float(point.z), radius_m, float(d.suction_tilt_rad)
 
 
 def detections_of(msg: Any) -> tuple[float, list[Detection]]:
@@ -142,7 +142,13 @@ def detections_of(msg: Any) -> tuple[float, list[Detection]]:
 
 
 def _detection(
-    stamp_s: float, d: Any, sx_m: float, sy_m: float, sz_m: float, radius_m: float
+    stamp_s: float,
+    d: Any,
+    sx_m: float,
+    sy_m: float,
+    sz_m: float,
+    radius_m: float,
+    tilt_rad: float,
 ) -> Detection:
     """One camera detection as the tracker takes it, with its suction point (NaN: none)."""
     return Detection(
@@ -160,6 +166,7 @@ def _detection(
         suction_y_m=sy_m,
         suction_z_m=sz_m,
         suction_radius_m=radius_m,
+        suction_tilt_rad=tilt_rad,
     )
 
 

@@ -58,7 +58,13 @@ from control.poses import (
     drop_pose,
     solve_meeting,
 )
-from control.scheduler import Schedule, grasp_height_m, nearest_grasp_yaw, schedule
+from control.scheduler import (
+    Schedule,
+    approach_rise_m,
+    grasp_height_m,
+    nearest_grasp_yaw,
+    schedule,
+)
 from control.tracking import Track
 
 FloatArray = NDArray[np.float64]
@@ -501,7 +507,9 @@ class PickController:
                 self._planner.state.position[3],
                 self._cfg.tool.grasp_yaw_period_rad,
             )
-        target, aim = self._following_target(now.t_s, now.belt_velocity_mps, pick.approach_height_m)
+        assert pursuit.target is not None
+        rise_m = approach_rise_m(pursuit.target, self._cfg)
+        target, aim = self._following_target(now.t_s, now.belt_velocity_mps, rise_m)
         yaw_error = abs(self._planner.state.position[3] - target.position[3])
         yaw_ready = (
             yaw_error < pick.yaw_tolerance_rad or motion.yaw_remaining_s <= pick.descend_yaw_lead_s
@@ -830,7 +838,8 @@ class PickController:
         if obj is None or remaining_s <= JOINT_REPLAN_UNTIL_S or goal.dq is None:
             return
         (x, y, z), (vx, vy, _) = obj
-        z += cfg.pick.approach_height_m
+        assert self._pursuit.target is not None
+        z += approach_rise_m(self._pursuit.target, cfg)
         planned = self._kin.fk(goal.q).translation
         if math.dist((x, y, z), planned) <= 0.5 * cfg.pick.arrive_tolerance_m:
             return

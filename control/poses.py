@@ -14,7 +14,7 @@ from control.config import ControllerConfig
 from control.errors import PlanningError
 from control.ik import Kinematics, tool_pose, yaw_of
 from control.planner import JointPlanner
-from control.scheduler import grasp_height_m, grasp_xy_at, nearest_grasp_yaw
+from control.scheduler import approach_z_m, grasp_xy_at, nearest_grasp_yaw
 from control.tracking import Track
 
 FloatArray = NDArray[np.float64]
@@ -107,7 +107,7 @@ def solve_meeting(
     """
     period_rad = config.tool.grasp_yaw_period_rad
     vx, vy = track.velocity_mps
-    z = grasp_height_m(track, config) + config.pick.approach_height_m
+    z = approach_z_m(track, config)
     dt_s = JOINT_APPROACH_GUESS_S
     near = nearest_grasp_yaw(track.yaw_rad, tcp_yaw_rad, period_rad)
     yaws: tuple[float, ...] = (near, near + period_rad)
@@ -166,7 +166,7 @@ def best_grasp_yaw(
     dt_s = intercept_s if math.isfinite(intercept_s) else 0.0
     x = track.position_m[0] + track.velocity_mps[0] * dt_s
     y = track.position_m[1] + track.velocity_mps[1] * dt_s
-    z = grasp_height_m(track, config) + config.pick.approach_height_m
+    z = approach_z_m(track, config)
     other = near - period_rad if near > tcp_yaw_rad else near + period_rad
     best, best_room = near, -math.inf
     lower, upper = kinematics.lower_rad[-1], kinematics.upper_rad[-1]

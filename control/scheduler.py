@@ -30,6 +30,7 @@ UNTARGETED_REASONS: tuple[str, ...] = (
     "too_wide",
     "too_flat",
     "too_small",
+    "too_tilted",
     "too_heavy",
     "excluded",
     "claimed_by_other",
@@ -118,6 +119,18 @@ def grasp_height_m(track: Track, config: ControllerConfig) -> float:
     return grasp_z_m(track.height_m, config) + base_lift_m(track, config) - drop_m
 
 
+def approach_rise_m(track: Track, config: ControllerConfig) -> float:
+    """How far above the grasp point the approach ends: ``pick.approach_height_m`` above the
+    object's top, not above a suction point lower than the top (a tipped piece's), which would
+    bring the tool in sideways into the piece's raised part."""
+    return config.pick.approach_height_m + config.tool.grasp_drop_m(track)
+
+
+def approach_z_m(track: Track, config: ControllerConfig) -> float:
+    """World z of the TCP where the approach to ``track`` ends (:func:`approach_rise_m`)."""
+    return grasp_height_m(track, config) + approach_rise_m(track, config)
+
+
 INTERCEPT_HORIZON_S = 5.0
 """Latest intercept searched for (s); an object the arm cannot meet sooner is not targeted."""
 
@@ -170,7 +183,7 @@ def approach_time_s(
     """
     motion = config.motion
     v, a, j = motion.max_velocity[0], motion.max_acceleration[0], motion.max_jerk[0]
-    z = grasp_height_m(track, config) + config.pick.approach_height_m
+    z = approach_z_m(track, config)
     turn_s = 0.0 if tcp_yaw_rad is None else yaw_turn_s(track, tcp_yaw_rad, config)
 
     vx = track.velocity_mps[0]
@@ -356,6 +369,7 @@ def _static_reason(
         height_m=track.height_m,
         width_margin_m=sched.grasp_width_margin_m,
         face_radius_m=track.suction_radius_m,
+        face_tilt_rad=track.suction_tilt_rad,
     )
     if misfit is not None:
         return misfit

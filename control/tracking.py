@@ -62,8 +62,9 @@ class Detection:
     ``base_z_m`` is the world z of the object's underside (the belt surface, or the top of the
     object it lies on); NaN when the camera does not say. ``suction_x_m``, ``suction_y_m``: the
     suction point the camera reports (where a round cup fits best on the top face), ``suction_z_m``
-    its height (on a tipped piece lower than the top) and ``suction_radius_m`` the largest lip
-    radius that fits there; NaN when it reports none.
+    its height (on a tipped piece lower than the top), ``suction_radius_m`` the largest lip
+    radius that fits there and ``suction_tilt_rad`` the tilt of the face there from level; NaN
+    when it reports none.
     """
 
     stamp_s: float
@@ -80,6 +81,7 @@ class Detection:
     suction_y_m: float = math.nan
     suction_z_m: float = math.nan
     suction_radius_m: float = math.nan
+    suction_tilt_rad: float = math.nan
 
     def is_finite(self) -> bool:
         """True when every numeric field is a finite number (``base_z_m`` and the suction
@@ -110,7 +112,8 @@ class Track:
     ``suction_below_top_m`` the smoothed depth of the suction point below the object's top (the
     underside plus the height; a tipped piece's upturned face slopes down from its top) and
     ``suction_radius_m`` its smoothed radius; NaN when no detection reported one (the depth also
-    when none said where the underside is).
+    when none said where the underside is); ``suction_tilt_rad`` the smoothed tilt of the face
+    there from level (NaN: none reported).
     """
 
     track_id: int
@@ -131,6 +134,7 @@ class Track:
     suction_offset_m: tuple[float, float] = (math.nan, math.nan)
     suction_below_top_m: float = math.nan
     suction_radius_m: float = math.nan
+    suction_tilt_rad: float = math.nan
 
     def position_at(self, t_s: float) -> tuple[float, float]:
         """The constant-velocity prediction of the position at ``t_s``."""
@@ -172,6 +176,7 @@ class _TrackState:
         "suction_dx_m",
         "suction_dy_m",
         "suction_radius_m",
+        "suction_tilt_rad",
         "track_id",
         "votes",
         "vx_mps",
@@ -211,6 +216,7 @@ class _TrackState:
         self.suction_dy_m = detection.suction_y_m - detection.y_m
         self.suction_below_top_m = _below_top(detection)
         self.suction_radius_m = detection.suction_radius_m
+        self.suction_tilt_rad = detection.suction_tilt_rad
         self._refresh()
 
     def _refresh(self) -> None:
@@ -268,6 +274,8 @@ class _TrackState:
             if math.isfinite(below_m):
                 self.suction_below_top_m = _fold(self.suction_below_top_m, below_m, a)
             self.suction_radius_m = _fold(self.suction_radius_m, detection.suction_radius_m, a)
+            if math.isfinite(detection.suction_tilt_rad):
+                self.suction_tilt_rad = _fold(self.suction_tilt_rad, detection.suction_tilt_rad, a)
         self._refresh()
 
     def snapshot(
@@ -300,6 +308,7 @@ class _TrackState:
             suction_offset_m=(self.suction_dx_m, self.suction_dy_m),
             suction_below_top_m=self.suction_below_top_m,
             suction_radius_m=self.suction_radius_m,
+            suction_tilt_rad=self.suction_tilt_rad,
         )
         return track
 
@@ -327,6 +336,7 @@ def _normalised(detection: Detection) -> Detection:
         suction_y_m=detection.suction_y_m,
         suction_z_m=detection.suction_z_m,
         suction_radius_m=detection.suction_radius_m,
+        suction_tilt_rad=detection.suction_tilt_rad,
     )
 
 

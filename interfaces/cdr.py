@@ -187,6 +187,7 @@ class DetectionValues:
     height_m: float
     suction_point_m: Vec3 = (0.0, 0.0, 0.0)
     suction_radius_m: float = 0.0
+    suction_tilt_rad: float = 0.0
 
 
 def detection_array_cdr(
@@ -202,7 +203,7 @@ def detection_array_cdr(
         w.align(4)
         w.out += _F32.pack(d.confidence)
         w.f64s((*d.position_m, d.yaw_rad, d.length_m, d.width_m, d.height_m))
-        w.f64s((*d.suction_point_m, d.suction_radius_m))
+        w.f64s((*d.suction_point_m, d.suction_radius_m, d.suction_tilt_rad))
     return w.bytes()
 
 

@@ -24,7 +24,8 @@ processed, (3) throughput = picked per minute. Every ratio is 0 when its denomin
 Line scores: ``recovery_rate`` per class and for the line, ``recovered`` / ``entered``:
 objects placed in their class's bin / objects that entered, over the *complete cohort*
 (:func:`complete_cohort`): in spawn order, every object spawned before the first one still
-undecided when the episode ends, so every one of them has a fate. An object still on its way
+undecided when the episode ends, so every one of them has a fate (or lies in a bin, knocked
+there unpicked). An object still on its way
 along the belt, and every one spawned after it, is left out of both counts: the figure neither
 falls with the share of the stream still in flight at the end (``placed_correct`` /
 ``spawned`` would) nor rises with it (with ``processed`` as denominator the objects in flight
@@ -58,9 +59,10 @@ every bin, the jaws' friction could not carry it, the cup's holding force could 
 seal was lost. An event without a reason (logs written before drops carried one) counts as
 ``released``, the only kind of drop then."""
 
-UNFIT_REASONS: tuple[str, ...] = ("too_wide", "too_flat", "too_small")
+UNFIT_REASONS: tuple[str, ...] = ("too_wide", "too_flat", "too_small", "too_tilted")
 """The controllers' ``untargeted`` reasons that say the station's tool cannot take the object
-(wider than the jaws open, too flat for the pads, a top face smaller than the suction cup)."""
+(wider than the jaws open, too flat for the pads, a top face smaller than the suction cup or
+tilted more than its lip seals on)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -91,8 +93,8 @@ METRICS: tuple[Metric, ...] = (
         name="entered",
         unit="objects",
         formula="objects of the complete cohort: in spawn order (for a station: the order they "
-        "entered its pick window), every object before the first one still undecided (no fate) "
-        "when the episode ended, or every spawned object when none is; for a class, the "
+        "entered its pick window), every object before the first one still undecided (no fate, "
+        "in no bin) when the episode ended, or every spawned object when none is; for a class, the "
         "cohort's objects of that class, the cut taken over every class",
         kind="count",
         scopes=EVENT_SCOPES,
@@ -191,7 +193,7 @@ METRICS: tuple[Metric, ...] = (
         name="untargeted_unfit",
         unit="objects",
         formula="objects a station's controller never targeted because its tool cannot take "
-        "them (`untargeted` reasons too_wide, too_flat, too_small)",
+        "them (`untargeted` reasons too_wide, too_flat, too_small, too_tilted)",
         kind="count",
         scopes=("station",),
     ),
@@ -447,7 +449,7 @@ def _cohort_of(tally: _Tally) -> set[int]:
     """The complete cohort of a tally's spawned objects (:func:`complete_cohort`)."""
     order = sorted(tally.spawned, key=tally.spawned_at_s.__getitem__)
     for position, oid in enumerate(order):
-        if oid not in tally.fate:
+        if oid not in tally.fate and oid not in tally.placed:
             return set(order[:position])
     return set(order)
 
@@ -461,7 +463,9 @@ def complete_cohort(
     (the time of their ``spawned`` event, or of their first ``entered_workspace`` at the
     station; equal times in the order of the events), up to, not including, the first one that
     is undecided when the events end (no fate, by the rules of :func:`count_events`, with
-    ``line_exit`` for the line). Every object of the cohort has a fate; none after the cut
+    ``line_exit`` for the line, and in no bin: an object knocked into a bin unpicked is out of
+    the stream, and cutting there left an episode with no cohort and a recovery of 0). Every
+    object of the cohort has a fate or lies in a bin; none after the cut
     counts, even one already placed. Every spawned object when none is undecided. Taken over
     every class, so a class's share of the cohort is consistent with the line's.
     """

@@ -10,7 +10,8 @@ object it lies on), the long-axis yaw (modulo pi), length, width and height as s
 noise, a per-object drop probability and a misclassification probability (a uniformly chosen
 other class). With a ``suction_points`` finder (:mod:`twin.suction_point`) each detection also
 carries the suction point of the face turned up, shifted by the same position noise, and its
-radius. The frame is released ``latency_s`` after capture, stamped with its capture time.
+radius and the tilt of that face from level. The frame is released ``latency_s`` after capture,
+stamped with its capture time.
 ``PerceptionConfig.zero_noise()`` gives the exact ground truth with no delay, drop or confusion.
 All randomness comes from the generator passed in (the scenario's seed tree).
 
@@ -102,7 +103,8 @@ class Detection:
     """One detected object (world frame). ``z_m`` is its underside: the belt surface, or the top of
     the object it lies on (what a depth camera sees around it). ``suction_point_m`` and
     ``suction_radius_m``: where a round cup fits best on its top face and the largest lip radius
-    that fits there (:mod:`twin.suction_point`), NaN when the camera reports none."""
+    that fits there (:mod:`twin.suction_point`), ``suction_tilt_rad`` that face's tilt from
+    level; NaN when the camera reports none."""
 
     class_name: str
     confidence: float
@@ -115,6 +117,7 @@ class Detection:
     height_m: float
     suction_point_m: tuple[float, float, float] = (math.nan, math.nan, math.nan)
     suction_radius_m: float = math.nan
+    suction_tilt_rad: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -153,7 +156,7 @@ class Perception:
         *,
         camera: CameraSpec | None = None,
         dropout_windows_s: Iterable[tuple[float, float]] = (),
-        suction_points: Callable[[GroundTruth], tuple[tuple[float, float, float], float]]
+        suction_points: Callable[[GroundTruth], tuple[tuple[float, float, float], float, float]]
         | None = None,
     ) -> None:
         self.config = config
@@ -202,8 +205,9 @@ class Perception:
             dx_m = cfg.position_noise_m * float(noise[0])
             dy_m = cfg.position_noise_m * float(noise[1])
             suction_m, suction_radius_m = (math.nan, math.nan, math.nan), math.nan
+            suction_tilt_rad = math.nan
             if self._suction_points is not None:
-                (sx, sy, sz), suction_radius_m = self._suction_points(obj)
+                (sx, sy, sz), suction_radius_m, suction_tilt_rad = self._suction_points(obj)
                 suction_m = (sx + dx_m, sy + dy_m, sz)
             detections.append(
                 Detection(
@@ -218,6 +222,7 @@ class Perception:
                     height_m=seen.height_m,
                     suction_point_m=suction_m,
                     suction_radius_m=suction_radius_m,
+                    suction_tilt_rad=suction_tilt_rad,
                 )
             )
         frame = DetectionFrame(

@@ -222,6 +222,7 @@ def _detection_values(d: PerceivedDetection) -> cdr.DetectionValues:
         height_m=d.height_m,
         suction_point_m=d.suction_point_m if has_point else (0.0, 0.0, 0.0),
         suction_radius_m=d.suction_radius_m if has_point else 0.0,
+        suction_tilt_rad=d.suction_tilt_rad if has_point else 0.0,
     )
 
 
@@ -729,6 +730,7 @@ class TwinEndpoint:
                     width_m=v.width_m,
                     height_m=v.height_m,
                     suction_radius_m=v.suction_radius_m,
+                    suction_tilt_rad=v.suction_tilt_rad,
                 )
                 det.position.x, det.position.y, det.position.z = v.position_m
                 point = det.suction_point

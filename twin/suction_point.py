@@ -2,11 +2,12 @@
 
 Vision systems of suction pickers report where a cup fits best: the point of the object's upturned
 face farthest from the face's outline (its pole of inaccessibility), and that distance, the
-largest lip radius that fits there. Here the face is the one of the object's mesh whose outward
-normal points most nearly up (:func:`twin.tools.suction_cup.planar_faces`: the top cap of an
-upright extruded prism, a side of a tipped one), the same face the twin's suction cup seals on,
-and the pole is shapely's ``polylabel`` (to 0.1 mm). On a concave or bent piece the pole lies
-well away from the footprint's centroid, which may have no room for a lip at all.
+largest lip radius that fits there, with the surface's normal (here its tilt from level, which
+decides whether a lip can seal on it at all). Here the face is the one of the object's mesh
+whose outward normal points most nearly up (:func:`twin.tools.suction_cup.planar_faces`: the
+top cap of an upright extruded prism, a side of a tipped one), the same face the twin's suction
+cup seals on, and the pole is shapely's ``polylabel`` (to 0.1 mm). On a concave or bent piece
+the pole lies well away from the footprint's centroid, which may have no room for a lip at all.
 
 The faces of each object and the pole of each of its faces are computed once per episode (a
 few per object; a 60 s episode has a few hundred objects).
@@ -14,6 +15,7 @@ few per object; a 60 s episode has a few hundred objects).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -33,8 +35,9 @@ Vec3 = tuple[float, float, float]
 
 
 class SuctionPoints:
-    """``points(gt)``: the suction point (world frame, m) of the object ``gt`` and its radius
-    (m). ``mesh_of(object_id)`` gives an object's triangles ``(t, 3, 3)`` in its own frame."""
+    """``points(gt)``: the suction point (world frame, m) of the object ``gt``, its radius (m)
+    and the tilt of its face (rad from level). ``mesh_of(object_id)`` gives an object's
+    triangles ``(t, 3, 3)`` in its own frame."""
 
     def __init__(self, mesh_of: Callable[[int], FloatArray]) -> None:
         self._mesh_of = mesh_of
@@ -42,15 +45,17 @@ class SuctionPoints:
         self._normals: dict[int, FloatArray] = {}
         self._poles: dict[tuple[int, int], tuple[FloatArray, float]] = {}
 
-    def __call__(self, gt: GroundTruth) -> tuple[Vec3, float]:
-        """The upturned face's pole in the world frame and its distance to the face's outline."""
+    def __call__(self, gt: GroundTruth) -> tuple[Vec3, float, float]:
+        """The upturned face's pole in the world frame, its distance to the face's outline and
+        the angle between the face's outward normal and up."""
         faces = self._faces.get(gt.id)
         if faces is None:
             faces = planar_faces(self._mesh_of(gt.id))
             self._faces[gt.id] = faces
             self._normals[gt.id] = np.array([f.normal for f in faces])
         rotation = rotation_matrix(gt.orientation_xyzw)
-        up = int(np.argmax(self._normals[gt.id] @ rotation[2]))
+        ups = self._normals[gt.id] @ rotation[2]  # world z of every face normal
+        up = int(np.argmax(ups))
         pole = self._poles.get((gt.id, up))
         if pole is None:
             face = faces[up]
@@ -60,7 +65,8 @@ class SuctionPoints:
             self._poles[(gt.id, up)] = pole
         local, radius_m = pole
         world = np.asarray(gt.position_m) + rotation @ local
-        return (float(world[0]), float(world[1]), float(world[2])), radius_m
+        tilt_rad = math.acos(min(1.0, max(-1.0, float(ups[up]))))
+        return (float(world[0]), float(world[1]), float(world[2])), radius_m, tilt_rad
 
 
 __all__ = ["POLE_TOLERANCE_M", "SuctionPoints"]

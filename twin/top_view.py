@@ -2,14 +2,16 @@
 
 An object is a prism: its footprint (length along the footprint's long axis, width across it)
 extruded by its height. Upright (within :data:`UPRIGHT_TILT_RAD`), a camera above sees that
-footprint and the height is the extrusion: the recorded measurements are used as they are, as
-they are for an object leaning on another (see :data:`FLAT_TILT_RAD`). An object that has
-tipped over onto a face (a wooden stick rolled onto its side, a brick on its end) shows that
-face: of the footprint's long axis, its width axis and its extrusion axis, the one nearest the
-vertical is seen as height, and the other two, projected on the belt, span the seen footprint
-(the longer one its long axis). The extents are those of the mesh's vertices, turned with the
-object, along those directions: exact for the silhouette's extents, and the height is from the
-lowest vertex to the highest. Pure geometry, no simulator.
+footprint and the height is the extrusion: the recorded measurements are used as they are. Any
+other object (a wooden stick rolled onto its side, a brick on its end, a tile propped on
+another piece) is seen as a depth camera sees it: of the footprint's long axis, its width axis
+and its extrusion axis, the one nearest the vertical is taken as the height's, and the other
+two, projected on the belt, give the seen footprint's directions (the longer one its long
+axis). The extents are those of the mesh's vertices, turned with the object: the silhouette's
+extents along those directions, the height from the lowest vertex to the highest and the
+underside at the lowest. A propped piece is therefore as tall as its raised end, not as its
+thickness (the controllers came down onto the raised end when it was reported as lying flat).
+Pure geometry, no simulator.
 """
 
 from __future__ import annotations
@@ -25,12 +27,6 @@ FloatArray = npt.NDArray[np.float64]
 
 UPRIGHT_TILT_RAD = math.radians(5.0)
 """Up to this tilt of the extrusion axis an object counts as upright (its recorded footprint)."""
-
-FLAT_TILT_RAD = math.radians(15.0)
-"""An object whose box axis nearest the vertical is within this of it lies on a face (upright,
-on its side or on its end) and is seen by that face. One leaning at a steeper angle (propped on
-another) keeps its recorded footprint: its top is not above its centroid, so no single seen
-footprint and height would describe where to grasp it."""
 
 
 @dataclass(frozen=True)
@@ -76,7 +72,7 @@ def top_view(
     In the body frame (origin at the centre of mass, z the extrusion axis) the footprint's long
     axis lies at ``footprint_yaw_rad`` about z; ``length_m``, ``width_m`` and ``height_m`` are
     its recorded extents; ``vertices_m()`` gives its mesh's ``(n, 3)`` vertices, asked for only
-    when the object has tipped onto a face (reading a mesh is not for every upright object).
+    when the object is not upright (reading a mesh is not for every upright object).
     """
     x, y, z, w = orientation_xyzw
     yaw_body = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
@@ -93,8 +89,6 @@ def top_view(
     c, s = math.cos(footprint_yaw_rad), math.sin(footprint_yaw_rad)
     axes = rotation @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # unit columns
     vertical = int(np.argmax(np.abs(axes[2])))
-    if abs(float(axes[2, vertical])) < math.cos(FLAT_TILT_RAD):  # leaning: as recorded
-        return recorded
     points = vertices_m() @ rotation.T  # world offsets from the centre of mass
 
     def seen_extent(i: int) -> float:

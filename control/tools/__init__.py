@@ -142,10 +142,12 @@ class ControllerTool(Protocol):
         height_m: float,
         width_margin_m: float,
         face_radius_m: float = math.nan,
+        face_tilt_rad: float = math.nan,
     ) -> str | None:
         """Why an object of this size cannot be grasped (one of
         :data:`control.scheduler.UNTARGETED_REASONS`), or None. ``face_radius_m`` is the
-        radius of the largest disc on its top face the camera reports (NaN: none)."""
+        radius of the largest disc on its top face the camera reports and ``face_tilt_rad``
+        that face's tilt from level (NaN: none)."""
         ...
 
     def fit_margin_m(
@@ -182,6 +184,14 @@ class ControllerTool(Protocol):
         ...
 
 
+def suction_point_depth_m(track: Track) -> float:
+    """How far the track's reported suction point lies below its top (not below 0); 0 when
+    none is reported. On a tipped or propped piece the upturned face slopes down from the top,
+    and the piece's middle lies about that much lower than its top."""
+    below_m = track.suction_below_top_m
+    return max(below_m, 0.0) if math.isfinite(below_m) else 0.0
+
+
 def make_tool(spec: ToolSpec) -> ControllerTool:
     """The controller's side of the tool ``spec`` describes (by its ``kind``)."""
     from control.tools.parallel_jaw import ParallelJaw
@@ -195,4 +205,4 @@ def make_tool(spec: ToolSpec) -> ControllerTool:
     raise ControlConfigError(msg)
 
 
-__all__ = ["ControllerTool", "Footprint", "GraspTiming", "make_tool"]
+__all__ = ["ControllerTool", "Footprint", "GraspTiming", "make_tool", "suction_point_depth_m"]

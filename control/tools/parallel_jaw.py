@@ -7,8 +7,9 @@ the measured opening is twice the mean of the finger joints. A grasp closes to t
 width less a squeeze; fingers that close to within a margin of that command met nothing. An
 object fits when its narrow side is narrower than the opening (less a margin) and it stands as
 tall as the finger pads. The open fingers and the hand need room around the grasp point. The
-fingers grasp below the object's top (``pick.grasp_below_top_m``), and the sequence dwells
-there before closing (the reference's grasp rule), with the pick configuration's timing.
+fingers grasp below the object's top (``pick.grasp_below_top_m``; on a tipped or propped piece
+lowered by the reported suction point's depth below the top), and the sequence dwells there
+before closing (the reference's grasp rule), with the pick configuration's timing.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from control.tools import Footprint, GraspTiming
+from control.tools import Footprint, GraspTiming, suction_point_depth_m
 from interfaces.tools import ParallelJawSpec
 
 if TYPE_CHECKING:
@@ -91,10 +92,11 @@ class ParallelJaw:
         height_m: float,
         width_margin_m: float,
         face_radius_m: float = math.nan,
+        face_tilt_rad: float = math.nan,
     ) -> str | None:
         """``too_wide`` when the narrow side does not fit the opening less ``width_margin_m``;
         ``too_flat`` when the object is lower than the finger pads; else None."""
-        del face_radius_m
+        del face_radius_m, face_tilt_rad
         if min(width_m, length_m) > (self.spec.max_opening_m - width_margin_m):
             return "too_wide"
         if height_m < self.spec.pad_height_m:
@@ -107,9 +109,11 @@ class ParallelJaw:
         return (0.0, 0.0)
 
     def grasp_drop_m(self, track: Track) -> float:
-        """The grasp height is measured from the top: no drop."""
-        del track
-        return 0.0
+        """The reported suction point's depth below the top (not below 0); none reported: 0.
+        On a piece propped on another the top is its raised end and its middle, where the
+        jaws close, lies that much lower (about where its upturned face's centre is): from a
+        height measured from the top the fingers would close above it."""
+        return suction_point_depth_m(track)
 
     def fit_margin_m(
         self,

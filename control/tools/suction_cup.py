@@ -8,8 +8,10 @@ through the lift) holds nothing. The cup grasps an object on its top face: the T
 centre of the lip, lowered ``pick.top_press_m`` into the top so that the soft lip seals, at the
 suction point the camera reports (where the largest disc fits on the top face) or, where it
 reports none, at the footprint's centre. An object fits when that disc (or, without one, the
-narrow side) holds the lip's disc with ``width_margin_m`` to spare (less is ``too_small``);
-nothing is too flat or too wide for it. Only the stem's disc comes down
+narrow side) holds the lip's disc with ``width_margin_m`` to spare (less is ``too_small``) and
+the face there, as the camera reports its tilt, lies within the lip's ``max_tilt_rad`` less
+:data:`TILT_MARGIN_RAD` (more is ``too_tilted``: a piece propped on another); nothing is too
+flat or too wide for it. Only the stem's disc comes down
 around the grasp point. The sequence does not dwell: the vacuum goes on as the descent to the
 top starts (the cup seals as the lip touches), the TCP waits at the top for the seal (the
 build-up, plus ``pick.seal_margin_s``; a seal made late, up to another build-up, once the
@@ -27,7 +29,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from control.tools import Footprint, GraspTiming
+from control.tools import Footprint, GraspTiming, suction_point_depth_m
 from interfaces.tools import SuctionCupSpec
 
 if TYPE_CHECKING:
@@ -43,6 +45,9 @@ STANDARD_GRAVITY_MPS2 = 9.81
 VACUUM_FULL = 0.99
 """The vacuum fraction at which the build-up is complete and the cup holds the object (a
 vacuum switch's "part present")."""
+TILT_MARGIN_RAD = math.radians(3.0)
+"""A face is left when its reported tilt comes within this of the lip's limit: the camera's
+normal is an estimate, and the lip pressing on a propped piece tilts it further."""
 
 
 @dataclass(frozen=True)
@@ -109,9 +114,14 @@ class SuctionCup:
         height_m: float,
         width_margin_m: float,
         face_radius_m: float = math.nan,
+        face_tilt_rad: float = math.nan,
     ) -> str | None:
         """``too_small`` when the top has no room for the lip's disc with ``width_margin_m``
-        to spare (:meth:`fit_margin_m` negative); else None."""
+        to spare (:meth:`fit_margin_m` negative); ``too_tilted`` when the face is tilted
+        beyond the lip's limit less :data:`TILT_MARGIN_RAD`; else None (an unknown tilt
+        fits)."""
+        if face_tilt_rad > self.spec.max_tilt_rad - TILT_MARGIN_RAD:  # False for NaN
+            return "too_tilted"
         margin_m = self.fit_margin_m(
             length_m=length_m,
             width_m=width_m,
@@ -131,8 +141,7 @@ class SuctionCup:
 
     def grasp_drop_m(self, track: Track) -> float:
         """The reported suction point's depth below the top (not below 0); none reported: 0."""
-        below_m = track.suction_below_top_m
-        return max(below_m, 0.0) if math.isfinite(below_m) else 0.0
+        return suction_point_depth_m(track)
 
     def fit_margin_m(
         self,

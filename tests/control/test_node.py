@@ -361,10 +361,19 @@ def test_a_detection_without_a_suction_point_reaches_the_tracker_without_one() -
     pointed.position.x, pointed.position.y = -0.8, 0.5
     pointed.suction_point.x, pointed.suction_point.y, pointed.suction_point.z = -0.82, 0.51, 0.04
     pointed.suction_radius_m = 0.03
+    pointed.suction_tilt_rad = 0.2
+    plain.suction_tilt_rad = 0.3  # no point (radius 0): no tilt either
     msg.detections = [plain, pointed]
     stamp_s, (first, second) = detections_of(msg)
     assert stamp_s == 3.0
     assert all(
-        math.isnan(v) for v in (first.suction_x_m, first.suction_y_m, first.suction_radius_m)
+        math.isnan(v)
+        for v in (
+            first.suction_x_m,
+            first.suction_y_m,
+            first.suction_radius_m,
+            first.suction_tilt_rad,
+        )
     )
+    assert second.suction_tilt_rad == 0.2
     assert (second.suction_x_m, second.suction_y_m, second.suction_radius_m) == (-0.82, 0.51, 0.03)

@@ -332,3 +332,19 @@ def test_a_cup_leaves_an_object_it_could_not_carry() -> None:
     assert target is not None
     assert target.track_id == 1
     assert schedule([heavy], now_s=0.0, tcp_position_m=TCP, config=base).target is not None
+
+
+def test_a_cup_leaves_a_propped_piece_whose_face_is_tilted_beyond_its_lip() -> None:
+    """The camera reports the tilt of the face at the suction point: beyond the lip's limit
+    (less the margin) the cup leaves the piece (``too_tilted``) for a station downstream; a
+    level piece beside it is its target."""
+    config = ControllerConfig(cell=load_cell("suction"))
+    cup = config.station.tool
+    assert isinstance(cup, SuctionCupSpec)
+    face = {"suction_radius_m": 0.035, "suction_offset_m": (0.0, 0.0)}
+    propped = replace(_track(1, -0.1, width=0.08), **face, suction_tilt_rad=cup.max_tilt_rad + 0.05)
+    level = replace(_track(2, -0.3, width=0.08), **face, suction_tilt_rad=0.02)
+    result = schedule([propped, level], now_s=0.0, tcp_position_m=TCP, config=config)
+    assert _reasons(result.untargeted) == {1: "too_tilted"}
+    assert result.target is not None
+    assert result.target.track_id == 2

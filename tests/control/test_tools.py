@@ -9,7 +9,7 @@ import pytest
 
 from control.config import ControllerConfig
 from control.errors import ControlConfigError
-from control.scheduler import blocked_by, grasp_height_m, schedule
+from control.scheduler import approach_z_m, blocked_by, grasp_height_m, schedule
 from control.tools import Footprint, make_tool
 from control.tracking import Track
 from interfaces.cell import default_cell
@@ -143,10 +143,10 @@ def test_a_cup_fits_by_the_disc_the_camera_reports_on_the_top_and_grasps_at_its_
     assert jaws.misfit(**size, face_radius_m=0.001) == jaws.misfit(**size)
 
 
-def test_a_cup_goes_down_to_the_suction_point_on_a_tipped_piece_and_jaws_keep_the_top() -> None:
-    """On a tipped piece the suction point lies below the top (the upturned face slopes down
-    from it): the cup's grasp point is that much lower, never higher; a gripper's is the
-    same with or without it."""
+def test_cup_and_jaws_go_down_to_the_suction_point_on_a_tipped_piece() -> None:
+    """On a tipped or propped piece the suction point lies below the top (the upturned face
+    slopes down from it): the cup's grasp point is that much lower, never higher, and so is
+    the jaws' (the piece's middle lies that much below its raised end)."""
     cup = _config_with_tool(tool_from_data("suction_cup", "tool"))
     jaws = _config_with_tool(XARM)
     level = _track(1, 0.5)
@@ -154,4 +154,26 @@ def test_a_cup_goes_down_to_the_suction_point_on_a_tipped_piece_and_jaws_keep_th
     proud = replace(level, suction_radius_m=0.03, suction_below_top_m=-0.005)
     assert grasp_height_m(tipped, cup) == pytest.approx(grasp_height_m(level, cup) - 0.012)
     assert grasp_height_m(proud, cup) == grasp_height_m(level, cup)
-    assert grasp_height_m(tipped, jaws) == grasp_height_m(level, jaws)
+    assert grasp_height_m(tipped, jaws) == pytest.approx(grasp_height_m(level, jaws) - 0.012)
+    assert grasp_height_m(proud, jaws) == grasp_height_m(level, jaws)
+    # the approach still ends above the top: the cup does not come in sideways into it
+    assert approach_z_m(tipped, cup) == pytest.approx(approach_z_m(level, cup))
+    assert approach_z_m(level, cup) == pytest.approx(
+        grasp_height_m(level, cup) + cup.pick.approach_height_m
+    )
+
+
+def test_a_cup_leaves_a_face_tilted_beyond_its_lip_and_jaws_do_not_mind() -> None:
+    """A piece propped on another shows a tilted face: the cup's lip seals within
+    ``max_tilt_rad`` (0.35 rad for the catalogue's cup); the cup leaves faces within 3 degrees
+    of that (``too_tilted``), takes a level or an unknown one, and jaws take any."""
+    spec = tool_from_data("suction_cup", "tool")
+    cup = make_tool(spec)
+    size = {"length_m": 0.2, "width_m": 0.08, "height_m": 0.03, "width_margin_m": 0.015}
+    limit = spec.max_tilt_rad - math.radians(3.0)
+    assert cup.misfit(**size, face_radius_m=0.035, face_tilt_rad=0.0) is None
+    assert cup.misfit(**size, face_radius_m=0.035, face_tilt_rad=limit - 1e-3) is None
+    assert cup.misfit(**size, face_radius_m=0.035, face_tilt_rad=limit + 1e-3) == "too_tilted"
+    assert cup.misfit(**size, face_radius_m=0.035, face_tilt_rad=math.nan) is None
+    jaws = make_tool(XARM)
+    assert jaws.misfit(**size, face_tilt_rad=1.0) == jaws.misfit(**size)

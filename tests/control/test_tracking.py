@@ -92,6 +92,7 @@ def test_the_suction_point_reaches_the_track_as_an_offset_from_its_position(swap
             "suction_x_m": detection.x_m - 0.03,
             "suction_y_m": detection.y_m + 0.01,
             "suction_radius_m": 0.024,
+            "suction_tilt_rad": 0.4 + rng.normal(0.0, 0.02),
         }
         tracker.update(t_s, [dataclasses.replace(detection, **point)], (0.4, 0.0))
         plain.update(t_s, [detection], (0.4, 0.0))
@@ -105,8 +106,8 @@ def test_the_suction_point_reaches_the_track_as_an_offset_from_its_position(swap
 
 def test_the_suction_points_depth_below_the_top_reaches_the_track() -> None:
     """A tipped piece on a 4 cm high neighbour, 3 cm tall: its top is at 7 cm, and the camera
-    reports the suction point 12 mm lower, on the sloping upturned face. The track keeps that
-    depth (smoothed); without an underside height it has none."""
+    reports the suction point 12 mm lower, on the sloping upturned face, tilted 0.4 rad. The
+    track keeps that depth and tilt (smoothed); without an underside height it has no depth."""
     rng = np.random.default_rng(9)
     tracker = Tracker(TrackingConfig(), classes=CLASSES)
     blind = Tracker(TrackingConfig(), classes=CLASSES)
@@ -118,13 +119,16 @@ def test_the_suction_points_depth_below_the_top_reaches_the_track() -> None:
             "suction_y_m": detection.y_m,
             "suction_z_m": 0.07 - 0.012 + rng.normal(0.0, 0.001),
             "suction_radius_m": 0.024,
+            "suction_tilt_rad": 0.4 + rng.normal(0.0, 0.02),
         }
         tracker.update(t_s, [dataclasses.replace(detection, base_z_m=0.04, **point)], (0.4, 0.0))
         blind.update(t_s, [dataclasses.replace(detection, **point)], (0.4, 0.0))
     (track,) = tracker.predict_to(1.0)
     assert track.suction_below_top_m == pytest.approx(0.012, abs=0.001)
+    assert track.suction_tilt_rad == pytest.approx(0.4, abs=0.02)
     (other,) = blind.predict_to(1.0)
     assert math.isnan(other.suction_below_top_m)
+    assert other.suction_tilt_rad == pytest.approx(0.4, abs=0.02)
 
 
 def test_identities_kept_through_crossing() -> None:

@@ -169,6 +169,7 @@ def test_detection_array(count: int) -> None:
             # the last one without a suction point (the message's default: none)
             suction_point_m=(-0.99 + 0.1 * i, 0.44, 0.033) if i < 3 else (0.0, 0.0, 0.0),
             suction_radius_m=0.021 if i < 3 else 0.0,
+            suction_tilt_rad=0.1 * i if i < 3 else 0.0,
         )
         for i in range(count)
     ]
@@ -184,6 +185,7 @@ def test_detection_array(count: int) -> None:
             width_m=v.width_m,
             height_m=v.height_m,
             suction_radius_m=v.suction_radius_m,
+            suction_tilt_rad=v.suction_tilt_rad,
         )
         det.position.x, det.position.y, det.position.z = v.position_m
         det.suction_point.x, det.suction_point.y, det.suction_point.z = v.suction_point_m

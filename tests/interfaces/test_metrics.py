@@ -264,6 +264,23 @@ def test_an_undecided_object_cuts_the_cohort_before_itself_and_every_later_one()
         assert scores["recovery_by_class"] == {"brick": pytest.approx(1 / 2), "wood": 0.0}
 
 
+def test_an_object_knocked_into_a_bin_unpicked_does_not_cut_the_cohort() -> None:
+    """The first object, pushed off the belt into a bin by an arm (``placed_in_bin`` with no
+    ``pick_success``), has no fate but is out of the stream: the cohort runs on past it (it
+    cut the whole stream off before, an episode of 102 correct placements scoring a recovery
+    of 0). In its own class's bin it is recovered; it is not picked nor processed."""
+    from interfaces.metrics import complete_cohort
+
+    spawns = [_at(float(i), E.SPAWNED, i) for i in range(1, 4)]
+    knocked = _at(9.0, E.PLACED_IN_BIN, 1, "brick", bin="brick", correct=True, station="s4")
+    events = [*spawns, knocked, *_placed(10.0, 2), _at(11.0, E.MISSED, 3)]
+    assert complete_cohort(events) == {1, 2, 3}
+    counts = count_events(events, 60.0)
+    assert (counts.entered, counts.recovered) == (3, 2)
+    assert (counts.processed, counts.picked, counts.placed_correct) == (2, 1, 2)
+    assert event_scores(counts)["recovery_rate"] == pytest.approx(2 / 3)
+
+
 def test_with_nothing_undecided_every_spawned_object_entered() -> None:
     """Every object has a fate: the cohort is the whole stream. One picked but still carried at
     the end (3) is decided: it entered, but is not recovered."""
@@ -489,7 +506,16 @@ def test_allocation_decisions_and_the_unfit_share_per_station() -> None:
 
     stats = [
         {"pick": {"targeted": 4, "untargeted": {"too_wide": 3, "claimed_by_other": 5}}},
-        {"pick": {"untargeted": {"too_flat": 1, "too_small": 2, "left_for_downstream": 4}}},
+        {
+            "pick": {
+                "untargeted": {
+                    "too_flat": 1,
+                    "too_small": 2,
+                    "too_tilted": 1,
+                    "left_for_downstream": 4,
+                }
+            }
+        },
         {"pick": {"targeted": 1}},
     ]
     untargeted = untargeted_objects(stats)
@@ -498,15 +524,16 @@ def test_allocation_decisions_and_the_unfit_share_per_station() -> None:
         "claimed_by_other": 5,
         "too_flat": 1,
         "too_small": 2,
+        "too_tilted": 1,
         "left_for_downstream": 4,
     }
-    assert considered_objects(stats) == 5 + 15
+    assert considered_objects(stats) == 5 + 16
     scores = untargeted_scores(untargeted, considered_objects(stats))
-    assert set(UNFIT_REASONS) == {"too_wide", "too_flat", "too_small"}
-    assert (scores["untargeted_total"], scores["untargeted_unfit"]) == (15, 6)
-    assert scores["considered"] == 20
-    assert scores["unfit_share"] == pytest.approx(6 / 20)
-    assert scores["untargeted_share"]["claimed_by_other"] == pytest.approx(5 / 20)
+    assert set(UNFIT_REASONS) == {"too_wide", "too_flat", "too_small", "too_tilted"}
+    assert (scores["untargeted_total"], scores["untargeted_unfit"]) == (16, 7)
+    assert scores["considered"] == 21
+    assert scores["unfit_share"] == pytest.approx(7 / 21)
+    assert scores["untargeted_share"]["claimed_by_other"] == pytest.approx(5 / 21)
     assert list(scores["untargeted_share"]) == sorted(untargeted)
     assert sum(scores["untargeted_share"].values()) <= 1.0
     assert untargeted_scores({}, considered=0)["unfit_share"] == 0.0

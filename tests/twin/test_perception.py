@@ -161,13 +161,14 @@ def test_dropout_windows_deliver_nothing_and_leave_the_other_frames_unchanged() 
 
 def test_the_suction_point_moves_with_the_detections_noise() -> None:
     """With a suction-point finder each detection carries its point, shifted by the same
-    position noise as the centre (one camera error), and its radius; without one, NaN."""
+    position noise as the centre (one camera error), its radius and its face's tilt; without
+    one, NaN."""
     cfg = PerceptionConfig(position_noise_m=0.003, drop_rate=0.0, latency_s=0.0)
     objects = [_object(i, -1.0 + 0.05 * i) for i in range(1, 9)]
 
-    def finder(obj: GroundTruth) -> tuple[tuple[float, float, float], float]:
+    def finder(obj: GroundTruth) -> tuple[tuple[float, float, float], float, float]:
         x, y, z = obj.position_m
-        return (x - 0.02 * obj.id, y + 0.01, z + 0.02), 0.001 * obj.id
+        return (x - 0.02 * obj.id, y + 0.01, z + 0.02), 0.001 * obj.id, 0.05 * obj.id
 
     found = Perception(cfg, CLASSES, 0.0, 1 / 240, np.random.default_rng(4), suction_points=finder)
     plain = Perception(cfg, CLASSES, 0.0, 1 / 240, np.random.default_rng(4))
@@ -178,5 +179,7 @@ def test_the_suction_point_moves_with_the_detections_noise() -> None:
         assert (sx - det.x_m, sy - det.y_m) == pytest.approx((-0.02 * obj.id, 0.01), abs=1e-12)
         assert sz == pytest.approx(obj.position_m[2] + 0.02)
         assert det.suction_radius_m == pytest.approx(0.001 * obj.id)
+        assert det.suction_tilt_rad == pytest.approx(0.05 * obj.id)
         assert (same.x_m, same.y_m) == (det.x_m, det.y_m)  # the same draws
         assert math.isnan(same.suction_radius_m)
+        assert math.isnan(same.suction_tilt_rad)

@@ -58,15 +58,16 @@ def test_the_pole_of_a_concave_top_is_where_the_cup_fits_not_the_centroid() -> N
     points = SuctionPoints(mesh_of)
     yaw = 0.7
     quat = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-    (x, y, z), radius_m = points(_truth((1.0, 0.5, 0.2), quat))
+    (x, y, z), radius_m, tilt_rad = points(_truth((1.0, 0.5, 0.2), quat))
     # the square's centre, turned by the yaw and moved to the position; z on the top
     assert (x, y) == pytest.approx((1.0, 0.5), abs=1.5e-3)  # the pole is 0.5 mm right of it
     assert z == pytest.approx(0.2 + HEIGHT_M, abs=1e-9)
     assert radius_m == pytest.approx(0.05, abs=2e-4)
+    assert tilt_rad == pytest.approx(0.0, abs=1e-6)  # level: turned about z only
     centroid = OUTLINE.centroid
     assert OUTLINE.boundary.distance(Point(centroid.x, centroid.y)) < 0.011  # no room there
     # moved on, the same object's point moves with it; its mesh is read once
-    (x2, _, _), _ = points(_truth((1.3, 0.5, 0.2), quat))
+    (x2, _, _), _, _ = points(_truth((1.3, 0.5, 0.2), quat))
     assert x2 == pytest.approx(x + 0.3, abs=1e-9)
     assert calls == [7]
 
@@ -79,6 +80,21 @@ def test_a_tipped_object_is_judged_by_the_face_turned_up() -> None:
     tipped = replace(
         upright, orientation_xyzw=(math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4))
     )
-    (_, _, z), radius_m = points(tipped)
+    (_, _, z), radius_m, tilt_rad = points(tipped)
     assert radius_m == pytest.approx(HEIGHT_M / 2, abs=2e-4)
     assert z == pytest.approx(0.03, abs=1e-9)  # the side that was at y = -0.03 is up
+    assert tilt_rad == pytest.approx(0.0, abs=1e-6)  # that side lies level
+
+
+@pytest.mark.parametrize("tilt_deg", [10.0, 25.0, 40.0])
+def test_a_propped_object_reports_its_faces_tilt(tilt_deg: float) -> None:
+    """Propped on another piece (turned about its long axis by less than 45 degrees) the top
+    stays the face turned up, and the camera reports how far it is tilted from level."""
+    points = SuctionPoints(lambda _: _triangles(box(-0.1, -0.03, 0.1, 0.03)))
+    half = math.radians(tilt_deg) / 2
+    propped = _truth((0.0, 0.5, 0.05), (math.sin(half), 0.0, 0.0, math.cos(half)))
+    (_, _, z), radius_m, tilt_rad = points(propped)
+    assert tilt_rad == pytest.approx(math.radians(tilt_deg), abs=1e-9)
+    assert radius_m == pytest.approx(0.03, abs=2e-4)  # still the 6 cm wide top
+    # the pole, the top's centre (the mesh frame's origin is under it, on the bottom)
+    assert z == pytest.approx(0.05 + HEIGHT_M * math.cos(math.radians(tilt_deg)), abs=1e-6)

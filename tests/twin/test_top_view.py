@@ -116,12 +116,19 @@ def test_a_small_tilt_keeps_the_recorded_footprint() -> None:
     )
 
 
-def test_a_leaning_object_keeps_its_recorded_footprint() -> None:
-    """Propped at 40 degrees its top is not above its centroid: no top view describes a grasp."""
-    seen = _view(Rotation.from_euler("y", 40, degrees=True), 0.3, L, W, H)
-    assert (seen.yaw_rad, seen.length_m, seen.width_m, seen.height_m) == pytest.approx(
-        (0.3, L, W, H), abs=1e-12
-    )
+@pytest.mark.parametrize("tilt_deg", [25.0, 40.0, 60.0])
+def test_a_propped_object_is_as_tall_as_its_raised_end(tilt_deg: float) -> None:
+    """Propped on another piece, a stick's raised end is its top: the height a camera above
+    measures is the vertical extent, not its thickness, and its underside the lowest corner."""
+    tilt = math.radians(tilt_deg)
+    seen = _view(Rotation.from_euler("y", tilt), 0.0, L, W, H)
+    height = L * math.sin(tilt) + H * math.cos(tilt)
+    assert _same_axis(seen.yaw_rad, 0.0)
+    assert seen.length_m == pytest.approx(L * math.cos(tilt) + H * math.sin(tilt), abs=1e-12)
+    assert seen.width_m == pytest.approx(W, abs=1e-12)
+    assert seen.height_m == pytest.approx(height, abs=1e-12)
+    assert seen.below_m == pytest.approx(height / 2, abs=1e-12)
+    assert seen.height_m > 2.5 * H  # the thickness would put the top far too low
 
 
 def test_a_tilt_near_a_face_grows_the_seen_extents_like_a_projection() -> None:
@@ -133,10 +140,10 @@ def test_a_tilt_near_a_face_grows_the_seen_extents_like_a_projection() -> None:
     assert seen.height_m == pytest.approx(H * math.cos(tilt) + L * math.sin(tilt))
 
 
-def test_upright_and_leaning_objects_never_read_their_mesh() -> None:
+def test_upright_objects_never_read_their_mesh() -> None:
     def unread() -> np.ndarray:
-        raise AssertionError("the mesh was read for an object that has not tipped onto a face")
+        raise AssertionError("the mesh was read for an upright object")
 
-    for rotation in (Rotation.from_euler("z", 0.7), Rotation.from_euler("y", 40, degrees=True)):
+    for rotation in (Rotation.from_euler("z", 0.7), Rotation.from_euler("y", 4, degrees=True)):
         seen = top_view(_quat(rotation), 0.3, length_m=L, width_m=W, height_m=H, vertices_m=unread)
         assert (seen.length_m, seen.width_m, seen.height_m) == (L, W, H)
