@@ -643,8 +643,10 @@ class PickController:
     def _abort(self, reason: str, t_s: float) -> None:
         book, pursuit = self._book, self._pursuit
         book.aborted[reason] += 1
+        book.last_error = f"{reason} in {self._phase.name.lower()} at t={t_s:.2f} s"
         if pursuit.target is not None:
             track_id = pursuit.target.track_id
+            book.last_error += f", track {track_id} ({pursuit.target.class_name})"
             if reason == "grip_missed":
                 book.grip_misses[track_id] += 1
             if reason != "grip_missed" or book.grip_misses[track_id] > self._cfg.pick.grip_retries:

@@ -124,3 +124,12 @@ def validate_priorities(classes: Sequence[str], known: Sequence[str]) -> tuple[s
     if len(set(classes)) != len(classes):
         return Rejected("duplicate_class", f"priorities repeat a class: {list(classes)}")
     return tuple(classes)
+
+
+def command_age_s(stamp_s: float, now_s: float) -> float:
+    """How long before ``now_s`` a command stamped ``stamp_s`` was meant for (s): 0 for an
+    unset stamp (0, "now", as ``JointTrajectory`` has it) or one not in the past. Stamps are
+    step times, so the age is rounded to the nanosecond: a command of this step has age 0."""
+    if stamp_s <= 0.0:
+        return 0.0
+    return max(round(now_s - stamp_s, 9), 0.0)

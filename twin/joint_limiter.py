@@ -5,13 +5,15 @@ is commanded: a position step is followed along a ramp. PyBullet's position-cont
 have no such limit (a 1 rad step moves a Panda joint at over 12 rad/s), so the twin puts a
 limiter between the commands and the motors, one per arm, stepped at the physics rate.
 
-Each new command (positions ``q_k``, velocities ``qd_k``, ``dt_k`` after the previous one) is
-checked against the previous one, per joint: it continues a trajectory within the limits when
-``|qd_k - qd_{k-1}| <= a dt_k`` and ``|q_k - (q_{k-1} + qd_{k-1} dt_k)| <= a dt_k^2`` (``a`` the
-acceleration limit; ``dt_k`` counted at most ``hold_s``, as long as a command's velocity moves
-its target on). Every trajectory within the limits passes this check whether it is sampled with
-its exact velocities (deviation ``a dt^2 / 2``) or with backward differences (``a dt^2``), at any
-command rate of ``1 / hold_s`` or more; a jump, or a velocity change beyond the limit, fails it.
+Each new command (positions ``q_k``, velocities ``qd_k``, stamped ``dt_k`` after the previous
+one) is checked against the previous one at their stamps, per joint: it continues a trajectory
+within the limits when ``|qd_k - qd_{k-1}| <= a dt_k`` and
+``|q_k - (q_{k-1} + qd_{k-1} dt_k)| <= a dt_k^2`` (``a`` the acceleration limit; ``dt_k`` counted
+at most ``hold_s``, as long as a command's velocity moves its target on). Every trajectory within
+the limits passes this check whether it is sampled with its exact velocities (deviation
+``a dt^2 / 2``) or with backward differences (``a dt^2``), at any command rate of ``1 / hold_s``
+or more, however late each command arrives; a jump, or a velocity change beyond the limit,
+fails it.
 
 A joint whose command passes keeps its commanded targets unchanged (the limiter only follows
 them). A joint whose command fails is *limited*: its motor gets the limiter's reference instead,
@@ -98,6 +100,7 @@ class JointLimiter:
         self._last_qd = np.zeros(n)
         self._continues = np.ones(n, dtype=bool)
         self._steps = _LONG_AGO
+        self._last_age_steps = 0
 
     def reset(self, position_rad: FloatArray) -> None:
         """At rest at ``position_rad``, as if commanded there long ago."""
@@ -110,17 +113,29 @@ class JointLimiter:
         self._last_qd = np.zeros_like(self.position)
         self._continues[:] = True
         self._steps = _LONG_AGO
+        self._last_age_steps = 0
 
     @property
     def any_limited(self) -> bool:
         """Whether some joint's motor gets the limiter's reference."""
         return self._any
 
-    def command(self, positions_rad: FloatArray, velocities_rps: FloatArray | None) -> None:
-        """A new command: the joints whose command does not continue a trajectory within the
-        limits become limited."""
+    def command(
+        self, positions_rad: FloatArray, velocities_rps: FloatArray | None, *, age_s: float = 0.0
+    ) -> None:
+        """A new command, stamped ``age_s`` before now: the joints whose command does not
+        continue a trajectory within the limits become limited. Commands are compared at their
+        stamps (the steps since the previous one's arrival, corrected by both ages), so a
+        command that arrives a step late, or two that arrive in one step, continue the
+        trajectory they sample. Ages count in whole steps (stamps are step times), so the
+        interval is as exact as the steps' own."""
         qd = self._zero if velocities_rps is None else velocities_rps
-        since_s = min(self._steps * self.dt_s, self.hold_s)
+        age_steps = round(age_s / self.dt_s)
+        since_steps = self._steps + self._last_age_steps - age_steps
+        if since_steps <= 0:  # stamped no later than the previous one: compare by arrival
+            since_steps = self._steps
+        since_s = min(since_steps * self.dt_s, self.hold_s)
+        self._last_age_steps = age_steps
         predicted = self._last_q + self._last_qd * since_s
         slack = 1.0 + _SLACK
         jump = np.abs(positions_rad - predicted) > self.amax * since_s * since_s * slack + 1e-12

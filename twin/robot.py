@@ -147,23 +147,34 @@ class Robot:
         self.limiter.reset(self._q_target)
         self._changed = True
 
-    def command(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
+    def command(self, q: np.ndarray, qd: np.ndarray | None = None, *, age_s: float = 0.0) -> None:
         """Set arm joint position targets (and feed-forward velocities); clipped to the limits.
 
         With velocities, the position target moves on with them between commands (as a
-        trajectory controller interpolates a point with velocity), for up to ``HOLD_S``. The
-        motors follow from the next :meth:`drive`, through the joint limiter.
+        trajectory controller interpolates a point with velocity), for up to ``HOLD_S`` after
+        the command's stamp, ``age_s`` (>= 0) before now: a command that arrives late starts
+        where it meant the arm to be by now. The motors follow from the next :meth:`drive`,
+        through the joint limiter.
         """
         self._q_command = np.clip(np.asarray(q, dtype=float), self.limits.lower, self.limits.upper)
-        self._q_target = self._q_command.copy()
         self._qd_target = (
             np.zeros(len(self.arm_joints))
             if qd is None
             else np.clip(np.asarray(qd, dtype=float), -self.limits.velocity, self.limits.velocity)
         )
-        self._since_command_s = 0.0
-        self.limiter.command(self._q_command, self._qd_target)
+        self._since_command_s = min(max(age_s, 0.0), HOLD_S)
+        self._q_target = self._q_command.copy()
+        if self._since_command_s > 0.0 and self._qd_target.any():
+            q_now = self._q_command + self._qd_target * self._since_command_s
+            self._q_target = np.clip(q_now, self.limits.lower, self.limits.upper)
+        self.limiter.command(self._q_command, self._qd_target, age_s=max(age_s, 0.0))
         self._changed = True
+
+    @property
+    def position_target_rad(self) -> np.ndarray:
+        """The arm's joint position targets now ``(n,)``: the last command, moved on along its
+        velocities (what the limiter is handed next)."""
+        return self._q_target.copy()
 
     def extrapolate(self, dt_s: float) -> None:
         """Advance the position target along the commanded velocity by one step."""

@@ -80,6 +80,7 @@ from twin import scene as sc
 from twin.commands import (
     JointTarget,
     Rejected,
+    command_age_s,
     validate_gripper,
     validate_joint_command,
     validate_priorities,
@@ -439,7 +440,9 @@ class TwinEndpoint:
             self._reject(link.wire(c.ARM_TRAJECTORY), result, link)
             return
         assert isinstance(result, JointTarget)
-        self.twin.command(ArmCommand(result.positions, result.velocities), link.station.index)
+        age_s = command_age_s(stamp_s, self.twin.time_s)
+        command = ArmCommand(result.positions, result.velocities, age_s=age_s)
+        self.twin.command(command, link.station.index)
 
     def _on_gripper(self, link: StationLink, msg: Float64) -> None:
         self._received(link)

@@ -23,12 +23,15 @@ from twin.tools import Tool, make_tool
 class ArmCommand:
     """A command for one station's arm: joint targets ``(n,)``, optional velocities ``(n,)``,
     the tool's command (a gripper's opening in m, a suction cup's vacuum 1 or 0); ``station``
-    is the station's index."""
+    is the station's index. ``age_s`` is how long before its arrival the command was stamped
+    (the sim time it is for): a trajectory controller starts a point at its stamp, not at its
+    arrival, so the targets of a command that came late are where it meant them to be now."""
 
     joint_positions: tuple[float, ...]
     joint_velocities: tuple[float, ...] | None = None
     gripper_width_m: float | None = None
     station: int = 0
+    age_s: float = 0.0
 
 
 @dataclass
@@ -98,7 +101,7 @@ class Station:
             )
             raise ConfigError(msg)
         qd = None if action.joint_velocities is None else np.asarray(action.joint_velocities)
-        self.robot.command(np.asarray(action.joint_positions, dtype=float), qd)
+        self.robot.command(np.asarray(action.joint_positions, dtype=float), qd, age_s=action.age_s)
         if action.gripper_width_m is not None:
             self.tool.command(action.gripper_width_m)
             self.tool.apply()

@@ -9,7 +9,7 @@ import pybullet as pb
 import pytest
 
 from interfaces.cell import default_cell
-from twin.commands import JointTarget, Rejected, validate_joint_command
+from twin.commands import JointTarget, Rejected, command_age_s, validate_joint_command
 from twin.robot import JointLimits, Robot
 
 PANDA = default_cell().stations[0].robot
@@ -94,3 +94,30 @@ def test_an_unknown_joint_name_is_named_with_the_arms_joints(limits: JointLimits
 def test_the_velocity_limits_are_the_urdfs(limits: JointLimits) -> None:
     """2.175 rad/s on the four shoulder joints, 2.61 rad/s on the wrist (Panda URDF)."""
     assert np.allclose(limits.velocity, [2.175] * 4 + [2.61] * 3)
+
+
+def test_a_command_is_applied_as_of_its_stamp() -> None:
+    """A command stamped one step before it arrives is one step old; an unset stamp (0) or one
+    ahead of the twin's clock counts as now."""
+    dt_s = 1.0 / 240.0
+    assert command_age_s(100 * dt_s, 101 * dt_s) == pytest.approx(dt_s, abs=1e-9)
+    assert command_age_s(101 * dt_s, 101 * dt_s) == 0.0
+    assert command_age_s(0.0, 101 * dt_s) == 0.0
+    assert command_age_s(102 * dt_s, 101 * dt_s) == 0.0
+
+
+def test_a_late_command_starts_where_it_meant_the_arm_to_be_now() -> None:
+    """Its feed-forward velocity has moved the position target on by its age."""
+    client = pb.connect(pb.DIRECT)
+    try:
+        on_time, late = Robot(client, PANDA), Robot(client, PANDA)
+        q = np.array(HOME, dtype=float)
+        qd = np.full(len(ARM), 0.2)
+        on_time.command(q, qd)
+        late.command(q, qd, age_s=0.01)
+        assert np.allclose(on_time.position_target_rad, q)
+        assert np.allclose(late.position_target_rad, q + 0.2 * 0.01)
+        late.extrapolate(0.005)
+        assert np.allclose(late.position_target_rad, q + 0.2 * 0.015)
+    finally:
+        pb.disconnect(physicsClientId=client)

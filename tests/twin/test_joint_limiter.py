@@ -74,6 +74,47 @@ def test_a_trajectory_within_the_limits_passes_unchanged(backward: bool, every: 
     assert np.array_equal(handed, desired)
 
 
+def _late_stream(*, stamped: bool, steps: int = 400) -> int:
+    """The 120 Hz stream at the acceleration limit (backward differences), each command
+    arriving 0 or 1 step after its stamp (seeded), as commands over DDS do in realtime; the
+    twin extrapolates a command from its stamp when ``stamped``, from its arrival otherwise.
+    Returns the steps limited."""
+    rng = np.random.default_rng(7)
+    arrivals: dict[int, tuple[float, float, int]] = {}
+    last = 0.0
+    for k in range(0, steps, 2):
+        q, _ = _trapezoid(1.6, AMAX, k * DT_S)
+        delay = int(rng.integers(0, 2))
+        arrivals[k + delay] = (q, (q - last) / (2 * DT_S), delay)
+        last = q
+    limiter, limited = _limiter(), 0
+    q_cmd = qd = 0.0
+    since = 0.0
+    for k in range(steps):
+        if k in arrivals:
+            q_cmd, qd, delay = arrivals[k]
+            age_s = delay * DT_S if stamped else 0.0
+            since = age_s
+            limiter.command(np.array([q_cmd]), np.array([qd]), age_s=age_s)
+        elif qd and since < HOLD_S:
+            since += DT_S
+        target = q_cmd + qd * min(since, HOLD_S)
+        moving = qd != 0.0 and since < HOLD_S
+        limiter.step(np.array([target]), np.array([qd]) if moving else None)
+        limited += limiter.any_limited
+    return limited
+
+
+def test_commands_that_arrive_late_are_judged_at_their_stamps() -> None:
+    """A command stamped for step k that arrives at step k + 1 continues the trajectory it
+    samples: judged by its stamp it passes. Judged by arrival (the interval between two
+    commands one step shorter or longer than between their stamps), the same stream is taken
+    over by the limiter, whose reference lags the command: in realtime that lag made the
+    controller's feedback ring by several cm."""
+    assert _late_stream(stamped=True) == 0
+    assert _late_stream(stamped=False) > 20
+
+
 def test_a_trajectory_beyond_the_acceleration_limit_is_limited() -> None:
     desired, handed, limited = _stream(1.5 * AMAX, backward=True)
     assert limited > 100
