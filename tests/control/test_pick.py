@@ -243,6 +243,9 @@ def test_lost_target_aborts_the_approach() -> None:
     commands = _drive(controller, tracks_at, 200)
     assert controller.stats().aborted == {"target_lost": 1}
     assert commands[-1].target_id is None
+    # the node's warning quotes what was aborted, where and when
+    assert controller.last_error.startswith("target_lost in approach at t=")
+    assert controller.last_error.endswith("track 1 (wood)")
 
 
 def test_grasp_yaw_is_across_the_narrow_side() -> None:
