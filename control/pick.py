@@ -56,6 +56,7 @@ from control.poses import (
     best_grasp_yaw,
     drop_point,
     drop_pose,
+    meeting_lead_s,
     solve_meeting,
 )
 from control.scheduler import (
@@ -819,9 +820,9 @@ class PickController:
     def _correct_joint_approach(self, now: TickInput) -> None:
         """Re-plan the joint-space approach when the target's latest prediction moved its
         meeting point by more than half ``pick.arrive_tolerance_m``: the same arrival time, the
-        grasp yaw of the plan, from the joint planner's current state. Like the Cartesian goals,
-        the meeting point is the object's when the command takes effect (``command_latency_s``
-        after the tick).
+        grasp yaw of the plan, from the joint planner's current state. The meeting point is
+        the object's :func:`~control.poses.meeting_lead_s` after the arrival, where the
+        hand-over to the Cartesian approach looks for it.
 
         The move is planned on a young track, whose velocity is still a few percent off: at
         0.6 m/s the meeting point moves by 1-2 cm while the arm travels, and the arm would reach
@@ -835,7 +836,7 @@ class PickController:
             return
         goal = approach.goal
         remaining_s = goal.arrive_s - now.t_s
-        arrive_cmd_s = goal.arrive_s + cfg.motion.command_latency_s  # as the Cartesian goals
+        arrive_cmd_s = goal.arrive_s + meeting_lead_s(cfg)  # where the hand-over checks it
         obj = self._object_state(arrive_cmd_s, now.belt_velocity_mps, now_s=now.t_s)
         if obj is None or remaining_s <= JOINT_REPLAN_UNTIL_S or goal.dq is None:
             return

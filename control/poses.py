@@ -83,6 +83,16 @@ def _turned_ready(
     return seed
 
 
+def meeting_lead_s(config: ControllerConfig) -> float:
+    """How far ahead of a tick (s) the object's prediction is that the setpoint must be on when
+    the joint-space approach hands over to the Cartesian one: the Cartesian goal is the object
+    ``motion.command_latency_s`` on, and the arrival check compares the setpoint with that goal
+    one control period back (``PickController._arrived``). Aimed elsewhere, the hand-over starts
+    ``v`` times the difference off (5 mm at 0.6 m/s), and the Cartesian approach spends up to
+    0.6 s catching up with the object instead of descending."""
+    return config.motion.command_latency_s - config.motion.control_period_s
+
+
 def solve_meeting(
     track: Track,
     t_s: float,
@@ -109,15 +119,16 @@ def solve_meeting(
     vx, vy = track.velocity_mps
     z = approach_z_m(track, config)
     dt_s = JOINT_APPROACH_GUESS_S
+    lead_s = meeting_lead_s(config)
     near = nearest_grasp_yaw(track.yaw_rad, tcp_yaw_rad, period_rad)
     yaws: tuple[float, ...] = (near, near + period_rad)
     if period_rad == 0.0:
-        x, y = grasp_xy_at(track, config, t_s + dt_s)
+        x, y = grasp_xy_at(track, config, t_s + dt_s + lead_s)
         yaws = (yaw_of(kinematics.fk(_turned_ready(kinematics, config, q_ready, x, y))),)
     q_goal: FloatArray | None = None
     yaw_goal = near
     for _ in range(5):
-        x, y = grasp_xy_at(track, config, t_s + dt_s)
+        x, y = grasp_xy_at(track, config, t_s + dt_s + lead_s)
         seed = _turned_ready(kinematics, config, q_ready, x, y) if q_goal is None else q_goal
         best = _best_pose(kinematics, (x, y, z), yaws, seed, q_now)
         if best is None:
@@ -133,7 +144,7 @@ def solve_meeting(
         if abs(dt_s - previous_s) < 0.005:
             break
     assert q_goal is not None  # the first iteration returned or set it
-    x, y = grasp_xy_at(track, config, t_s + dt_s)
+    x, y = grasp_xy_at(track, config, t_s + dt_s + lead_s)
     result = kinematics.solve(tool_pose((x, y, z), yaw_goal), q_goal)
     if not result.success:
         return None
