@@ -162,12 +162,13 @@ class Robot:
             if qd is None
             else np.clip(np.asarray(qd, dtype=float), -self.limits.velocity, self.limits.velocity)
         )
-        self._since_command_s = min(max(age_s, 0.0), HOLD_S)
+        age_s = max(age_s, 0.0)
+        self._since_command_s = min(age_s, HOLD_S)
         self._q_target = self._q_command.copy()
         if self._since_command_s > 0.0 and self._qd_target.any():
             q_now = self._q_command + self._qd_target * self._since_command_s
             self._q_target = np.clip(q_now, self.limits.lower, self.limits.upper)
-        self.limiter.command(self._q_command, self._qd_target, age_s=max(age_s, 0.0))
+        self.limiter.command(self._q_command, self._qd_target, age_s=age_s)
         self._changed = True
 
     @property
