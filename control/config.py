@@ -327,6 +327,9 @@ class SchedulerConfig:
     in the window first, so that fewer objects pass) or ``cycle`` (the least time to meet the
     object and carry it to its bin first, so that more objects are picked per minute; objects
     near the end of the window are left to stations downstream).
+    ``settle_tolerance_mps``: a track whose velocity differs from the belt's measured one by
+    more than this is left ``unsettled`` until it agrees (:func:`control.scheduler.unsettled`;
+    unset: every track counts as settled).
     ``replan_period_s``: a station that found no target looks again only that much later (0:
     every control update); with joint-space approaches every candidate's meeting is an IK
     solve and a joint plan, and the tracks change only with the camera's frames.
@@ -343,6 +346,7 @@ class SchedulerConfig:
     class_density_kg_m3: dict[str, float] = field(default_factory=dict)
     fill_fraction: float = 0.85
     carry_acceleration_mps2: float = 10.0
+    settle_tolerance_mps: float = math.inf
     replan_period_s: float = 0.0
 
     def __post_init__(self) -> None:
@@ -355,6 +359,12 @@ class SchedulerConfig:
         )
         _require(
             self.rank in RANKS, "scheduler.rank", self.rank, f"must be one of {', '.join(RANKS)}"
+        )
+        _require(
+            self.settle_tolerance_mps > 0.0,
+            "scheduler.settle_tolerance_mps",
+            self.settle_tolerance_mps,
+            "must be > 0 (unset: every track counts as settled)",
         )
         for name, value in self.class_density_kg_m3.items():
             _require(

@@ -65,6 +65,7 @@ from control.scheduler import (
     grasp_height_m,
     nearest_grasp_yaw,
     schedule,
+    unsettled,
 )
 from control.tracking import Track
 
@@ -468,7 +469,7 @@ class PickController:
     # -- phase handlers -----------------------------------------------------------------------
     def _on_idle(self, now: TickInput) -> Goal | Transition:
         """At the ready pose: choose a target."""
-        self._schedule(now.t_s, now.tracks)
+        self._schedule(now.t_s, now.tracks, now.belt_velocity_mps)
         if self._phase != Phase.IDLE:
             return Transition(phase=self._phase, tracks=now.tracks)
         return Goal(target=JointGoal(q=self.q_ready))
@@ -481,7 +482,7 @@ class PickController:
             or pick.approach_space == "joint"
         )
         if almost_ready:
-            self._schedule(now.t_s, now.tracks)
+            self._schedule(now.t_s, now.tracks, now.belt_velocity_mps)
             if self._phase != Phase.RETURN:
                 return Transition(phase=self._phase, tracks=now.tracks)
         goal = JointGoal(q=self.q_ready)
@@ -755,7 +756,9 @@ class PickController:
         self._set_phase(Phase.CARRY, t_s)
 
     # -- targets ------------------------------------------------------------------------------
-    def _schedule(self, t_s: float, tracks: Sequence[Track]) -> None:
+    def _schedule(
+        self, t_s: float, tracks: Sequence[Track], belt_velocity_mps: tuple[float, float]
+    ) -> None:
         if t_s < self._next_schedule_s:
             return  # found nothing a moment ago (``scheduler.replan_period_s``)
         estimate = None
@@ -774,7 +777,7 @@ class PickController:
             excluded_ids=book.excluded | book.targeted_ids,
             tcp_yaw_rad=self._planner.state.position[3],
             approach_estimate=estimate,
-            allow=self._allocator.chooser(t_s),
+            allow=self._chooser(t_s, belt_velocity_mps),
         )
         for item in result.untargeted:
             if item.track_id not in book.targeted_ids:
@@ -783,6 +786,20 @@ class PickController:
             self._start_pick(result.target, result, t_s)
         else:
             self._next_schedule_s = t_s + self._cfg.scheduler.replan_period_s - 1e-9
+
+    def _chooser(
+        self, t_s: float, belt_velocity_mps: tuple[float, float]
+    ) -> Callable[[Track], str | None]:
+        """The scheduler's ``allow``: ``unsettled`` (:func:`~control.scheduler.unsettled`),
+        else the line's allocation."""
+        allocation = self._allocator.chooser(t_s)
+
+        def allow(track: Track) -> str | None:
+            if unsettled(track, belt_velocity_mps, self._cfg):
+                return "unsettled"
+            return allocation(track)
+
+        return allow
 
     def _joint_meeting(self, track: Track, t_s: float) -> JointApproach | None:
         """:func:`~control.poses.solve_meeting` from the current joint state, cached per track

@@ -33,6 +33,7 @@ UNTARGETED_REASONS: tuple[str, ...] = (
     "too_tilted",
     "too_heavy",
     "excluded",
+    "unsettled",
     "claimed_by_other",
     "left_for_downstream",
     "too_late",
@@ -380,6 +381,20 @@ def _static_reason(
     return None
 
 
+def unsettled(
+    track: Track, belt_velocity_mps: tuple[float, float], config: ControllerConfig
+) -> bool:
+    """The track's velocity differs from the belt's measured ``(vx, vy)`` by more than
+    ``scheduler.settle_tolerance_mps``: an object still sliding or tumbling, or a young track
+    whose velocity has not converged, whose prediction misses the meeting point by
+    centimetres at speed (False when the belt's velocity is not known). Such a track is left
+    ``unsettled`` and considered again at the next update."""
+    if not all(math.isfinite(v) for v in belt_velocity_mps):
+        return False
+    dv = math.dist(track.velocity_mps, belt_velocity_mps)
+    return dv > config.scheduler.settle_tolerance_mps
+
+
 def _timing_reason(
     track: Track,
     now_s: float,
@@ -434,7 +449,8 @@ def schedule(
     ``approach_estimate(track)``, when given, replaces :func:`approach_time_s` as the time (s)
     until the arm can be above the track (``inf`` when it cannot): the joint-space approach
     estimates its own move. ``allow(track)``, when given, is the line's allocation: the reason
-    this station must leave the track to another (:mod:`control.allocation`), or None.
+    this station must leave the track to another (:mod:`control.allocation`), or None (it may
+    also say ``unsettled``, :func:`unsettled`).
     """
     x_max = config.pick_window_x_m[1]
     ranked: list[tuple[tuple[float, float, float, int], Track, float, float]] = []

@@ -104,8 +104,14 @@ class ParallelJaw:
         return None
 
     def grasp_offset_m(self, track: Track) -> tuple[float, float]:
-        """The jaws close about the object's centre."""
-        del track
+        """The jaws close about the object's centre, unless the camera's suction point (the
+        centre of the largest disc on the top face) lies further from it than that disc's
+        radius: then the centre may lie off the piece (a bent or hooked piece's centroid is in
+        its crook, where the jaws close on nothing), and they close about the suction point,
+        which is on it."""
+        dx_m, dy_m = track.suction_offset_m
+        if math.hypot(dx_m, dy_m) > track.suction_radius_m:  # False for NaN
+            return (dx_m, dy_m)
         return (0.0, 0.0)
 
     def grasp_drop_m(self, track: Track) -> float:

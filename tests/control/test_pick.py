@@ -76,6 +76,27 @@ def test_joint_space_approach_meets_the_object_and_picks_it(speed_mps: float) ->
     assert result.stats.errors == {}
 
 
+def test_a_station_waits_for_a_track_to_move_with_the_belt_before_it_meets_it() -> None:
+    """With ``scheduler.settle_tolerance_mps`` a track whose estimate is 0.15 m/s off the
+    belt's measured speed is left ``unsettled`` (the arm stays at the ready pose); once the
+    estimate agrees with the belt (0.1 s later), the station goes for it."""
+    base = ControllerConfig()
+    config = replace(base, scheduler=replace(base.scheduler, settle_tolerance_mps=0.08))
+    controller = PickController(config)
+    unsettled_then: list[bool] = []
+
+    def tracks_at(t_s: float) -> tuple[Track, ...]:
+        unsettled_then.append("unsettled" in controller.stats().untargeted)
+        vx = 0.4 if t_s >= 0.1 else 0.25
+        return (replace(_track(-0.45, t_s), velocity_mps=(vx, 0.0)),)
+
+    commands = _drive(controller, tracks_at, 140)
+    first = next(c.t_s for c in commands if c.phase != Phase.IDLE)
+    assert 0.1 <= first < 0.12  # unset, the station goes at once (t = 0)
+    assert any(unsettled_then)  # while the estimate was off
+    assert "unsettled" not in controller.stats().untargeted  # targeted in the end
+
+
 def test_full_pick_drops_into_the_class_bin() -> None:
     config = ControllerConfig()
     result = run_episode(0.4, seed=2, duration_s=6.5)

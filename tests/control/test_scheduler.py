@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from control.config import ControllerConfig, SchedulerConfig
+from control.errors import ControlConfigError
 from control.scheduler import (
     UNTARGETED_REASONS,
     approach_time_s,
@@ -20,6 +21,7 @@ from control.scheduler import (
     grasp_z_m,
     move_time_s,
     schedule,
+    unsettled,
     yaw_turn_s,
 )
 from control.tracking import Track
@@ -348,3 +350,22 @@ def test_a_cup_leaves_a_propped_piece_whose_face_is_tilted_beyond_its_lip() -> N
     assert _reasons(result.untargeted) == {1: "too_tilted"}
     assert result.target is not None
     assert result.target.track_id == 2
+
+
+def test_a_track_moving_off_the_belts_speed_is_unsettled_when_the_line_says_so() -> None:
+    """``scheduler.settle_tolerance_mps``: a track whose velocity differs from the belt's
+    measured one by more than it (a young track's estimate, a piece still sliding) is not met
+    yet; unset, every track counts as settled, and so does every track while the belt's
+    velocity is unknown."""
+    base = ControllerConfig()
+    line = replace(base, scheduler=replace(base.scheduler, settle_tolerance_mps=0.08))
+    young = _track(1, -0.3, vx=0.45)
+    settled = _track(2, -0.3, vx=0.55)
+    assert unsettled(young, (0.6, 0.0), line)
+    assert not unsettled(settled, (0.6, 0.0), line)
+    assert unsettled(replace(settled, velocity_mps=(0.6, 0.1)), (0.6, 0.0), line)  # sideways
+    assert not unsettled(young, (0.6, 0.0), base)
+    assert not unsettled(young, (math.nan, math.nan), line)
+    assert "unsettled" in UNTARGETED_REASONS
+    with pytest.raises(ControlConfigError, match="settle_tolerance_mps"):
+        replace(base.scheduler, settle_tolerance_mps=0.0)

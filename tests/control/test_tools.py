@@ -139,8 +139,21 @@ def test_a_cup_fits_by_the_disc_the_camera_reports_on_the_top_and_grasps_at_its_
     assert cup.grasp_offset_m(track) == (-0.03, 0.01)
     assert cup.grasp_offset_m(_track(1, 0.5)) == (0.0, 0.0)
     jaws = make_tool(XARM)
-    assert jaws.grasp_offset_m(track) == (0.0, 0.0)
     assert jaws.misfit(**size, face_radius_m=0.001) == jaws.misfit(**size)
+
+
+def test_jaws_close_about_the_centre_unless_it_may_lie_off_the_piece() -> None:
+    """The jaws close about the object's centre while the centre lies inside the largest disc
+    the camera reports on the top (the material is there); a bent piece's centre lies in its
+    crook, further from the disc's centre than its radius, and the jaws close about the disc's
+    centre instead (the piece is there). No disc reported: the centre."""
+    jaws = make_tool(XARM)
+    level = _track(1, 0.5)
+    inside = replace(level, suction_offset_m=(-0.02, 0.01), suction_radius_m=0.03)
+    bent = replace(level, suction_offset_m=(-0.05, 0.02), suction_radius_m=0.025)
+    assert jaws.grasp_offset_m(inside) == (0.0, 0.0)
+    assert jaws.grasp_offset_m(bent) == (-0.05, 0.02)
+    assert jaws.grasp_offset_m(level) == (0.0, 0.0)
 
 
 def test_cup_and_jaws_go_down_to_the_suction_point_on_a_tipped_piece() -> None:
