@@ -92,9 +92,12 @@ def test_a_station_waits_for_a_track_to_move_with_the_belt_before_it_meets_it() 
 
     commands = _drive(controller, tracks_at, 140)
     first = next(c.t_s for c in commands if c.phase != Phase.IDLE)
-    assert 0.1 <= first < 0.12  # unset, the station goes at once (t = 0)
+    assert 0.1 <= first < 0.12
     assert any(unsettled_then)  # while the estimate was off
     assert "unsettled" not in controller.stats().untargeted  # targeted in the end
+    # unset (the default), the same track is met at once, its estimate off or not
+    unset = _drive(PickController(base), tracks_at, 20)
+    assert next(c.t_s for c in unset if c.phase != Phase.IDLE) < 0.01
 
 
 def test_full_pick_drops_into_the_class_bin() -> None:
