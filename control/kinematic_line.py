@@ -34,7 +34,7 @@ from control.allocation import Claim
 from control.config import ControllerConfig, TrackingConfig
 from control.ik import Kinematics, yaw_of
 from control.kinematic_sim import CameraSpec
-from control.pick import PickController, PickStats, TcpMeasurement
+from control.pick import Phase, PickController, PickStats, TcpMeasurement
 from control.tracking import Detection, Tracker
 from interfaces.cell import Cell
 from interfaces.tools import ParallelJawSpec, SuctionCupSpec
@@ -127,7 +127,9 @@ class LineResult:
     them, however far they were); ``dropped`` objects let go outside the bins and the belt;
     ``lost`` objects that passed the end of the belt; ``stats`` each station's controller
     counters; ``relayed_claims`` every claim relayed, in order; ``phase_s`` per station the
-    time spent in each phase of the pick sequence.
+    time spent in each phase of the pick sequence; ``approach_strikes`` per station the objects
+    its tool ran into on the way to a target (:func:`_strikes`: nothing here pushes them, in
+    the twin the tool would have).
     """
 
     duration_s: float
@@ -141,6 +143,7 @@ class LineResult:
     stats: dict[str, PickStats]
     relayed_claims: tuple[Claim, ...]
     phase_s: dict[str, dict[str, float]] = field(default_factory=dict)
+    approach_strikes: dict[str, int] = field(default_factory=dict)
 
     @property
     def recovery(self) -> float:
@@ -249,6 +252,8 @@ class _Station:
         self.tool = _Tool(spec=config.station.tool, value=open_value, command=open_value)
         self.placed = 0
         self.phase_s: dict[str, float] = {}
+        self.phase = Phase.IDLE
+        self.struck: set[int] = set()
 
     def tcp(self) -> tuple[Vec3, float]:
         """The TCP now (the command of ``command_latency_s`` ago) and its yaw."""
@@ -449,16 +454,34 @@ def _step_station(
 ) -> tuple[Claim, ...]:
     """One control period of a station; the claims it made."""
     tcp, yaw = station.tcp()
+    if station.phase is Phase.APPROACH:
+        station.struck.update(_strikes(station, world, tcp, t_s))
     _step_tool(station, world, tcp, t_s, dt_s)
     measured = TcpMeasurement(position_m=tcp, yaw_rad=yaw, tool_measured=station.tool.value)
     command = station.controller.update(
         t_s, measured, tracker.predict_to(t_s), (world.speed_mps, 0.0)
     )
     station.tool.command = command.tool_command
+    station.phase = command.phase
     phase = str(command.phase)
     station.phase_s[phase] = station.phase_s.get(phase, 0.0) + dt_s
     station.in_flight.append(np.asarray(command.joint_positions_rad))
     return command.claims
+
+
+def _strikes(station: _Station, world: _World, tcp: Vec3, t_s: float) -> list[int]:
+    """The objects on the belt the tool is in now: the TCP below an object's top with the
+    tool's body over its footprint (a suction cup's stem disc, ``body_radius_m``; a gripper's
+    TCP point). Asked during the approach, where the tool should pass above everything."""
+    spec = station.tool.spec
+    radius_m = spec.body_radius_m if isinstance(spec, SuctionCupSpec) else 0.0
+    return [
+        body.index
+        for body in world.bodies
+        if body.state == "belt"
+        and tcp[2] < world.top_z(body)
+        and body.holds_point(tcp[0], tcp[1], t_s, world.speed_mps) >= -radius_m
+    ]
 
 
 def _result(
@@ -490,4 +513,5 @@ def _result(
         stats={s.name: s.controller.stats() for s in stations},
         relayed_claims=tuple(board.relayed),
         phase_s={s.name: dict(s.phase_s) for s in stations},
+        approach_strikes={s.name: len(s.struck) for s in stations},
     )
