@@ -15,7 +15,7 @@ of every run are pooled and grouped by belt speed. Figures:
 5. tracking time to 4 mm per speed, one dot per settled pursuit (``summary.json``,
    ``tracking.tracking_times_s``), settled/pursuits noted above each speed;
 6. success and miss rate per speed with 95 % Wilson score intervals over the pooled counts
-   (``success_rate`` = placed_correct / targeted, ``miss_rate`` = missed / processed: the
+   (``success_rate`` = sorted / targeted, ``miss_rate`` = missed / processed: the
    metric table's rates, ``docs/metrics.md``);
 7. line recovery against the number of stations of the run's cell, one line per belt speed:
    the mean over the episodes (seeds) with its 95 % Student t interval
@@ -291,6 +291,7 @@ def load_runs(paths: Sequence[Path]) -> RunData:
 COUNT_KEYS = (
     "picked",
     "placed_correct",
+    "sorted",
     "targeted",
     "missed",
     "processed",

@@ -26,7 +26,7 @@ class (``aggregate.classes``):
 
 - every metric of the table (``docs/metrics.md``): Student t interval over the cell's
   episodes, ``mean +- t(0.975, n-1) * s / sqrt(n)`` (none for n < 2);
-- every rate of the table (a ratio of two counts, such as ``success_rate``, placed_correct of
+- every rate of the table (a ratio of two counts, such as ``success_rate``, sorted of
   targeted, and ``miss_rate``, missed of processed) also as a Wilson score interval over the
   counts pooled across the episodes, which stays inside [0, 1] and is meaningful with few
   episodes;

@@ -144,6 +144,15 @@ METRICS: tuple[Metric, ...] = (
         scopes=BIN_SCOPES,
     ),
     Metric(
+        name="sorted",
+        unit="objects",
+        formula="objects a tool picked (`pick_success`) and let go into their class's bin "
+        "(`placed_correct` less the pieces that got there unpicked, with another or knocked in, "
+        "and the ones dropped on the way that fell in)",
+        kind="count",
+        scopes=EVENT_SCOPES,
+    ),
+    Metric(
         name="recovered",
         unit="objects",
         formula="objects of the complete cohort (`entered`) that came to rest in their class's "
@@ -231,9 +240,9 @@ METRICS: tuple[Metric, ...] = (
     Metric(
         name="success_rate",
         unit="1",
-        formula="placed_correct / targeted",
+        formula="sorted / targeted",
         kind="rate",
-        ratio_of=("placed_correct", "targeted"),
+        ratio_of=("sorted", "targeted"),
     ),
     Metric(
         name="throughput_per_min",
@@ -362,6 +371,7 @@ class Counts:
     lost: int = 0
     placed: int = 0
     placed_correct: int = 0
+    sorted: int = 0
     recovered: int = 0
     binned: int = 0
     dropped: int = 0
@@ -413,6 +423,8 @@ class _Tally:
     fate: dict[int, str] = field(default_factory=dict)
     placed: set[int] = field(default_factory=set)
     placed_correct: dict[int, str] = field(default_factory=dict)
+    carried: set[int] = field(default_factory=set)
+    sorted: set[int] = field(default_factory=set)
     binned: set[int] = field(default_factory=set)
     drops: list[str] = field(default_factory=list)
     unintended: int = 0
@@ -429,6 +441,7 @@ def _count_fate(tally: _Tally, event: Event, *, station: str | None, line_exit: 
         tally.spawned_at_s.setdefault(oid, event.time_s)
     elif kind is EventType.PICK_SUCCESS:
         tally.fate[oid] = "picked"
+        tally.carried.add(oid)
     elif kind is EventType.MISSED:
         if station is not None or line_exit is None or station_of(event) in (None, line_exit):
             tally.fate.setdefault(oid, "missed")
@@ -437,10 +450,13 @@ def _count_fate(tally: _Tally, event: Event, *, station: str | None, line_exit: 
             tally.fate[oid] = "lost"
         if kind is EventType.PICK_DROPPED:
             tally.drops.append(drop_reason(event))
+            tally.carried.discard(oid)
     elif kind is EventType.PLACED_IN_BIN:
         tally.placed.add(oid)
         if event.data.get("correct"):
             tally.placed_correct[oid] = event.class_name
+            if oid in tally.carried:
+                tally.sorted.add(oid)
     elif kind is EventType.UNINTENDED_CONTACT:
         tally.unintended += 1
 
@@ -527,6 +543,7 @@ def count_events(
         lost=outcomes.count("lost"),
         placed=len(tally.placed),
         placed_correct=len(tally.placed_correct),
+        sorted=len(tally.sorted),
         recovered=len(recovered),
         binned=len(tally.binned),
         dropped=len(tally.drops),
@@ -573,6 +590,7 @@ def _count_values(counts: Counts) -> dict[str, float]:
         "lost": counts.lost,
         "placed": counts.placed,
         "placed_correct": counts.placed_correct,
+        "sorted": counts.sorted,
         "recovered": counts.recovered,
         "binned": counts.binned,
     }
@@ -593,6 +611,7 @@ def event_scores(counts: Counts) -> dict[str, Any]:
         "lost": counts.lost,
         "placed": counts.placed,
         "placed_correct": counts.placed_correct,
+        "sorted": counts.sorted,
         "recovered": counts.recovered,
         "binned": counts.binned,
         "dropped": counts.dropped,
@@ -749,9 +768,7 @@ def controller_scores(counts: Counts, targeted: int) -> dict[str, float]:
     """The metrics that need the controllers' ``targeted`` count."""
     minutes = counts.duration_s / 60.0
     return {
-        "success_rate": rate(
-            "success_rate", {"placed_correct": counts.placed_correct, "targeted": targeted}
-        ),
+        "success_rate": rate("success_rate", {"sorted": counts.sorted, "targeted": targeted}),
         "throughput_per_min": ratio(counts.placed_correct, minutes),
     }
 

@@ -32,6 +32,7 @@ def _row(placed: int, targeted: int, missed: int, processed: int, **extra: float
     return {
         "picked": placed,
         "placed_correct": placed,
+        "sorted": placed,
         "targeted": targeted,
         "missed": missed,
         "processed": processed,
@@ -106,7 +107,7 @@ def test_the_sweep_aggregates_every_line_metric_of_the_table_and_pools_every_rat
     assert {
         m.name: m.ratio_of for m in METRICS if m.kind == "rate" and "line" in m.scopes
     } == WILSON_RATES
-    assert WILSON_RATES["success_rate"] == ("placed_correct", "targeted")
+    assert WILSON_RATES["success_rate"] == ("sorted", "targeted")
     assert WILSON_RATES["pick_success_rate"] == ("picked", "processed")
 
 

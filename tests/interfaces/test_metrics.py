@@ -137,6 +137,29 @@ def test_nothing_happened_gives_zero_rates_not_errors() -> None:
     assert controller_scores(count_events([], 0.0), targeted=0)["success_rate"] == 0.0
 
 
+def test_success_counts_only_what_a_tool_picked_and_let_go_into_its_bin() -> None:
+    """A piece carried into the bin along with the target, or knocked in, and one dropped on
+    the way that fell in, lie in their class's bin (``placed_correct``) but were not sorted by a
+    pick: the success rate's numerator leaves them out."""
+    events = [
+        _e(E.PICK_SUCCESS, 1, "brick", station="s1"),
+        _e(E.PLACED_IN_BIN, 1, "brick", bin="brick", correct=True, station="s1"),
+        _e(E.PLACED_IN_BIN, 2, "brick", bin="brick", correct=True, station="s1"),  # carried in
+        _e(E.PICK_SUCCESS, 3, "wood", station="s1"),
+        _e(E.PICK_DROPPED, 3, "wood", station="s1", reason="suction_overload"),
+        _e(E.PLACED_IN_BIN, 3, "wood", bin="wood", correct=True, station="s1"),  # fell in
+        _e(E.PICK_SUCCESS, 4, "wood", station="s1"),
+        _e(E.PLACED_IN_BIN, 4, "wood", bin="brick", correct=False, station="s1"),
+    ]
+    counts = count_events(events, 60.0)
+    assert (counts.placed, counts.placed_correct, counts.sorted) == (4, 3, 1)
+    assert event_scores(counts)["sorted"] == 1
+    # the station targeted 1, 3 and 4: one of three sorted (placed_correct would say 3 of 3)
+    assert controller_scores(counts, targeted=3)["success_rate"] == pytest.approx(1 / 3)
+    assert count_events(events, 60.0, station="s1").sorted == 1
+    assert count_events(events, 60.0, class_name="wood").sorted == 0
+
+
 def _two_stations() -> list[Event]:
     up, down = {"station": "upstream"}, {"station": "downstream"}
     return [
