@@ -252,7 +252,6 @@ class _Station:
         self.tool = _Tool(spec=config.station.tool, value=open_value, command=open_value)
         self.placed = 0
         self.phase_s: dict[str, float] = {}
-        self.phase = Phase.IDLE
         self.struck: set[int] = set()
 
     def tcp(self) -> tuple[Vec3, float]:
@@ -454,7 +453,7 @@ def _step_station(
 ) -> tuple[Claim, ...]:
     """One control period of a station; the claims it made."""
     tcp, yaw = station.tcp()
-    if station.phase is Phase.APPROACH:
+    if station.controller.phase is Phase.APPROACH:  # the phase the TCP is moving in
         station.struck.update(_strikes(station, world, tcp, t_s))
     _step_tool(station, world, tcp, t_s, dt_s)
     measured = TcpMeasurement(position_m=tcp, yaw_rad=yaw, tool_measured=station.tool.value)
@@ -462,7 +461,6 @@ def _step_station(
         t_s, measured, tracker.predict_to(t_s), (world.speed_mps, 0.0)
     )
     station.tool.command = command.tool_command
-    station.phase = command.phase
     phase = str(command.phase)
     station.phase_s[phase] = station.phase_s.get(phase, 0.0) + dt_s
     station.in_flight.append(np.asarray(command.joint_positions_rad))
