@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from interfaces.cell import CameraSpec
+from interfaces.detections import Detection, DetectionFrame, wrap_half_pi
 from twin.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -96,47 +97,6 @@ class PerceptionConfig:
             return 1.0
         k = self.confidence_concentration
         return float(rng.beta(k * mean, k * (1.0 - mean)))
-
-
-@dataclass(frozen=True)
-class Detection:
-    """One detected object (world frame). ``z_m`` is its underside: the belt surface, or the top of
-    the object it lies on (what a depth camera sees around it). ``suction_point_m`` and
-    ``suction_radius_m``: where a round cup fits best on its top face and the largest lip radius
-    that fits there (:mod:`twin.suction_point`), ``suction_tilt_rad`` that face's tilt from
-    level; NaN when the camera reports none."""
-
-    class_name: str
-    confidence: float
-    x_m: float
-    y_m: float
-    z_m: float
-    yaw_rad: float
-    length_m: float
-    width_m: float
-    height_m: float
-    suction_point_m: tuple[float, float, float] = (math.nan, math.nan, math.nan)
-    suction_radius_m: float = math.nan
-    suction_tilt_rad: float = math.nan
-
-
-@dataclass(frozen=True)
-class DetectionFrame:
-    """The detections of one capture."""
-
-    capture_time_s: float
-    release_time_s: float
-    detections: tuple[Detection, ...]
-
-
-def wrap_half_pi(angle_rad: float) -> float:
-    """An axis direction folded into (-pi/2, pi/2]."""
-    a = math.fmod(angle_rad, math.pi)
-    if a <= -math.pi / 2:
-        a += math.pi
-    elif a > math.pi / 2:
-        a -= math.pi
-    return a
 
 
 class Perception:

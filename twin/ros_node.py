@@ -73,6 +73,8 @@ from interfaces import cdr
 from interfaces import contract as c
 from interfaces.class_colours import class_rgb, dataset_class_rgb
 from interfaces.contract import Topic
+from interfaces.detections import Detection as PerceivedDetection
+from interfaces.detections import DetectionFrame
 from interfaces.events import Event
 from interfaces.inproc import Bus, InprocLogger, WireExact
 from interfaces.ros import RosWire, message_class, msg_stamp_ns, msg_stamp_s, time_msg
@@ -88,8 +90,6 @@ from twin.commands import (
 )
 from twin.link_visuals import link_visuals
 from twin.monitor import GroundTruth
-from twin.perception import Detection as PerceivedDetection
-from twin.perception import DetectionFrame
 from twin.sim import ArmCommand, Twin
 from twin.station import Station
 from twin.target_metric import PURSUIT_PHASES

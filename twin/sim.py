@@ -45,6 +45,7 @@ import numpy as np
 import pybullet as pb
 
 from interfaces.cell import Cell, DriveSpec
+from interfaces.detections import DetectionFrame
 from interfaces.events import Event, EventType
 from interfaces.metrics import Counts, count_events, event_scores, exit_station
 from twin.belt_drive import BeltDrive, BeltState
@@ -52,7 +53,7 @@ from twin.builtin import cache_root
 from twin.errors import ConfigError
 from twin.monitor import GroundTruth, Monitor
 from twin.objects import ImageLayout, ObjectSpec, load_dataset, read_obj_triangles
-from twin.perception import DetectionFrame, Perception, PerceptionConfig
+from twin.perception import Perception, PerceptionConfig
 from twin.scenario import PerturbationLevel, Scenario, scenario_cell, seed_tree
 from twin.station import ArmCommand, Station
 from twin.stream import ImageBatch, Stream
