@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -31,6 +32,16 @@ SKIP_REASONS: dict[str, str] = {
 }
 """Every skip reason the pipeline reports, with its meaning."""
 
+WARNING_REASONS: dict[str, str] = {
+    "photo_missing": "no photo found for the image: its pieces carry a procedural texture",
+    "photo_unreadable": "the photo cannot be read or decoded: procedural texture instead",
+    "photo_size_mismatch": "the photo's size is not the annotation's: procedural texture instead",
+    "height_image_unreadable": "the height image cannot be read: the image's heights are sampled",
+    "height_image_size_mismatch": "the height image's size is not the annotation's: sampled",
+    "height_not_above_belt": "no level above the belt inside the piece: its height is sampled",
+}
+"""Every warning reason: something was made differently than asked, but the meshes were written."""
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Skip:
@@ -45,6 +56,38 @@ class Skip:
         """Human-readable warning line naming file, line and reason."""
         loc = f"{self.file}:{self.where}" if self.where else self.file
         return f"{loc}: skipped ({self.reason}): {self.detail}"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Notice:
+    """One warning about an image or object: where (file and shape) and what was done instead.
+
+    Unlike a :class:`Skip`, nothing is left out: the meshes are written (see
+    :data:`WARNING_REASONS`).
+    """
+
+    file: str
+    where: str
+    reason: str
+    detail: str
+
+    def message(self) -> str:
+        """Human-readable warning line naming file, place and reason."""
+        loc = f"{self.file}:{self.where}" if self.where else self.file
+        return f"{loc}: {self.reason}: {self.detail}"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PhotoRef:
+    """Where the photo an annotation was drawn on is: a file, or bytes embedded in the annotation.
+
+    Exactly one of ``path`` and ``data`` is set; ``name`` says where it came from in messages
+    (a path relative to the dataset, or ``labelme/x.json imageData``).
+    """
+
+    name: str
+    path: Path | None = None
+    data: bytes | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -63,7 +106,11 @@ class RawPolygon:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ImageAnnotation:
-    """All polygons of one image plus the image size in pixels and the skips found while parsing."""
+    """All polygons of one image plus the image size in pixels and the skips found while parsing.
+
+    ``photo`` is the image's photo when the dataset has it (:mod:`meshgen.photos`), else None
+    and ``photo_searched`` says where it was looked for.
+    """
 
     stem: str
     source: str
@@ -71,3 +118,5 @@ class ImageAnnotation:
     height_px: int
     polygons: tuple[RawPolygon, ...]
     skips: tuple[Skip, ...] = field(default=())
+    photo: PhotoRef | None = None
+    photo_searched: str = ""

@@ -9,8 +9,8 @@ topology-preserving ``simplify`` with the same tolerance, ``orient``, shapely ar
 engine), a translation to the centre of mass, and trimesh's own OBJ export written to
 ``<image_stem>/<object_id>.obj``; one ``scene.csv`` per image with the same columns. Files are
 written with the same one-call writer as the pipeline. It writes no convex decomposition, no
-scene.json, index, summary or materials and uses no staging folder, so it does less than the
-pipeline and the comparison is conservative for the pipeline.
+scene.json, index, summary, materials or textures (nor texture coordinates) and uses no staging
+folder, so it does less than the pipeline and the comparison is conservative for the pipeline.
 """
 
 from __future__ import annotations
@@ -107,6 +107,8 @@ def run_baseline(dataset: Path, out: Path, config: MeshgenConfig) -> tuple[int, 
                     1,
                     1.0,
                     "",
+                    "",
+                    "sampled",
                 )
             )
             objects += 1

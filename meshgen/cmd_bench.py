@@ -62,7 +62,7 @@ BASELINE = (
     "area/centroid/minimum_rotated_rectangle; trimesh.creation.extrude_polygon(engine='earcut'), "
     "translation to the centre of mass, trimesh.exchange.obj.export_obj written to <id>.obj; "
     "plus one scene.csv per image (same columns). No convex decomposition, scene.json, index, "
-    "summary or staging folder (work the pipeline does on top)."
+    "summary, textures, texture coordinates or staging folder (work the pipeline does on top)."
 )
 """What ``baseline`` means in the JSON (see :mod:`meshgen.baseline`)."""
 

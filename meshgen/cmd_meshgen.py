@@ -3,8 +3,16 @@
 Example::
 
     cdw-twin meshgen data/sample --out out/meshes --json
+    cdw-twin meshgen PATH/cdw_stacked_sample --out out/real --heights auto   # heights/ images
+    cdw-twin meshgen data/sample --out out/plain --no-textures    # no texture.jpg, no vt lines
 
-Every skipped object or file is printed to stderr as a warning naming file, line and reason.
+Every piece is textured (:mod:`meshgen.textures`): its image's photo when the dataset has it,
+else a procedural picture of its pieces.
+
+Every skipped object or file is printed to stderr as a warning naming file, line and reason,
+and so is everything made otherwise than asked (a procedural texture for an image without a
+usable photo, a sampled height where a height image gives none); those are not skips: the
+meshes are written, and ``--strict`` does not count them.
 Exit status 0 when objects were produced, 1 when nothing was produced or, with ``--strict``,
 when anything was skipped, 2 on a usage error (an ``--out`` that may not be replaced, see
 :mod:`meshgen.outdir`), 130 when interrupted by Ctrl-C or SIGTERM: the summary of the images
@@ -22,6 +30,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from meshgen.config import MeshgenConfig
+    from meshgen.pipeline import DatasetSummary
 
 FORMAT_CHOICES = ("auto", "yolo", "coco", "labelme")
 
@@ -47,6 +56,29 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-area-mm2", type=float, default=25.0)
     parser.add_argument("--up", choices=("z", "y"), default="z", help="up axis of the meshes")
     parser.add_argument("--classes", type=Path, default=None, help="class table YAML")
+    parser.add_argument(
+        "--no-textures",
+        dest="textures",
+        action="store_false",
+        help="write no textures and no texture coordinates",
+    )
+    parser.add_argument(
+        "--texture-max-px", type=int, default=1024, help="long side of a texture at most (1024)"
+    )
+    parser.add_argument(
+        "--heights",
+        default="",
+        help="heights from height images: a folder of <stem>.* images, or auto (DATASET/heights)",
+    )
+    parser.add_argument(
+        "--height-scale-m", type=float, default=0.001, help="m per height-image level (0.001)"
+    )
+    parser.add_argument(
+        "--height-percentile",
+        type=float,
+        default=90.0,
+        help="percentile of a piece's levels taken as its top (90)",
+    )
 
 
 def config_from_args(args: argparse.Namespace) -> MeshgenConfig:
@@ -65,7 +97,36 @@ def config_from_args(args: argparse.Namespace) -> MeshgenConfig:
         min_area_mm2=args.min_area_mm2,
         up=args.up,
         classes=tuple(table.values()),
+        textures=args.textures,
+        texture_max_px=args.texture_max_px,
+        heights=args.heights if args.heights in ("", "auto") else str(Path(args.heights).resolve()),
+        height_scale_m=args.height_scale_m,
+        height_percentile=args.height_percentile,
     )
+
+
+def _report(summary: DatasetSummary, as_json: bool) -> None:
+    """Print every skip and notice to stderr, and the summary (JSON or a table) to stdout."""
+    for skip in summary.skips:
+        print(f"warning: {skip.message()}", file=sys.stderr)
+    for notice in summary.notices:
+        print(f"warning: {notice.message()}", file=sys.stderr)
+    if as_json:
+        print(json.dumps({**summary.to_json(), "complete": summary.complete}, sort_keys=True))
+        return
+    counts = f"{summary.images} images, {summary.objects} objects"
+    if summary.complete:
+        print(f"meshgen: {counts} -> {summary.out}")
+    else:
+        print(f"meshgen: interrupted after {counts}; nothing written to {summary.out}")
+    print(
+        f"  format {summary.fmt}, {summary.ms_per_image:.2f} ms/image, "
+        f"{summary.ms_per_object:.3f} ms/object"
+    )
+    for reason, count in summary.skipped.items():
+        print(f"  skipped {count:4d}  {reason}")
+    for reason, count in summary.warned.items():
+        print(f"  warned  {count:4d}  {reason}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -89,22 +150,7 @@ def run(args: argparse.Namespace) -> int:
             summary, interrupted = exc.summary, True
             if progress is not None:
                 print(file=sys.stderr)  # end the progress bar's line
-    for skip in summary.skips:
-        print(f"warning: {skip.message()}", file=sys.stderr)
-    if args.json:
-        print(json.dumps({**summary.to_json(), "complete": summary.complete}, sort_keys=True))
-    else:
-        counts = f"{summary.images} images, {summary.objects} objects"
-        if summary.complete:
-            print(f"meshgen: {counts} -> {summary.out}")
-        else:
-            print(f"meshgen: interrupted after {counts}; nothing written to {summary.out}")
-        print(
-            f"  format {summary.fmt}, {summary.ms_per_image:.2f} ms/image, "
-            f"{summary.ms_per_object:.3f} ms/object"
-        )
-        for reason, count in summary.skipped.items():
-            print(f"  skipped {count:4d}  {reason}")
+    _report(summary, args.json)
     if interrupted:
         print("cdw-twin: interrupted", file=sys.stderr)
         return 130

@@ -8,6 +8,8 @@ from typing import Any
 
 from meshgen.classes import DEFAULT_CLASSES, ClassSpec
 from meshgen.errors import MeshgenError
+from meshgen.heights import HEIGHT_PERCENTILE, HEIGHT_SCALE_M
+from meshgen.textures import TEXTURE_MAX_PX
 
 BELT_WIDTH_RANGE_M = (1e-3, 100.0)
 """Accepted ``--belt-width`` values, in m: any real belt, and no width so extreme (inf, 1e300,
@@ -20,6 +22,11 @@ class MeshgenConfig:
 
     ``classes`` is the class table in order; a class's ``class_id`` in the outputs is its
     position here (concrete 0, brick 1, wood 2, rubber 3 by default), whatever the input format.
+    ``textures`` writes each image's texture and the meshes' texture coordinates
+    (:mod:`meshgen.textures`), a texture's long side at most ``texture_max_px``. ``heights``
+    takes heights from height images (:mod:`meshgen.heights`): ``""`` off, ``auto``
+    (``DATASET/heights/``) or a folder; ``height_scale_m`` metres per level,
+    ``height_percentile`` the percentile of a piece's levels taken as its top.
     """
 
     fmt: str = "auto"
@@ -31,6 +38,11 @@ class MeshgenConfig:
     min_area_mm2: float = 25.0
     up: str = "z"
     classes: tuple[ClassSpec, ...] = field(default=tuple(DEFAULT_CLASSES.values()))
+    textures: bool = True
+    texture_max_px: int = TEXTURE_MAX_PX
+    heights: str = ""
+    height_scale_m: float = HEIGHT_SCALE_M
+    height_percentile: float = HEIGHT_PERCENTILE
 
     def __post_init__(self) -> None:
         """Reject values that cannot work, naming the option."""
@@ -56,6 +68,19 @@ class MeshgenConfig:
             (self.up in {"z", "y"}, f"--up must be z or y, got {self.up!r}"),
             (self.seed >= 0, f"--seed must be >= 0, got {self.seed}"),
             (bool(self.classes), "the class table is empty"),
+            (
+                16 <= self.texture_max_px <= 16384,
+                f"--texture-max-px must be from 16 to 16384, got {self.texture_max_px}",
+            ),
+            (
+                0.0 < self.height_scale_m <= 1.0,  # False for nan
+                "--height-scale-m must be a height per level in m in (0, 1], got "
+                + str(self.height_scale_m),
+            ),
+            (
+                0.0 <= self.height_percentile <= 100.0,
+                f"--height-percentile must lie in [0, 100], got {self.height_percentile}",
+            ),
         )
         for ok, msg in checks:
             if not ok:

@@ -10,11 +10,18 @@ from __future__ import annotations
 import json
 import os
 import queue
+import shutil
 import threading
 from pathlib import Path
 from typing import Any
 
 from meshgen.classes import ClassSpec
+from meshgen.errors import DatasetError
+
+OUTPUT_VERSION = 2
+"""Version of what a meshgen output folder holds; caches of meshed data key on it. 2: each
+image's ``texture.jpg``, texture coordinates in the meshes, scene.csv columns ``texture_path``
+and ``height_source``."""
 
 SCENE_COLUMNS: tuple[str, ...] = (
     "object_id",
@@ -35,8 +42,14 @@ SCENE_COLUMNS: tuple[str, ...] = (
     "n_convex_pieces",
     "area_change_ratio",
     "repairs",
+    "texture_path",
+    "height_source",
 )
-"""Columns of ``<image_stem>/scene.csv``, in order."""
+"""Columns of ``<image_stem>/scene.csv``, in order.
+
+``texture_path`` is the piece's texture relative to the scene folder (like ``mesh_path``;
+empty when meshgen wrote none, ``--no-textures``); ``height_source`` is ``image`` (from a
+height image, ``--heights``) or ``sampled`` (seeded, from the class table)."""
 
 INDEX_COLUMNS: tuple[str, ...] = (
     "image",
@@ -72,14 +85,14 @@ FILE_MODE = 0o666
 _WRITE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_CLOEXEC", 0)
 
 
-def write_text(path: Path | str, text: str) -> None:
+def write_text(path: Path | str, text: str | bytes) -> None:
     """Write ``text`` to ``path`` (UTF-8, ``\\n`` line ends) with one ``os.write`` of one buffer.
 
-    Files are written in place: atomicity is per output folder (see
-    :func:`meshgen.outdir.swap_in`), so the files inside a staging folder need no temporary name
-    each. The mode is :data:`FILE_MODE` minus the umask.
+    ``bytes`` are written as they are (a texture image). Files are written in place: atomicity
+    is per output folder (see :func:`meshgen.outdir.swap_in`), so the files inside a staging
+    folder need no temporary name each. The mode is :data:`FILE_MODE` minus the umask.
     """
-    data = text.encode("utf-8")
+    data = text if isinstance(text, bytes) else text.encode("utf-8")
     fd = os.open(path, _WRITE_FLAGS, FILE_MODE)
     try:
         view = memoryview(data)
@@ -100,9 +113,23 @@ class FileSink:
             if not os.path.isdir(path):
                 raise
 
-    def write(self, path: str, text: str) -> None:
-        """Write ``text`` to ``path``."""
+    def write(self, path: str, text: str | bytes) -> None:
+        """Write ``text`` (or ``bytes`` as they are) to ``path``."""
         write_text(path, text)
+
+    def copy(self, source: Path, path: str) -> None:
+        """Copy the file ``source`` to ``path`` as it is (the kernel copies the bytes).
+
+        A source that can no longer be read (removed since it was checked) raises
+        :class:`~meshgen.errors.DatasetError` naming it.
+        """
+        try:
+            shutil.copyfile(source, path)
+        except OSError as exc:
+            if exc.filename is not None and str(exc.filename) == str(source):
+                msg = f"{source}: cannot read the photo any more: {exc.strerror}"
+                raise DatasetError(msg) from None
+            raise
 
     def close(self) -> None:
         """Finish all pending work (nothing to do here)."""
@@ -120,7 +147,9 @@ class ThreadedFileSink(FileSink):
     """
 
     def __init__(self) -> None:
-        self._queue: queue.SimpleQueue[tuple[bool, str, str] | None] = queue.SimpleQueue()
+        self._queue: queue.SimpleQueue[tuple[str, str, str | bytes | Path] | None] = (
+            queue.SimpleQueue()
+        )
         self._error: BaseException | None = None
         self._cancelled = False
         self._thread = threading.Thread(target=self._run, name="meshgen-writer", daemon=True)
@@ -130,22 +159,28 @@ class ThreadedFileSink(FileSink):
         while (item := self._queue.get()) is not None:
             if self._error is not None or self._cancelled:
                 continue
-            is_dir, path, text = item
+            kind, path, payload = item
             try:
-                if is_dir:
+                if kind == "mkdir":
                     FileSink.mkdir(self, path)
+                elif isinstance(payload, Path):
+                    FileSink.copy(self, payload, path)
                 else:
-                    write_text(path, text)
+                    write_text(path, payload)
             except BaseException as exc:
                 self._error = exc
 
     def mkdir(self, path: str) -> None:
         """Queue the creation of folder ``path``."""
-        self._queue.put((True, path, ""))
+        self._queue.put(("mkdir", path, ""))
 
-    def write(self, path: str, text: str) -> None:
-        """Queue writing ``text`` to ``path``."""
-        self._queue.put((False, path, text))
+    def write(self, path: str, text: str | bytes) -> None:
+        """Queue writing ``text`` (or ``bytes``) to ``path``."""
+        self._queue.put(("write", path, text))
+
+    def copy(self, source: Path, path: str) -> None:
+        """Queue copying the file ``source`` to ``path``."""
+        self._queue.put(("copy", path, source))
 
     def close(self) -> None:
         """Wait until everything queued is done; raise the first error, if any."""

@@ -7,6 +7,8 @@ from pathlib import Path
 
 IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".jpg", ".jpeg", ".bmp", ".gif")
 
+_FIRST_READ = 16384
+_LAST_READ = 262144
 _JPEG_SOF = frozenset(
     {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
 )
@@ -32,11 +34,14 @@ def _jpeg_size(head: bytes) -> tuple[int, int] | None:
 def read_image_size(path: Path) -> tuple[int, int] | None:
     """Return ``(width_px, height_px)`` from the header of ``path``, or None if unknown.
 
-    Reads at most 256 KiB (JPEG markers may come after large EXIF blocks).
+    Reads the first 16 KiB, and up to 256 KiB only for a JPEG whose frame header comes later
+    (after a large EXIF block): a photo is not read whole to learn its size.
     """
     try:
         with path.open("rb") as fh:
-            head = fh.read(262144)
+            head = fh.read(_FIRST_READ)
+            if head[:2] == b"\xff\xd8" and _jpeg_size(head) is None:
+                head += fh.read(_LAST_READ - _FIRST_READ)
     except OSError:
         return None
     size: tuple[int, int] | None = None

@@ -15,13 +15,16 @@ Layouts understood (``DATASET`` is the folder given on the command line):
 - labelme: ``DATASET/labelme/**/*.json`` or ``DATASET/*.json`` with ``shapes``,
   ``imageWidth`` and ``imageHeight``.
 
-``auto`` picks COCO (when some file is a COCO document: all three fields lists), then YOLO with
-images, then labelme (when ``DATASET/labelme/`` holds JSON or some ``DATASET/*.json`` has
-``shapes``), then YOLO without images, then labelme files that cannot be decoded (to report
-them). A stray JSON that is neither, next to YOLO labels, is ignored.
+``auto`` picks COCO (when some file is a COCO document: all three fields lists), then labelme
+when ``DATASET/labelme/`` holds JSON (the pixel coordinates as annotated; a YOLO conversion
+beside them is normalised and rounded), then YOLO with images, then labelme when some
+``DATASET/*.json`` has ``shapes``, then YOLO without images, then labelme files that cannot be
+decoded (to report them). A stray JSON that is neither, next to YOLO labels, is ignored.
 Sizes are read per image from a real source, never assumed; an image file's header wins over an
-annotation's size fields. A UTF-8 byte order mark at the start of a label or JSON file is
-ignored.
+annotation's size fields (a photo under ``DATASET/images/`` before any other image file of the
+same stem; never a height image under ``DATASET/heights/``). A UTF-8 byte order mark at the
+start of a label or JSON file is ignored.
+Each annotation also says where its photo is (:mod:`meshgen.photos`).
 """
 
 from __future__ import annotations
@@ -37,8 +40,10 @@ import numpy as np
 
 from meshgen.annotations import ImageAnnotation, RawPolygon, Skip
 from meshgen.errors import DatasetError
+from meshgen.heights import HEIGHTS_FOLDER
 from meshgen.imagesize import IMAGE_SUFFIXES, read_image_size
 from meshgen.jsondoc import NOT_DECODED, loads_exact, without_bom
+from meshgen.photos import beside_label, coco_photo, labelme_photo, photo_index, yolo_photo
 
 FORMATS: tuple[str, ...] = ("auto", "yolo", "coco", "labelme")
 OUT_OF_RANGE_FRACTION = 0.05
@@ -52,7 +57,11 @@ COCO_FIELDS: tuple[str, ...] = ("images", "annotations", "categories")
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ImageSource:
-    """One unit of work: an annotation file still to parse, or an image COCO already parsed."""
+    """One unit of work: an annotation file still to parse, or an image COCO already parsed.
+
+    ``photo`` is the image file found for the stem at discovery (:mod:`meshgen.photos`): a
+    YOLO label's photo, a labelme file's last-resort photo.
+    """
 
     fmt: str
     stem: str
@@ -60,6 +69,7 @@ class ImageSource:
     size_px: tuple[int, int] | None = None
     class_names: tuple[tuple[int, str], ...] = ()
     parsed: ImageAnnotation | None = None
+    photo: Path | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -79,10 +89,13 @@ def _rel(path: Path, root: Path) -> str:
 
 
 def _image_index(dataset: Path) -> dict[str, Path]:
-    images: dict[str, Path] = {}
+    """Every image file of the dataset by stem: the photos under ``images/`` first; never a
+    height image (``heights/``, :mod:`meshgen.heights`)."""
+    images: dict[str, Path] = photo_index(dataset)
+    heights = dataset / HEIGHTS_FOLDER
     named = sorted(p for p in dataset.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
     for path in named:
-        if path.is_file():
+        if path.is_file() and not path.is_relative_to(heights):
             images.setdefault(path.stem, path)
     return images
 
@@ -220,6 +233,9 @@ def _detect(dataset: Path) -> tuple[str, list[Path]]:
     """The format ``auto`` resolves to, with the labelme files when that format is labelme."""
     if any(valid for _, valid in _coco_candidates(dataset)):
         return "coco", []
+    in_folder = _json_files(dataset / "labelme", True)
+    if in_folder:
+        return "labelme", in_folder
     yolo = _yolo_label_files(dataset) if (dataset / "data.yaml").is_file() else []
     if yolo and _image_index(dataset):
         return "yolo", []
@@ -251,6 +267,7 @@ def discover(
     if resolved == "yolo":
         names = tuple(sorted(load_yolo_names(dataset).items()))
         images = _image_index(dataset)
+        photos = photo_index(dataset)
         labelme = {p.stem: p for p in _labelme_files(dataset)}
         for path in _yolo_label_files(dataset):
             size = read_image_size(images[path.stem]) if path.stem in images else None
@@ -263,11 +280,15 @@ def discover(
                     path=path,
                     size_px=size or image_size,
                     class_names=names,
+                    photo=photos.get(path.stem) or beside_label(path),
                 )
             )
     elif resolved == "labelme":
+        photos = photo_index(dataset)
         sources = [
-            ImageSource(fmt="labelme", stem=p.stem, path=p, size_px=image_size)
+            ImageSource(
+                fmt="labelme", stem=p.stem, path=p, size_px=image_size, photo=photos.get(p.stem)
+            )
             for p in labelme_files or _labelme_files(dataset)
         ]
     else:
@@ -417,6 +438,7 @@ def parse_yolo(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None,
         polygons.append(
             RawPolygon(index=index, where=where, class_name=class_name, points_px=points)
         )
+    photo, searched = yolo_photo(source.photo, root)
     annotation = ImageAnnotation(
         stem=source.stem,
         source=name,
@@ -424,6 +446,8 @@ def parse_yolo(source: ImageSource, root: Path) -> tuple[ImageAnnotation | None,
         height_px=height,
         polygons=tuple(polygons),
         skips=tuple(skips),
+        photo=photo,
+        photo_searched=searched,
     )
     return annotation, []
 
@@ -675,6 +699,7 @@ def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | No
         detail = "no image file, no imageWidth/imageHeight and no --image-size"
         return None, [Skip(file=name, where="", reason="missing_image_size", detail=detail)]
     polygons, skips = _labelme_polygons(data["shapes"], name, fast, size)
+    photo, searched = labelme_photo(data, source.path, root, source.photo)
     annotation = ImageAnnotation(
         stem=source.stem,
         source=name,
@@ -682,6 +707,8 @@ def parse_labelme(source: ImageSource, root: Path) -> tuple[ImageAnnotation | No
         height_px=size[1],
         polygons=tuple(polygons),
         skips=tuple(skips),
+        photo=photo,
+        photo_searched=searched,
     )
     return annotation, []
 
@@ -822,6 +849,7 @@ def parse_coco(
     }
     skips: list[Skip] = []
     per_image = _coco_by_image(data["annotations"], known, name, skips)
+    photos = photo_index(root)
     out: list[ImageAnnotation] = []
     for j, image in enumerate(data["images"]):
         if not isinstance(image, dict) or not isinstance(image.get("id"), int):
@@ -837,6 +865,7 @@ def parse_coco(
             )
             continue
         polygons = _coco_polygons(per_image.get(image["id"], []), categories, size, name, skips)
+        photo, searched = coco_photo(image.get("file_name"), path, root, photos)
         out.append(
             ImageAnnotation(
                 stem=stem,
@@ -844,6 +873,8 @@ def parse_coco(
                 width_px=size[0],
                 height_px=size[1],
                 polygons=tuple(polygons),
+                photo=photo,
+                photo_searched=searched,
             )
         )
     return out, skips

@@ -305,7 +305,7 @@ def hertel_mehlhorn(rings: list[FloatArray], tris_list: list[IntArray]) -> Conve
     )
 
 
-_SIDES_TEXT: dict[int, str] = {}
+_SIDES_TEXT: dict[tuple[int, bool], str] = {}
 _CACHE_LIMIT = 100_000
 
 
@@ -314,19 +314,26 @@ def clear_text_caches() -> None:
     _SIDES_TEXT.clear()
 
 
-def sides_text(n: int) -> str:
+def sides_text(n: int, textured: bool = False) -> str:
     """OBJ ``f`` lines of the side walls of an ``n``-prism (as :func:`extrude`, 1-based).
 
-    Per ring edge ``i -> j``: ``(i, j, j + n)`` and ``(i, j + n, i + n)``. Cached per ``n`` for
-    the run; built from a plain list, which for rings this small beats building it in numpy.
+    Per ring edge ``i -> j``: ``(i, j, j + n)`` and ``(i, j + n, i + n)``; with ``textured``
+    every corner also names the texture coordinate of its own index (``f i/i j/j ...``).
+    Cached per ``n`` for the run; built from a plain list, which for rings this small beats
+    building it in numpy.
     """
-    sides = _SIDES_TEXT.get(n)
+    sides = _SIDES_TEXT.get((n, textured))
     if sides is None:
         flat: list[int] = []
         for i in range(1, n + 1):
             j = i % n + 1
             flat += (i, j, j + n, i, j + n, i + n)
-        sides = ("f %d %d %d\n" * (2 * n)) % tuple(flat)
+        if textured:
+            line = "f %d/%d %d/%d %d/%d\n"
+            flat = [k for k in flat for _ in range(2)]
+        else:
+            line = "f %d %d %d\n"
+        sides = (line * (2 * n)) % tuple(flat)
         if len(_SIDES_TEXT) < _CACHE_LIMIT:
-            _SIDES_TEXT[n] = sides
+            _SIDES_TEXT[(n, textured)] = sides
     return sides

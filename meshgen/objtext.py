@@ -22,6 +22,9 @@ IntArray = npt.NDArray[np.int64]
 
 VERTEX_DECIMALS = 6
 """OBJ vertex coordinates are written with ``%.6f``."""
+UV_DECIMALS = 6
+"""OBJ texture coordinates are written with ``%.6f`` (a thousandth of a pixel of a 1024 px
+photo)."""
 
 
 def _offsets(sizes: IntArray) -> list[int]:
@@ -74,17 +77,34 @@ def vertex_texts(rows: Rendered, sizes: IntArray) -> tuple[list[str], list[str]]
     return blocks[: len(sizes)], blocks[len(sizes) :]
 
 
-def face_rows(faces: IntArray) -> Rendered:
-    """``f a b c`` lines of ``(m, 3)`` 1-based faces."""
+def uv_blocks(uv: FloatArray, sizes: IntArray) -> list[str]:
+    """Per ring its ``vt u v`` lines (``%.6f``), from the ``(P, 2)`` uv of all rings."""
+    u, v = Fixed(uv[:, 0], UV_DECIMALS), Fixed(uv[:, 1], UV_DECIMALS)
+    return _blocks(render(["vt ", u, " ", v, "\n"], len(uv)), _offsets(sizes))
+
+
+def face_rows(faces: IntArray, textured: bool = False) -> Rendered:
+    """``f a b c`` lines of ``(m, 3)`` 1-based faces; ``f a/a b/b c/c`` when ``textured``.
+
+    A textured face names, for each corner, the texture coordinate of the same index as its
+    vertex (one ``vt`` line per ``v`` line).
+    """
     a, b, c = (Whole(faces[:, k]) for k in range(3))
-    return render(["f ", a, " ", b, " ", c, "\n"], len(faces))
+    if textured:
+        parts: list[Part] = ["f ", a, "/", a, " ", b, "/", b, " ", c, "/", c, "\n"]
+    else:
+        parts = ["f ", a, " ", b, " ", c, "\n"]
+    return render(parts, len(faces))
 
 
-def caps_blocks(faces: IntArray, counts: IntArray, sizes: IntArray) -> list[str]:
+def caps_blocks(
+    faces: IntArray, counts: IntArray, sizes: IntArray, textured: bool = False
+) -> list[str]:
     """Face lines of both caps of prisms: bottom (reversed), then top (``+ n``), 1-based.
 
     ``faces`` is the ``(M, 3)`` CCW cap triangles of all prisms (indices local to each ring),
-    ``counts`` how many each prism has and ``sizes`` its ring size.
+    ``counts`` how many each prism has and ``sizes`` its ring size; ``textured`` as in
+    :func:`face_rows`.
     """
     total = len(faces)
     starts = np.cumsum(counts) - counts
@@ -92,7 +112,7 @@ def caps_blocks(faces: IntArray, counts: IntArray, sizes: IntArray) -> list[str]
     rows = np.empty((2 * total, 3), dtype=np.int64)
     rows[position] = faces[:, ::-1] + 1
     rows[position + np.repeat(counts, counts)] = faces + np.repeat(sizes + 1, counts)[:, None]
-    return _blocks(face_rows(rows), [2 * s for s in _offsets(counts)])
+    return _blocks(face_rows(rows, textured), [2 * s for s in _offsets(counts)])
 
 
 def points_json_blocks(points: FloatArray, sizes: IntArray, decimals: int) -> list[str]:

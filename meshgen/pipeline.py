@@ -8,13 +8,17 @@ Output layout (the twin reads it)::
     OUT/materials.mtl                  one material per class
     OUT/<stem>/scene.csv               one row per object (see ``export.SCENE_COLUMNS``)
     OUT/<stem>/scene.json              full per-object metadata
-    OUT/<stem>/<object_id>.obj         the prism mesh, centre of mass at the origin
+    OUT/<stem>/<object_id>.obj         the prism mesh, centre of mass at the origin, with texture
+                                       coordinates into the image's texture
     OUT/<stem>/<object_id>_convex.obj  concave footprints only: one ``o piece_k`` per convex piece
+    OUT/<stem>/texture.jpg             the image's texture: its photo, else procedural
 
 ``object_id`` is ``<stem>_<k:03d>`` with ``k`` the polygon's index in its source file. Frames
 are documented in :mod:`meshgen.footprint` (belt frame) and :mod:`meshgen.mesh` (mesh frame).
 Heights come from ``numpy.random.default_rng([seed, crc32(stem), k])``, so they do not depend on
-workers or on other objects, and equal seeds give byte-identical mesh, CSV and scene files.
+workers or on other objects, and equal seeds give byte-identical mesh, CSV and scene files;
+with ``--heights`` they come from height images where there are some (:mod:`meshgen.heights`).
+Textures: :mod:`meshgen.textures`; texture coordinates: :mod:`meshgen.imageframe`.
 
 ``OUT`` is replaced whole by a finished run, and only when it is empty or an earlier meshgen
 output (the rules are in :mod:`meshgen.outdir`). An interrupted run (Ctrl-C) leaves ``OUT`` as
@@ -30,14 +34,22 @@ import sys
 import time
 import zlib
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from meshgen.annotations import SKIP_REASONS, FloatArray, ImageAnnotation, RawPolygon, Skip
+from meshgen.annotations import (
+    SKIP_REASONS,
+    WARNING_REASONS,
+    FloatArray,
+    ImageAnnotation,
+    Notice,
+    RawPolygon,
+    Skip,
+)
 from meshgen.classes import ClassSpec
 from meshgen.config import MeshgenConfig
 from meshgen.export import (
@@ -55,6 +67,8 @@ from meshgen.footprint import (
     FootprintRejected,
     build_footprints,
 )
+from meshgen.heights import height_index, measured_heights_m
+from meshgen.imageframe import rings_uv
 from meshgen.interrupts import deferred_interrupts, ignore_interrupts
 from meshgen.loaders import DatasetListing, ImageSource, discover, load_source
 from meshgen.mesh import clear_text_caches
@@ -70,11 +84,16 @@ from meshgen.prisms import prism_texts
 from meshgen.ragged import split_rows
 from meshgen.records import EntryExtras, ObjectRecord, csv_row, objects_json_text
 from meshgen.seeding import first_doubles, pcg64_first_double
+from meshgen.textures import TEXTURE_NAME, Texture, image_texture
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ImageResult:
-    """What meshing one image produced: its index row, records and skips."""
+    """What meshing one image produced: its index row, records, skips and notices.
+
+    ``texture`` is where its texture came from (``photo``, ``procedural``, or ``""`` when none
+    was written).
+    """
 
     stem: str
     width_px: int
@@ -82,6 +101,8 @@ class ImageResult:
     m_per_px: float
     records: tuple[ObjectRecord, ...]
     skips: tuple[Skip, ...]
+    notices: tuple[Notice, ...] = ()
+    texture: str = ""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -101,11 +122,19 @@ class DatasetSummary:
     workers: int
     config: MeshgenConfig
     complete: bool = True
+    notices: tuple[Notice, ...] = ()
+    textures: tuple[tuple[str, int], ...] = ()
+    height_sources: tuple[tuple[str, int], ...] = ()
 
     @property
     def skipped(self) -> dict[str, int]:
         """Number of skips by reason (reasons that occurred only, sorted)."""
         return dict(sorted(Counter(s.reason for s in self.skips).items()))
+
+    @property
+    def warned(self) -> dict[str, int]:
+        """Number of notices (warnings) by reason (reasons that occurred only, sorted)."""
+        return dict(sorted(Counter(n.reason for n in self.notices).items()))
 
     @property
     def ms_per_image(self) -> float:
@@ -131,6 +160,14 @@ class DatasetSummary:
                 for s in self.skips
             ],
             "skip_reasons": {r: SKIP_REASONS[r] for r in self.skipped},
+            "warnings": [
+                {"file": n.file, "where": n.where, "reason": n.reason, "detail": n.detail}
+                for n in self.notices
+            ],
+            "warned": self.warned,
+            "warning_reasons": {r: WARNING_REASONS[r] for r in self.warned},
+            "textures": dict(self.textures),
+            "height_sources": dict(self.height_sources),
             "elapsed_s": round(self.elapsed_s, 6),
             "ms_per_image": round(self.ms_per_image, 4),
             "ms_per_object": round(self.ms_per_object, 4),
@@ -186,12 +223,17 @@ def _record(
     poly: RawPolygon,
     *,
     fp: Footprint,
-    spec: ClassSpec,
-    class_id: int,
+    cls: tuple[int, ClassSpec],
     height: float,
     n_pieces: int,
+    texture_path: str,
+    height_source: str,
 ) -> ObjectRecord:
-    """The scene record of one meshed footprint (``n_pieces`` > 1 means it has convex pieces)."""
+    """The scene record of one meshed footprint (``n_pieces`` > 1 means it has convex pieces).
+
+    ``cls`` is the class's id and table entry.
+    """
+    class_id, spec = cls
     name = object_id(ann.stem, poly.index)
     cx, cy = fp.centroid_m
     volume = fp.area_m2 * height
@@ -214,6 +256,8 @@ def _record(
         n_convex_pieces=n_pieces,
         area_change_ratio=fp.area_change_ratio,
         repairs=fp.repairs,
+        texture_path=texture_path,
+        height_source=height_source,
     )
 
 
@@ -271,8 +315,27 @@ def _select(
     return skips, kept, kept_rings
 
 
+def _texture_json(texture: Texture | None) -> dict[str, Any] | None:
+    """The scene.json ``texture`` entry: the file, where it came from, its size (or None)."""
+    if texture is None:
+        return None
+    return {
+        "path": TEXTURE_NAME,
+        "source": texture.source,
+        "photo": texture.photo,
+        "width_px": texture.size_px[0],
+        "height_px": texture.size_px[1],
+    }
+
+
 def _scene_json(
-    ann: ImageAnnotation, config: MeshgenConfig, skips: list[Skip], objects_json: str
+    ann: ImageAnnotation,
+    config: MeshgenConfig,
+    skips: list[Skip],
+    objects_json: str,
+    *,
+    texture: Texture | None,
+    notices: list[Notice],
 ) -> str:
     head = json.dumps(
         {
@@ -286,6 +349,10 @@ def _scene_json(
             "up": config.up,
             "frame": "belt: origin image centre, +x image down (travel), +y image right, +z up",
             "skipped": [{"where": s.where, "reason": s.reason, "detail": s.detail} for s in skips],
+            "texture": _texture_json(texture),
+            "warnings": [
+                {"where": n.where, "reason": n.reason, "detail": n.detail} for n in notices
+            ],
         },
         sort_keys=True,
         separators=(",", ":"),
@@ -293,19 +360,37 @@ def _scene_json(
     return f'{head[:-1]},"objects":[{objects_json}]}}\n'
 
 
+_Kept = tuple[tuple[int, int, RawPolygon, int, ClassSpec], Footprint]
+"""A polygon kept for meshing (see :func:`_select`) with its footprint."""
+
+
+def _texture(ann: ImageAnnotation, config: MeshgenConfig) -> Texture:
+    """The texture of one image (:func:`meshgen.textures.image_texture`)."""
+    return image_texture(
+        ann,
+        {spec.name: spec.rgb for spec in config.classes},
+        seed=config.seed,
+        belt_width_m=config.belt_width_m,
+        max_px=config.texture_max_px,
+    )
+
+
 def mesh_images(
     anns: list[ImageAnnotation],
     config: MeshgenConfig,
     out: Path,
     sink: FileSink | None = None,
+    height_images: Mapping[str, Path] | None = None,
 ) -> list[ImageResult]:
     """Mesh every polygon of several images into ``out / ann.stem`` each.
 
     Bad polygons become skips. Border checks, metric conversion, footprints
     (:func:`build_footprints`), heights and the mesh texts (:func:`meshgen.prisms.prism_texts`)
     are computed for all polygons of all the images together; then each object's mesh and convex
-    pieces are written, and one scene.csv and scene.json per image.
-    Files go through ``sink`` (default: written right away; the caller closes its own sink).
+    pieces are written, one scene.csv and scene.json per image, and (``config.textures``) the
+    texture of each image with objects. ``height_images`` maps an image stem to its height
+    image (``--heights``). Files go through ``sink`` (default: written right away; the caller
+    closes its own sink).
     """
     if sink is None:
         sink = FileSink()
@@ -322,23 +407,42 @@ def mesh_images(
         sink.mkdir(folder)
     records: list[list[ObjectRecord]] = [[] for _ in anns]
     extras: list[list[EntryExtras]] = [[] for _ in anns]
-    good = [
+    good: list[_Kept] = [
         (item, fp)
         for item, fp in zip(kept, footprints, strict=True)
         if not isinstance(fp, FootprintRejected)
     ]
     heights = object_heights_m(config.seed, [(anns[t[0]].stem, t[2].index, t[4]) for t, _ in good])
+    from_image: list[float | None] = [None] * len(good)
+    notices: list[list[Notice]] = [[] for _ in anns]
+    if height_images:
+        from_image, notices = measured_heights_m(
+            anns,
+            [(t[0], t[2].where, fp.ring_m) for t, fp in good],
+            height_images,
+            belt_width_m=config.belt_width_m,
+            scale_m=config.height_scale_m,
+            percentile=config.height_percentile,
+        )
+        heights = [h if m is None else m for h, m in zip(heights, from_image, strict=True)]
     texts = prism_texts(
         [fp for _, fp in good],
         heights,
         [t[2].points_px for t, _ in good],
         [object_id(anns[t[0]].stem, t[2].index) for t, _ in good],
         config.up,
+        rings_uv(
+            [(fp.ring_m, anns[t[0]].width_px, anns[t[0]].height_px) for t, fp in good],
+            config.belt_width_m,
+        )
+        if config.textures
+        else None,
     )
     crcs = {ann.stem: zlib.crc32(ann.stem.encode()) for ann in anns}
     made = iter(
         zip(
             heights,
+            from_image,
             texts.mesh,
             texts.pieces,
             texts.n_pieces,
@@ -348,17 +452,25 @@ def mesh_images(
             strict=True,
         )
     )
+    texture_path = TEXTURE_NAME if config.textures else ""
     for (img, pos, poly, class_id, spec), fp in zip(kept, footprints, strict=True):
         ann = anns[img]
         if isinstance(fp, FootprintRejected):
             early[img].append((pos, _skip(ann, poly, fp.reason, fp.detail)))
             continue
-        height, mesh, pieces, n_pieces, footprint_json, polygon_json, error = next(made)
+        height, measured, mesh, pieces, n_pieces, footprint_json, polygon_json, error = next(made)
         if error:
             early[img].append((pos, _skip(ann, poly, "degenerate", error)))
             continue
         record = _record(
-            ann, poly, fp=fp, spec=spec, class_id=class_id, height=height, n_pieces=n_pieces
+            ann,
+            poly,
+            fp=fp,
+            cls=(class_id, spec),
+            height=height,
+            n_pieces=n_pieces,
+            texture_path=texture_path,
+            height_source="sampled" if measured is None else "image",
         )
         header = (
             f"# cdw-twin meshgen {record.object_id}\nmtllib ../materials.mtl\nusemtl {spec.name}\n"
@@ -378,24 +490,60 @@ def mesh_images(
             )
         )
     results: list[ImageResult] = []
-    header = ",".join(SCENE_COLUMNS) + "\n"
     for img, ann in enumerate(anns):
         early[img].sort(key=lambda item: item[0])
         skips = list(ann.skips) + [s for _, s in early[img]]
-        sink.write(f"{folders[img]}/scene.csv", header + "".join(map(csv_row, records[img])))
-        objects_json = objects_json_text(records[img], extras[img], config.seed)
-        sink.write(f"{folders[img]}/scene.json", _scene_json(ann, config, skips, objects_json))
+        made_image = _MadeImage(records=records[img], extras=extras[img], skips=skips)
+        texture = _texture(ann, config) if config.textures and made_image.records else None
         results.append(
-            ImageResult(
-                stem=ann.stem,
-                width_px=ann.width_px,
-                height_px=ann.height_px,
-                m_per_px=config.belt_width_m / ann.width_px,
-                records=tuple(records[img]),
-                skips=tuple(skips),
-            )
+            _finish_image(ann, folders[img], made_image, notices[img], texture, config, sink)
         )
     return results
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class _MadeImage:
+    """What meshing made of one image: its records with their scene.json extras, its skips."""
+
+    records: list[ObjectRecord]
+    extras: list[EntryExtras]
+    skips: list[Skip]
+
+
+def _finish_image(
+    ann: ImageAnnotation,
+    folder: str,
+    made: _MadeImage,
+    notices: list[Notice],
+    texture: Texture | None,
+    config: MeshgenConfig,
+    sink: FileSink,
+) -> ImageResult:
+    """Write one image's texture (when it has one), scene.csv and scene.json."""
+    image_notices = list(notices)
+    if texture is not None and texture.copy_of is not None:
+        sink.copy(texture.copy_of, f"{folder}/{TEXTURE_NAME}")
+    elif texture is not None:
+        sink.write(f"{folder}/{TEXTURE_NAME}", texture.data)
+        if texture.notice is not None:
+            image_notices.insert(0, texture.notice)
+    header = ",".join(SCENE_COLUMNS) + "\n"
+    sink.write(f"{folder}/scene.csv", header + "".join(map(csv_row, made.records)))
+    objects_json = objects_json_text(made.records, made.extras, config.seed)
+    scene = _scene_json(
+        ann, config, made.skips, objects_json, texture=texture, notices=image_notices
+    )
+    sink.write(f"{folder}/scene.json", scene)
+    return ImageResult(
+        stem=ann.stem,
+        width_px=ann.width_px,
+        height_px=ann.height_px,
+        m_per_px=config.belt_width_m / ann.width_px,
+        records=tuple(made.records),
+        skips=tuple(made.skips),
+        notices=tuple(image_notices),
+        texture="" if texture is None else texture.source,
+    )
 
 
 def mesh_image(ann: ImageAnnotation, config: MeshgenConfig, out: Path) -> ImageResult:
@@ -413,14 +561,19 @@ which favours several batches. 32 balances the two (figures in ``docs/benchmarks
 """
 
 
+_Job = tuple[tuple[ImageSource, ...], Path, MeshgenConfig, Path, dict[str, Path]]
+"""One batch: its sources, the dataset, the configuration, the staging folder, the height
+images by stem."""
+
+
 def _process(
-    job: tuple[tuple[ImageSource, ...], Path, MeshgenConfig, Path],
+    job: _Job,
     sink: FileSink | None = None,
 ) -> list[tuple[ImageResult | None, list[Skip]]]:
-    sources, root, config, staging = job
+    sources, root, config, staging, height_images = job
     loaded = [load_source(source, root) for source in sources]
     anns = [ann for ann, _ in loaded if ann is not None]
-    meshed = iter(mesh_images(anns, config, staging, sink)) if anns else iter(())
+    meshed = iter(mesh_images(anns, config, staging, sink, height_images)) if anns else iter(())
     return [(next(meshed) if ann is not None else None, skips) for ann, skips in loaded]
 
 
@@ -451,6 +604,7 @@ class _Run:
     workers: int
     start: float
     listing: DatasetListing
+    height_images: dict[str, Path] = field(default_factory=dict)
     results: list[tuple[ImageResult | None, list[Skip]]] = field(default_factory=list)
     sink: FileSink = field(default_factory=FileSink)
     pool: Any = None
@@ -460,6 +614,9 @@ class _Run:
 def _summarise(run: _Run, complete: bool) -> tuple[DatasetSummary, list[tuple[object, ...]]]:
     """The summary of the images meshed so far and their ``index.csv`` rows."""
     skips: list[Skip] = list(run.listing.skips)
+    notices: list[Notice] = []
+    textures: Counter[str] = Counter()
+    height_sources: Counter[str] = Counter()
     rows: list[tuple[object, ...]] = []
     objects = 0
     for result, file_skips in run.results:
@@ -467,7 +624,11 @@ def _summarise(run: _Run, complete: bool) -> tuple[DatasetSummary, list[tuple[ob
         if result is None:
             continue
         skips.extend(result.skips)
+        notices.extend(result.notices)
         objects += len(result.records)
+        if result.texture:
+            textures[result.texture] += 1
+        height_sources.update(r.height_source for r in result.records)
         rows.append(
             (
                 result.stem,
@@ -489,6 +650,9 @@ def _summarise(run: _Run, complete: bool) -> tuple[DatasetSummary, list[tuple[ob
         workers=run.workers,
         config=run.config,
         complete=complete,
+        notices=tuple(notices),
+        textures=tuple(sorted(textures.items())),
+        height_sources=tuple(sorted(height_sources.items())),
     )
     return summary, rows
 
@@ -503,8 +667,9 @@ def _mesh_sources(run: _Run, progress: Callable[[int, int], None] | None) -> Non
     total = len(sources)
     workers = run.workers
     size = CHUNK_IMAGES if workers <= 1 else max(1, min(CHUNK_IMAGES, total // (4 * workers)))
-    jobs = [
-        (sources[i : i + size], run.dataset, run.config, run.staging) for i in range(0, total, size)
+    jobs: list[_Job] = [
+        (sources[i : i + size], run.dataset, run.config, run.staging, run.height_images)
+        for i in range(0, total, size)
     ]
     if workers > 1 and len(jobs) > 1:
         from concurrent.futures import ProcessPoolExecutor
@@ -564,6 +729,7 @@ def mesh_dataset(
     )
     try:
         run.listing = discover(run.dataset, config.fmt, config.image_size_px)
+        run.height_images = height_index(config.heights, run.dataset)
         staging_dir(out)
         write_text(run.staging / "materials.mtl", mtl_text(config.classes))
         _mesh_sources(run, progress)

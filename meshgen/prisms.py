@@ -20,6 +20,7 @@ from meshgen.objtext import (
     caps_blocks,
     pieces_blocks,
     points_json_blocks,
+    uv_blocks,
     vertex_rows,
     vertex_texts,
 )
@@ -35,7 +36,8 @@ PIXEL_DECIMALS = 3
 class PrismTexts:
     """Per footprint (in order): its texts, or ``error`` when it cannot be meshed.
 
-    ``mesh`` is the OBJ body after the material lines (``o`` line, vertices, faces);
+    ``mesh`` is the OBJ body after the material lines (``o`` line, vertices, texture
+    coordinates when textured, faces);
     ``pieces`` the convex pieces' OBJ body (empty for a convex footprint) and ``n_pieces``
     their number (1 when convex); ``footprint_json`` and ``polygon_json`` the point arrays of
     the scene.json entry. ``error`` is "" or the detail of a ``degenerate`` skip.
@@ -55,12 +57,17 @@ def prism_texts(
     polygons_px: list[FloatArray],
     object_ids: list[str],
     up: str,
+    uv: FloatArray | None = None,
 ) -> PrismTexts:
     """Mesh texts of prisms of ``heights_m`` over ``footprints`` (see :class:`PrismTexts`).
 
     The mesh frame is the footprint's ring relative to its centroid, half the height above
     the belt; ``polygons_px`` are the source polygons (for scene.json); ``object_ids`` name
-    the ``o`` lines.
+    the ``o`` lines. ``uv`` is None (no texture coordinates) or the ``(P, 2)`` texture
+    coordinates of all footprints' ring points, concatenated: each prism then has one ``vt``
+    line per ``v`` line (the ring's for the bottom, again for the top, so a side or bottom
+    vertex has the coordinate of the outline vertex it is extruded from) and its faces name
+    them (``f a/a b/b c/c``). The vertices and the faces are the same either way.
     """
     count = len(footprints)
     if not count:
@@ -81,9 +88,14 @@ def prism_texts(
     half_m = 0.5 * np.array(heights_m, dtype=np.float64)
     vertices = vertex_rows(local, sizes, half_m, up)
     bottoms, tops = vertex_texts(vertices, sizes)
-    caps = caps_blocks(faces, counts, sizes)
-    blocks = zip(object_ids, bottoms, tops, caps, size_list, strict=True)
-    mesh = [f"o {name}\n{bottom}{top}{cap}{sides_text(n)}" for name, bottom, top, cap, n in blocks]
+    textured = uv is not None
+    caps = caps_blocks(faces, counts, sizes, textured)
+    uvs = uv_blocks(uv, sizes) if uv is not None else [""] * count
+    blocks = zip(object_ids, bottoms, tops, uvs, caps, size_list, strict=True)
+    mesh = [
+        f"o {name}\n{bottom}{top}{vts}{vts}{cap}{sides_text(n, textured)}"
+        for name, bottom, top, vts, cap, n in blocks
+    ]
     pieces = [""] * count
     n_pieces = [1] * count
     concave = [k for k, fp in enumerate(footprints) if not fp.convex and not error[k]]

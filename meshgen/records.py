@@ -46,6 +46,8 @@ class ObjectRecord:
     n_convex_pieces: int
     area_change_ratio: float
     repairs: tuple[str, ...]
+    texture_path: str = ""
+    height_source: str = "sampled"
 
     def row(self) -> tuple[object, ...]:
         """Values in ``SCENE_COLUMNS`` order (repairs joined with ``;``)."""
@@ -55,7 +57,7 @@ class ObjectRecord:
         )
 
 
-_ROW_FORMAT = "%s,%s,%d,%s," + "%.9g," * 9 + "%s,%s,%d,%.9g,%s\n"
+_ROW_FORMAT = "%s,%s,%d,%s," + "%.9g," * 9 + "%s,%s,%d,%.9g,%s,%s,%s\n"
 
 
 def _csv_str(text: str) -> str:
@@ -86,6 +88,8 @@ def csv_row(record: ObjectRecord) -> str:
         record.n_convex_pieces,
         record.area_change_ratio,
         _csv_str(";".join(record.repairs)),
+        _csv_str(record.texture_path),
+        _csv_str(record.height_source),
     )
 
 
@@ -109,10 +113,10 @@ def _object_fields(
 
 _OBJECT_FORMAT = (
     '{"area_change_ratio":%r,"area_m2":%r,"centroid_x_m":%r,"centroid_y_m":%r,"class_id":%d,'
-    '"class_name":%s,"convex_path":%s,"density_kg_m3":%r,"height_m":%r,"length_m":%r,'
-    '"mass_kg":%r,"mesh_path":%s,"n_convex_pieces":%d,"object_id":%s,"repairs":[%s],'
-    '"rng_key":[%d,%d,%d],"seed":%d,"source_image":%s,"source_where":%s,"volume_m3":%r,'
-    '"width_m":%r,"yaw_rad":%r,'
+    '"class_name":%s,"convex_path":%s,"density_kg_m3":%r,"height_m":%r,"height_source":%s,'
+    '"length_m":%r,"mass_kg":%r,"mesh_path":%s,"n_convex_pieces":%d,"object_id":%s,'
+    '"repairs":[%s],"rng_key":[%d,%d,%d],"seed":%d,"source_image":%s,"source_where":%s,'
+    '"texture_path":%s,"volume_m3":%r,"width_m":%r,"yaw_rad":%r,'
 )
 """:func:`_object_fields` as sorted compact JSON without the closing brace, for plain floats."""
 
@@ -132,6 +136,7 @@ def _head_values(
         text(r.convex_path),
         density,
         r.height_m,
+        text(r.height_source),
         r.length_m,
         r.mass_kg,
         text(r.mesh_path),
@@ -142,6 +147,7 @@ def _head_values(
         seed,
         text(r.source_image),
         text(where),
+        text(r.texture_path),
         r.volume_m3,
         r.width_m,
         r.yaw_rad,
@@ -181,11 +187,11 @@ def object_json_text(record: ObjectRecord, extra: EntryExtras, seed: int) -> str
 
 
 _ENTRY_FORMAT = _OBJECT_FORMAT + '"footprint_m":%s,"polygon_px":%s}'
-""":func:`object_json_text` of plain floats as one template (26 values)."""
-_ENTRY_WIDTH = 26
-_ENTRY_FLOATS = (0, 1, 2, 3, 7, 8, 9, 10, 21, 22, 23)
+""":func:`object_json_text` of plain floats as one template (28 values)."""
+_ENTRY_WIDTH = 28
+_ENTRY_FLOATS = (0, 1, 2, 3, 7, 8, 10, 11, 23, 24, 25)
 """Where in an entry's values the floats stand (written with ``%r``)."""
-_ENTRY_INTS = (4, 12, 15, 16, 17, 18)
+_ENTRY_INTS = (4, 13, 16, 17, 18, 19)
 """Where in an entry's values the integers stand (written with ``%d``)."""
 
 

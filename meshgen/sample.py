@@ -8,10 +8,17 @@ outlines (irregular, concave for rubber and some wood and concrete) are made by
 with the objects cut by the border left out, as meshgen skips them, that is about the real
 sample's 4.5 objects per image, hence its stream density). Every fourth image has one object cut
 by the image border; its dimensions are drawn independently, as it is never measured. Image
-sizes alternate between 1024x960 and 990x990 like the real sample, and each image is written as
-a small blank grayscale PNG so that its size is read from the header. Heights are not part of
+sizes alternate between 1024x960 and 990x990 like the real sample. Heights are not part of
 the sample: meshgen draws them from its class table. Written files: ``data.yaml``,
-``images/<stem>.png``, ``labels/<stem>.txt``.
+``images/<stem>.jpg``, ``labels/<stem>.txt``.
+
+Each image is a photo of its labels: every object painted inside its polygon with its class's
+pattern (:mod:`meshgen.paint`: speckled grey concrete, granular red-orange brick, grained
+brown wood, matte near-black rubber) on a dark belt, as an RGB JPEG. meshgen textures the
+meshed pieces from these photos, and a detector can be trained on them. The labels are drawn
+first and from their own random stream (:func:`sample_labels`); the photos from other seeds
+(``[seed, image, object, PIECE_STREAM]`` and ``[seed, image, BELT_STREAM]``), so the labels,
+and the meshes made from them, do not depend on the photos.
 
 Example::
 
@@ -20,6 +27,7 @@ Example::
 
 from __future__ import annotations
 
+import io
 import math
 import struct
 import zlib
@@ -28,7 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
+from interfaces.class_colours import class_rgb
+from meshgen.annotations import FloatArray
 from meshgen.errors import DatasetError, OutputError
+from meshgen.paint import PaintedPiece, paint_picture
 from meshgen.sample_dims import class_counts, draw_dimensions, draw_one
 from meshgen.sample_shapes import outline
 from meshgen.sample_stats import SampleStats, load_sample_stats
@@ -40,9 +51,16 @@ DEFAULT_IMAGES = 96
 """Images of the default sample: enough objects of every class (rubber, the rarest, gets about
 60) that each class's length, width and area distributions stay within a Kolmogorov-Smirnov
 distance of 0.15 of the real sample's."""
-SAMPLE_VERSION = 2
-"""Changes whenever the same arguments give a different sample (caches key on it)."""
+SAMPLE_VERSION = 3
+"""Changes whenever the same arguments give a different sample (caches key on it). 3: the
+images are photos of the pieces (the labels are those of version 2)."""
 MARGIN_PX = 20
+PHOTO_QUALITY = 90
+"""JPEG quality of the sample's photos."""
+PIECE_STREAM = 0x5A3F
+"""Last element of an object's photo seed key."""
+BELT_STREAM = 0xBE17
+"""Last element of an image's belt seed key."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -96,10 +114,25 @@ def _measured_objects(
     return [objects[k] for k in rng.permutation(len(objects))]
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SampleLabel:
+    """One object of the sample: its class, its ``(n, 2) float`` polygon in pixels, its line.
+
+    ``text`` is the YOLO-seg label line (no line end); ``points_px`` the polygon it was
+    written from (before rounding to 6 decimals of the normalised coordinates).
+    """
+
+    class_id: int
+    class_name: str
+    points_px: FloatArray
+    text: str
+
+
 def _label_line(
     rng: np.random.Generator, cls_id: int, ring_m: np.ndarray, size_px: tuple[int, int], cut: bool
-) -> str:
-    """The YOLO-seg line of one outline, turned and placed in the image (or on its border)."""
+) -> tuple[str, FloatArray]:
+    """The YOLO-seg line of one outline, turned and placed in the image (or on its border), and
+    its ``(n, 2)`` pixel polygon."""
     width, height = size_px
     m_per_px = BELT_WIDTH_M / width
     yaw = rng.uniform(-math.pi, math.pi)
@@ -115,21 +148,11 @@ def _label_line(
     px[:, 0] = px[:, 0].clip(0, width - 1)
     px[:, 1] = px[:, 1].clip(0, height - 1)
     norm = px / np.array([width, height])
-    return f"{cls_id} " + " ".join(f"{v:.6f}" for v in norm.ravel())
+    return f"{cls_id} " + " ".join(f"{v:.6f}" for v in norm.ravel()), px
 
 
-def write_sample(
-    out: Path,
-    images: int = DEFAULT_IMAGES,
-    seed: int = 0,
-    objects_per_image: tuple[int, int] = (3, 7),
-    stats: SampleStats | None = None,
-) -> SampleSummary:
-    """Write the procedural YOLO-seg sample to ``out`` (created; files replaced atomically).
-
-    Each image holds between ``objects_per_image[0]`` and ``objects_per_image[1]`` objects;
-    ``stats`` defaults to the stored real-sample statistics.
-    """
+def _check(images: int, objects_per_image: tuple[int, int], stats: SampleStats) -> None:
+    """Refuse arguments no sample can be drawn from, naming them."""
     if images < 1:
         msg = f"--images must be >= 1, got {images}"
         raise OutputError(msg)
@@ -137,23 +160,33 @@ def write_sample(
     if not 1 <= lo <= hi:
         msg = f"objects per image must satisfy 1 <= min <= max, got {objects_per_image}"
         raise OutputError(msg)
-    stats = load_sample_stats() if stats is None else stats
-    class_ids = {name: i for i, name in enumerate(CLASS_NAMES)}
-    unknown = sorted(set(stats.classes) - set(class_ids))
+    unknown = sorted(set(stats.classes) - set(CLASS_NAMES))
     if unknown or not stats.classes:
         msg = f"sample statistics {stats.source!r}: classes {unknown} are not among {CLASS_NAMES}"
         raise DatasetError(msg)
-    out = Path(out)
-    (out / "images").mkdir(parents=True, exist_ok=True)
-    (out / "labels").mkdir(parents=True, exist_ok=True)
-    table = "\n".join(f"  {i}: {n}" for i, n in enumerate(CLASS_NAMES))
-    _atomic(out / "data.yaml", f"# cdw-twin procedural sample\npath: .\nnames:\n{table}\n".encode())
+
+
+def sample_labels(
+    images: int = DEFAULT_IMAGES,
+    seed: int = 0,
+    objects_per_image: tuple[int, int] = (3, 7),
+    stats: SampleStats | None = None,
+) -> list[list[SampleLabel]]:
+    """The objects of every image of the sample :func:`write_sample` writes, in label order.
+
+    All randomness of the labels comes from ``numpy.random.default_rng(seed)``, drawn here
+    and nowhere else.
+    """
+    stats = load_sample_stats() if stats is None else stats
+    _check(images, objects_per_image, stats)
+    lo, hi = objects_per_image
+    class_ids = {name: i for i, name in enumerate(CLASS_NAMES)}
     rng = np.random.default_rng(seed)
     slots = _slots(rng, images, lo, hi)
     measured = iter(_measured_objects(rng, stats, sum(not s.cut for s in slots)))
     names = list(stats.classes)
     mix = np.array([stats.classes[n].objects for n in names], dtype=np.float64)
-    lines: list[list[str]] = [[] for _ in range(images)]
+    labels: list[list[SampleLabel]] = [[] for _ in range(images)]
     for slot in slots:
         if slot.cut:
             name = names[int(rng.choice(len(names), p=mix / mix.sum()))]
@@ -162,14 +195,77 @@ def write_sample(
             name, length, width, fill = next(measured)
         ring = outline(rng, name, length, width, fill)
         size = SIZES_PX[slot.image % len(SIZES_PX)]
-        lines[slot.image].append(_label_line(rng, class_ids[name], ring, size, slot.cut))
-    for i in range(images):
+        text, points = _label_line(rng, class_ids[name], ring, size, slot.cut)
+        labels[slot.image].append(
+            SampleLabel(class_id=class_ids[name], class_name=name, points_px=points, text=text)
+        )
+    return labels
+
+
+def label_text(labels: list[SampleLabel]) -> str:
+    """The label file of one image: one line per object."""
+    return "\n".join(label.text for label in labels) + "\n"
+
+
+def sample_photo(
+    labels: list[SampleLabel], size_px: tuple[int, int], seed: int, image: int
+) -> bytes:
+    """The JPEG photo of one image of ``size_px`` ``(w, h)``: its objects on the belt."""
+    mm_per_px = 1e3 * BELT_WIDTH_M / size_px[0]
+    pieces = [
+        PaintedPiece(
+            class_name=label.class_name,
+            rgb=class_rgb(label.class_name),
+            points_px=label.points_px,
+            seed_key=(seed, image, k, PIECE_STREAM),
+        )
+        for k, label in enumerate(labels)
+    ]
+    picture = paint_picture(
+        size_px, pieces, mm_per_px=mm_per_px, background_key=(seed, image, BELT_STREAM)
+    )
+    buffer = io.BytesIO()
+    picture.save(buffer, format="JPEG", quality=PHOTO_QUALITY)
+    return buffer.getvalue()
+
+
+def write_sample(
+    out: Path,
+    images: int = DEFAULT_IMAGES,
+    seed: int = 0,
+    objects_per_image: tuple[int, int] = (3, 7),
+    stats: SampleStats | None = None,
+    *,
+    photos: bool = True,
+) -> SampleSummary:
+    """Write the procedural YOLO-seg sample to ``out`` (created; files replaced atomically).
+
+    Each image holds between ``objects_per_image[0]`` and ``objects_per_image[1]`` objects
+    (:func:`sample_labels`) and is written with its photo (:func:`sample_photo`); ``stats``
+    defaults to the stored real-sample statistics. A flat grey ``images/<stem>.png`` left by an
+    older version of the sample is removed. ``photos=False`` writes that flat grey PNG
+    instead of the photo (the same labels, several times faster: for work on the outlines).
+    """
+    stats = load_sample_stats() if stats is None else stats
+    labels = sample_labels(images, seed, objects_per_image, stats)
+    out = Path(out)
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    (out / "labels").mkdir(parents=True, exist_ok=True)
+    table = "\n".join(f"  {i}: {n}" for i, n in enumerate(CLASS_NAMES))
+    _atomic(out / "data.yaml", f"# cdw-twin procedural sample\npath: .\nnames:\n{table}\n".encode())
+    for i, objects in enumerate(labels):
         stem = f"sample_{i:03d}"
-        width, height = SIZES_PX[i % len(SIZES_PX)]
-        _atomic(out / "labels" / f"{stem}.txt", ("\n".join(lines[i]) + "\n").encode())
-        _atomic(out / "images" / f"{stem}.png", png_bytes(width, height))
-    cuts = sum(s.cut for s in slots)
-    return SampleSummary(out=out, images=images, objects=len(slots), border_objects=cuts)
+        size = SIZES_PX[i % len(SIZES_PX)]
+        _atomic(out / "labels" / f"{stem}.txt", label_text(objects).encode())
+        if photos:
+            _atomic(out / "images" / f"{stem}.jpg", sample_photo(objects, size, seed, i))
+            (out / "images" / f"{stem}.png").unlink(missing_ok=True)
+        else:
+            _atomic(out / "images" / f"{stem}.png", png_bytes(*size))
+            (out / "images" / f"{stem}.jpg").unlink(missing_ok=True)
+    count = sum(len(objects) for objects in labels)
+    cuts = sum(1 for i in range(images) if i % 4 == 3)
+    return SampleSummary(out=out, images=images, objects=count, border_objects=cuts)
 
 
 def _atomic(path: Path, data: bytes) -> None:

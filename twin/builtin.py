@@ -29,11 +29,15 @@ def builtin_dataset(
 
     ``dense`` packs 9 to 12 objects into each image (clutter; the 40-object benchmark).
     """
+    from meshgen.export import OUTPUT_VERSION
     from meshgen.sample import SAMPLE_VERSION, write_sample
 
     per_image = (9, 12) if dense else (3, 7)
-    # the generator's version is in the name: a cache of an older generator is not reused
-    name = f"builtin-v{SAMPLE_VERSION}-i{images}-s{seed}" + ("-dense" if dense else "")
+    # the generator's and meshgen's output versions are in the name: a cache of an older
+    # generator or of an older meshgen output is not reused
+    name = f"builtin-v{SAMPLE_VERSION}-m{OUTPUT_VERSION}-i{images}-s{seed}" + (
+        "-dense" if dense else ""
+    )
     base = (root or cache_root()) / name
     meshes = base / "meshes"
     if (meshes / "index.csv").is_file():

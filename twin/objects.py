@@ -4,6 +4,15 @@ Everything is checked before a simulation starts: a missing file, a malformed ro
 or an unknown class raises :class:`twin.errors.SceneError` naming the file, line and field.
 Inertia comes from the mesh itself (trimesh mass properties scaled to the recorded mass), expressed
 as principal moments plus the rotation of the principal frame, which is what PyBullet takes.
+
+The twin trusts no path a dataset names. Every file ``index.csv`` and the ``scene.csv`` files
+name (``scene_csv``, ``mesh_path``, ``convex_path``, ``texture_path``) must resolve, symbolic
+links followed, to a file inside the dataset folder: a ``..`` that climbs out of it, an absolute
+path elsewhere or a link out of it is refused, naming the CSV file, its line and the column.
+Every mesh is bounded (:class:`MeshLimits`, by default :data:`MAX_MESH_VERTICES` vertices,
+:data:`MAX_MESH_FACES` faces and :data:`MAX_MESH_BYTES` bytes): its size is checked before it
+is opened and its ``v`` and ``f`` lines are counted before anything (PyBullet included) reads
+it, so a huge mesh is refused with its file's name instead of stalling the twin.
 """
 
 from __future__ import annotations
@@ -11,6 +20,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cache
@@ -35,6 +45,88 @@ _FLOAT_FIELDS = (
 )
 _REQUIRED = ("object_id", "source_image", "class_name", *_FLOAT_FIELDS, "mesh_path", "convex_path")
 
+MAX_MESH_VERTICES = 100_000
+"""Default bound on the vertices of one mesh file (meshgen writes at most a few thousand: two
+per outline point, and the real sample's longest outline has 370 points)."""
+MAX_MESH_FACES = 200_000
+"""Default bound on the faces (triangles) of one mesh file."""
+MAX_MESH_BYTES = 32 * 1024 * 1024
+"""Default bound on the size of one mesh file, checked before it is opened."""
+QUOTE_CHARS = 80
+"""An error quotes at most this many characters of a value read from a file."""
+MAX_MEAN_LINE_BYTES = 256
+"""A mesh file larger than :data:`LONG_LINES_FROM_BYTES` whose lines are longer than this on
+average is refused (meshgen's lines are under 100 bytes): the line counts bound the faces only
+when a face line cannot hold thousands of corners."""
+LONG_LINES_FROM_BYTES = 1024 * 1024
+"""Files from this size on are held to :data:`MAX_MEAN_LINE_BYTES`."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MeshLimits:
+    """How large a mesh file the twin accepts (see the module doc); pass your own to
+    :func:`load_dataset` and :func:`read_mesh` for larger meshes."""
+
+    max_vertices: int = MAX_MESH_VERTICES
+    max_faces: int = MAX_MESH_FACES
+    max_bytes: int = MAX_MESH_BYTES
+
+
+DEFAULT_MESH_LIMITS = MeshLimits()
+"""The bounds every mesh is held to unless told otherwise."""
+
+_VERTEX_LINE = re.compile(rb"^[ \t]*v[ \t]", re.MULTILINE)
+_FACE_LINE = re.compile(rb"^[ \t]*f[ \t]", re.MULTILINE)
+
+
+def _cut(value: str) -> str:
+    """``repr`` of ``value`` cut to :data:`QUOTE_CHARS` characters (``...`` marks a cut)."""
+    if len(value) <= QUOTE_CHARS:
+        return repr(value)
+    return repr(value[:QUOTE_CHARS]) + "..."
+
+
+def check_mesh_size(path: Path, limits: MeshLimits = DEFAULT_MESH_LIMITS) -> None:
+    """Refuse the mesh file at ``path`` when it exceeds ``limits`` (:class:`SceneError` naming
+    the file): its size first, without opening it, then its ``v`` and ``f`` lines counted."""
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        msg = f"{path}: cannot read: {exc.strerror}"
+        raise SceneError(msg) from None
+    if size > limits.max_bytes:
+        msg = (
+            f"{path}: {size} bytes, more than the {limits.max_bytes} a mesh file may have "
+            "(twin.objects.MeshLimits.max_bytes): refused unread"
+        )
+        raise SceneError(msg)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        msg = f"{path}: cannot read: {exc.strerror}"
+        raise SceneError(msg) from None
+    lines = data.count(b"\n") + 1
+    if len(data) > LONG_LINES_FROM_BYTES and len(data) > MAX_MEAN_LINE_BYTES * lines:
+        msg = (
+            f"{path}: {len(data)} bytes in {lines} lines, more than {MAX_MEAN_LINE_BYTES} bytes "
+            "per line: not a mesh the twin reads (a face of that many corners would be as "
+            "costly as that many faces)"
+        )
+        raise SceneError(msg)
+    if lines <= min(limits.max_vertices, limits.max_faces):
+        return  # fewer lines than either bound: no need to tell them apart
+    for pattern, bound, what in (
+        (_VERTEX_LINE, limits.max_vertices, "vertices"),
+        (_FACE_LINE, limits.max_faces, "faces"),
+    ):
+        count = sum(1 for _ in pattern.finditer(data))
+        if count > bound:
+            msg = (
+                f"{path}: {count} {what}, more than the {bound} a mesh may have "
+                f"(twin.objects.MeshLimits.max_{what}): refused unparsed"
+            )
+            raise SceneError(msg)
+
 
 @dataclass(frozen=True)
 class ObjectSpec:
@@ -54,6 +146,9 @@ class ObjectSpec:
     mass_kg: float
     mesh_path: Path
     convex_path: Path | None
+    texture_path: Path | None = None
+    """The image the piece's texture coordinates point into (None: a dataset without
+    textures, or written before meshgen wrote them)."""
 
     @property
     def collision_path(self) -> Path:
@@ -109,7 +204,37 @@ def _float(path: Path, line: int, row: dict[str, str], key: str) -> float:
     return value
 
 
-def _parse_object(path: Path, line: int, row: dict[str, str], classes: Iterable[str]) -> ObjectSpec:
+def _inside(root: Path, path: Path, line: int, key: str, value: str, kind: str = "mesh") -> Path:
+    """The file ``value`` (column ``key`` of line ``line`` of CSV file ``path``) names,
+    relative to the CSV file's folder, resolved; :class:`SceneError` unless it is a file
+    inside ``root`` (the resolved dataset folder). ``kind`` names the file in the message."""
+    where = f"{path}:{line}: field {key!r} = {_cut(value)}"
+    try:
+        target = (path.parent / value).resolve()
+    except (OSError, ValueError) as exc:
+        msg = f"{where}: not a usable path ({exc})"
+        raise SceneError(msg) from None
+    if not target.is_relative_to(root):
+        msg = (
+            f"{where}: resolves to {target}, outside the dataset folder {root} "
+            "(a dataset may name only its own files: no '..', absolute path or link out of it)"
+        )
+        raise SceneError(msg)
+    if not target.is_file():
+        msg = f"{path}:{line}: field {key!r}: {kind} {target} does not exist"
+        raise SceneError(msg)
+    return target
+
+
+def _parse_object(
+    path: Path,
+    line: int,
+    row: dict[str, str],
+    classes: Iterable[str],
+    *,
+    root: Path,
+    limits: MeshLimits,
+) -> ObjectSpec:
     for key in _REQUIRED:
         if key not in row or row[key] is None:
             msg = f"{path}:{line}: missing field {key!r}"
@@ -124,22 +249,22 @@ def _parse_object(path: Path, line: int, row: dict[str, str], classes: Iterable[
     if class_name not in known:
         msg = f"{path}:{line}: field 'class_name' = {class_name!r} is not a known class {known}"
         raise SceneError(msg)
-    mesh_path = (path.parent / row["mesh_path"]).resolve()
-    if not mesh_path.is_file():
-        msg = f"{path}:{line}: field 'mesh_path': mesh {mesh_path} does not exist"
-        raise SceneError(msg)
+    mesh_path = _inside(root, path, line, "mesh_path", row["mesh_path"])
+    check_mesh_size(mesh_path, limits)
     convex_path: Path | None = None
     if row["convex_path"]:
-        convex_path = (path.parent / row["convex_path"]).resolve()
-        if not convex_path.is_file():
-            msg = f"{path}:{line}: field 'convex_path': mesh {convex_path} does not exist"
-            raise SceneError(msg)
+        convex_path = _inside(root, path, line, "convex_path", row["convex_path"])
+        check_mesh_size(convex_path, limits)
+    texture_path: Path | None = None
+    if row.get("texture_path"):
+        texture_path = _inside(root, path, line, "texture_path", row["texture_path"], "texture")
     return ObjectSpec(
         object_id=row["object_id"],
         source_image=row["source_image"],
         class_name=class_name,
         mesh_path=mesh_path,
         convex_path=convex_path,
+        texture_path=texture_path,
         **values,
     )
 
@@ -167,15 +292,26 @@ def dataset_class_table(dataset_dir: Path) -> tuple[str, ...]:
     return tuple(str(name) for name in table)
 
 
-def load_dataset(out_dir: Path, classes: Iterable[str] | None = None) -> tuple[ImageLayout, ...]:
+def load_dataset(
+    out_dir: Path,
+    classes: Iterable[str] | None = None,
+    *,
+    mesh_limits: MeshLimits = DEFAULT_MESH_LIMITS,
+) -> tuple[ImageLayout, ...]:
     """Read a meshgen output folder: every image's layout, in ``index.csv`` order.
 
     Every object's class must be one of ``classes`` (default: the dataset's own class table,
-    :func:`dataset_class_table`).
+    :func:`dataset_class_table`); every file named must lie inside ``out_dir`` and every mesh
+    within ``mesh_limits`` (module doc).
     """
     index_path = out_dir / "index.csv"
     rows = _read_csv(index_path)
     known = tuple(dataset_class_table(out_dir) if classes is None else classes)
+    try:
+        root = out_dir.resolve()
+    except (OSError, ValueError) as exc:
+        msg = f"{out_dir}: cannot resolve the dataset folder: {exc}"
+        raise SceneError(msg) from None
     layouts = []
     for line, row in rows:
         for key in ("image", "width_px", "height_px", "m_per_px", "scene_csv"):
@@ -185,9 +321,9 @@ def load_dataset(out_dir: Path, classes: Iterable[str] | None = None) -> tuple[I
         m_per_px = _float(index_path, line, row, "m_per_px")
         width_px = _float(index_path, line, row, "width_px")
         height_px = _float(index_path, line, row, "height_px")
-        scene_path = out_dir / row["scene_csv"]
+        scene_path = _inside(root, index_path, line, "scene_csv", row["scene_csv"], "scene file")
         objects = tuple(
-            _parse_object(scene_path, obj_line, obj_row, known)
+            _parse_object(scene_path, obj_line, obj_row, known, root=root, limits=mesh_limits)
             for obj_line, obj_row in _read_csv(scene_path)
         )
         if objects:
@@ -205,13 +341,22 @@ def load_dataset(out_dir: Path, classes: Iterable[str] | None = None) -> tuple[I
     return tuple(layouts)
 
 
-def read_mesh(path: Path) -> ObjMesh:
+def read_mesh(path: Path, limits: MeshLimits = DEFAULT_MESH_LIMITS) -> ObjMesh:
     """An OBJ file meshgen wrote (:func:`meshgen.objfile.read_obj`); :class:`SceneError`
-    naming the file and line when it cannot be read or is malformed."""
+    naming the file (and line) when it cannot be read, is malformed or exceeds ``limits``
+    (checked before it is parsed, :func:`check_mesh_size`, and on the triangles parsed)."""
+    check_mesh_size(path, limits)
     try:
-        return read_obj(path)
+        mesh = read_obj(path)
     except ObjFileError as exc:
         raise SceneError(str(exc)) from None
+    if len(mesh.faces) > limits.max_faces:
+        msg = (
+            f"{path}: {len(mesh.faces)} triangles, more than the {limits.max_faces} a mesh may "
+            "have (twin.objects.MeshLimits.max_faces)"
+        )
+        raise SceneError(msg)
+    return mesh
 
 
 def read_obj_triangles(path: Path) -> np.ndarray:

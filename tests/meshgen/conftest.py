@@ -40,9 +40,10 @@ def meshed(sample_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Datase
 
 @pytest.fixture(scope="session")
 def default_sample_meshed(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The default built-in sample (``cdw-twin sample``'s defaults), meshed by default."""
+    """The default built-in sample (``cdw-twin sample``'s defaults, without its photos: the
+    outlines are the same), meshed by default."""
     root = tmp_path_factory.mktemp("default_sample")
-    write_sample(root / "sample")
+    write_sample(root / "sample", photos=False)
     return mesh_dataset(root / "sample", root / "meshes", MeshgenConfig()).out
 
 

@@ -30,8 +30,17 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 
-def _faces_text(faces_0based: list[tuple[int, int, int]]) -> str:
+def _faces_text(faces_0based: list[tuple[int, int, int]], textured: bool = False) -> str:
+    if textured:
+        return "".join(
+            f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}\n" for a, b, c in faces_0based
+        )
     return "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces_0based)
+
+
+def uv_block(uv: FloatArray) -> str:
+    """OBJ ``vt`` lines of ``(n, 2)`` texture coordinates, every number with 6 decimals."""
+    return "".join(f"vt {u:.6f} {v:.6f}\n" for u, v in uv.tolist())
 
 
 def vertex_blocks(ring: FloatArray, half_m: float, up: str) -> tuple[str, str]:
@@ -58,22 +67,23 @@ def caps_faces(tris: IntArray, n: int) -> list[tuple[int, int, int]]:
     return bottom + top
 
 
-def caps_texts(tris_list: list[IntArray], sizes: list[int]) -> list[str]:
+def caps_texts(tris_list: list[IntArray], sizes: list[int], textured: bool = False) -> list[str]:
     """Per prism the ``f`` lines of both caps (what :func:`prism_faces_text` writes first)."""
-    return [_faces_text(caps_faces(t, n)) for t, n in zip(tris_list, sizes, strict=True)]
+    return [_faces_text(caps_faces(t, n), textured) for t, n in zip(tris_list, sizes, strict=True)]
 
 
-def prism_faces_text(tris: IntArray, n: int) -> str:
+def prism_faces_text(tris: IntArray, n: int, textured: bool = False) -> str:
     """OBJ ``f`` lines of a prism over ``n`` points with CCW cap triangles ``tris``, 1-based.
 
     Both caps (:func:`caps_faces`), then per ring edge ``i -> j`` the side triangles
     ``(i, j, j + n)`` and ``(i, j + n, i + n)``: the faces of :func:`meshgen.mesh.extrude`.
+    ``textured`` writes every corner as ``i/i`` (the texture coordinate of the same index).
     """
     sides = []
     for i in range(n):
         j = (i + 1) % n
         sides += [(i, j, j + n), (i, j + n, i + n)]
-    return _faces_text(caps_faces(tris, n) + sides)
+    return _faces_text(caps_faces(tris, n) + sides, textured)
 
 
 def pieces_text(bottom: str, top: str, pieces: list[list[int]]) -> str:

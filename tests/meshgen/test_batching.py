@@ -57,12 +57,17 @@ def test_prism_face_texts_match_extrude() -> None:
     rings = [_star(n, seed) for seed, n in enumerate((3, 4, 7, 12, 30, 5, 64))]
     tris = [triangulate(r) for r in rings]
     caps = caps_texts(tris, [len(r) for r in rings])
+    textured_caps = caps_texts(tris, [len(r) for r in rings], textured=True)
     assert len(caps) == len(rings)
-    for ring, t, cap in zip(rings, tris, caps, strict=True):
+    for ring, t, cap, textured_cap in zip(rings, tris, caps, textured_caps, strict=True):
         _, faces = extrude(ring, t, 1.0)
         want = "".join(f"f {a} {b} {c}\n" for a, b, c in (faces + 1).tolist())
         assert cap + sides_text(len(ring)) == want
         assert prism_faces_text(t, len(ring)) == want
+        # textured: every corner also names the texture coordinate of its own index
+        textured = "".join(f"f {a}/{a} {b}/{b} {c}/{c}\n" for a, b, c in (faces + 1).tolist())
+        assert textured_cap + sides_text(len(ring), textured=True) == textured
+        assert prism_faces_text(t, len(ring), textured=True) == textured
     assert caps_texts([], []) == []
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -19,7 +20,7 @@ NAMES = ("concrete", "brick", "wood", "rubber")
 def _read_yolo(sample: Path) -> dict[str, tuple[tuple[int, int], list[tuple[int, list[float]]]]]:
     images = {}
     for label in sorted((sample / "labels").glob("*.txt")):
-        size = read_image_size(sample / "images" / f"{label.stem}.png")
+        size = read_image_size(sample / "images" / f"{label.stem}.jpg")
         assert size is not None
         polys = []
         for line in label.read_text().splitlines():
@@ -46,7 +47,7 @@ def _write_labelme(images: dict, root: Path) -> None:  # type: ignore[type-arg]
         doc = {
             "version": "5.0",
             "shapes": shapes,
-            "imagePath": f"{stem}.png",
+            "imagePath": f"../images/{stem}.jpg",
             "imageData": None,
             "imageWidth": w,
             "imageHeight": h,
@@ -62,7 +63,7 @@ def _write_coco(images: dict, root: Path) -> None:  # type: ignore[type-arg]
         "categories": [{"id": i + 1, "name": n} for i, n in enumerate(NAMES)],
     }
     for image_id, (stem, ((w, h), polys)) in enumerate(images.items(), start=1):
-        doc["images"].append({"id": image_id, "file_name": f"{stem}.png", "width": w, "height": h})
+        doc["images"].append({"id": image_id, "file_name": f"{stem}.jpg", "width": w, "height": h})
         for c, pts in polys:
             doc["annotations"].append(
                 {
@@ -76,15 +77,20 @@ def _write_coco(images: dict, root: Path) -> None:  # type: ignore[type-arg]
     (root / "instances.json").write_text(json.dumps(doc))
 
 
-def _objs(out: Path) -> dict[str, bytes]:
-    return {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*.obj"))}
+def _files(out: Path, pattern: str) -> dict[str, bytes]:
+    return {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob(pattern))}
 
 
 def test_yolo_coco_labelme_give_same_meshes(sample_dir: Path, tmp_path: Path) -> None:
+    """All three formats find their photos (YOLO images/, labelme imagePath, COCO file_name)
+    and give the same meshes and textures."""
     images = _read_yolo(sample_dir)
     _write_labelme(images, tmp_path / "lm")
     _write_coco(images, tmp_path / "coco")
+    for folder in ("lm", "coco"):
+        shutil.copytree(sample_dir / "images", tmp_path / folder / "images")
     results = {}
+    textures = {}
     for fmt, data in (
         ("yolo", sample_dir),
         ("labelme", tmp_path / "lm"),
@@ -93,9 +99,14 @@ def test_yolo_coco_labelme_give_same_meshes(sample_dir: Path, tmp_path: Path) ->
         assert discover(data).fmt == fmt
         summary = mesh_dataset(data, tmp_path / f"out_{fmt}", MeshgenConfig())
         assert summary.fmt == fmt
-        results[fmt] = _objs(summary.out)
+        assert summary.notices == ()
+        assert dict(summary.textures) == {"photo": summary.images}
+        results[fmt] = _files(summary.out, "*.obj")
+        textures[fmt] = _files(summary.out, "texture.jpg")
     assert results["yolo"]
     assert results["yolo"] == results["labelme"] == results["coco"]
+    assert len(textures["yolo"]) == len(images)
+    assert textures["yolo"] == textures["labelme"] == textures["coco"]
 
 
 def test_sizes_are_read_per_image(sample_dir: Path) -> None:

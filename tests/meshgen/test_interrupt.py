@@ -35,10 +35,10 @@ def big_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("big") / "data"
     write_sample(folder, images=SAMPLE_IMAGES, seed=11)
     for label in sorted((folder / "labels").glob("*.txt")):
-        png = folder / "images" / f"{label.stem}.png"
+        photo = folder / "images" / f"{label.stem}.jpg"
         for k in range(1, COPIES):
             os.link(label, folder / "labels" / f"{label.stem}_c{k:03d}.txt")
-            os.link(png, folder / "images" / f"{label.stem}_c{k:03d}.png")
+            os.link(photo, folder / "images" / f"{label.stem}_c{k:03d}.jpg")
     return folder
 
 

@@ -15,6 +15,7 @@ from meshgen.objtext import (
     caps_blocks,
     pieces_blocks,
     points_json_blocks,
+    uv_blocks,
     vertex_rows,
     vertex_texts,
 )
@@ -23,6 +24,7 @@ from tests.meshgen.reference_text import (
     hertel_mehlhorn_one,
     pieces_text,
     points_json,
+    uv_block,
     vertex_blocks,
 )
 
@@ -126,6 +128,8 @@ def test_caps_and_pieces_blocks_match_one_object_texts() -> None:
     counts = np.array([len(t) for t in tris], dtype=np.int64)
     caps = caps_blocks(np.concatenate(tris), counts, SIZES)
     assert caps == caps_texts(tris, SIZES.tolist())
+    textured = caps_blocks(np.concatenate(tris), counts, SIZES, textured=True)
+    assert textured == caps_texts(tris, SIZES.tolist(), textured=True)
     halves = np.linspace(0.01, 0.04, len(RINGS))
     rows = vertex_rows(np.concatenate(RINGS), SIZES, halves, "z")
     pieces = [hertel_mehlhorn_one(r, t) for r, t in zip(RINGS, tris, strict=True)]
@@ -139,6 +143,20 @@ def test_caps_and_pieces_blocks_match_one_object_texts() -> None:
     )
     for ring, half, parts, text in zip(RINGS, halves.tolist(), pieces, texts, strict=True):
         assert text == pieces_text(*vertex_blocks(ring, half, "z"), parts)
+
+
+def test_uv_blocks_match_uv_block() -> None:
+    # texture coordinates of pixels of a 1024 x 960 photo, including the edges and exact ties
+    rng = np.random.default_rng(9)
+    pixels = np.concatenate(
+        (rng.uniform(0.0, 1024.0, (int(SIZES.sum()) - 4, 2)), [[0, 0], [1024, 960], [512, 480]])
+    )
+    pixels = np.concatenate((pixels, [[0.5, 959.5]]))
+    uv = np.stack((pixels[:, 0] / 1024.0, 1.0 - pixels[:, 1] / 960.0), axis=1)
+    blocks = uv_blocks(uv, SIZES)
+    starts = np.cumsum(SIZES) - SIZES
+    for start, size, block in zip(starts.tolist(), SIZES.tolist(), blocks, strict=True):
+        assert block == uv_block(uv[start : start + size])
 
 
 def test_points_json_blocks_match_points_json() -> None:

@@ -206,3 +206,53 @@ def test_unreadable_files_are_named(tmp_path: Path) -> None:
     binary.write_bytes(b"v 0 0 0\n\xff\xfe\n")
     with pytest.raises(ObjFileError, match=r"binary\.obj: not UTF-8"):
         read_obj(binary)
+
+
+def test_texture_coordinates_read_back_on_both_routes(meshed: DatasetSummary) -> None:
+    paths = sorted(meshed.out.glob("*/*.obj"))
+    textured = [p for p in paths if not p.name.endswith("_convex.obj")]
+    assert textured
+    for path in textured[:40]:
+        text = path.read_text()
+        assert text.count("\nvt ") == text.count("\nv ")
+        fast = parse_obj(text)
+        slow = parse_obj(text.replace("v ", "v\t").replace("vt ", "vt\t").replace("f ", "f\t"))
+        assert fast.uv is not None
+        assert fast.uv.shape == (len(fast.vertices), 2)
+        assert slow.uv is not None
+        np.testing.assert_array_equal(fast.uv, slow.uv)
+        np.testing.assert_array_equal(fast.faces, slow.faces)
+        assert ((fast.uv >= 0.0) & (fast.uv <= 1.0)).all()
+    for path in paths:
+        if path.name.endswith("_convex.obj"):
+            assert read_obj(path).uv is None
+
+
+def test_uv_only_when_every_vertex_has_its_own() -> None:
+    own = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n"
+    np.testing.assert_array_equal(parse_obj(own).uv, [[0, 0], [1, 0], [0, 1]])
+    shared = own.replace("f 1/1 2/2 3/3", "f 1/1 2/1 3/1")
+    assert parse_obj(shared).uv is None
+    fewer = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1\n"
+    assert parse_obj(fewer).uv is None
+    # OBJ lets a vt line give u alone (v = 0) and a malformed vt line only costs the uv
+    alone = own.replace("vt 1 0\n", "vt 1\n")
+    np.testing.assert_array_equal(parse_obj(alone).uv, [[0, 0], [1, 0], [0, 1]])
+    broken = own.replace("vt 1 0\n", "vt one 0\n")
+    assert parse_obj(broken).uv is None
+    np.testing.assert_array_equal(parse_obj(broken).faces, [[0, 1, 2]])
+    relative = own.replace("f 1/1 2/2 3/3", "f -3/-3 -2/-2 -1/-1")
+    np.testing.assert_array_equal(parse_obj(relative).uv, [[0, 0], [1, 0], [0, 1]])
+
+
+def test_an_error_quotes_at_most_80_characters_of_the_line(tmp_path: Path) -> None:
+    path = tmp_path / "long.obj"
+    path.write_text("v 0 0 0\nv 1 0 " + "x" * 100_000 + "\n", encoding="utf-8")
+    with pytest.raises(ObjFileError, match=r"long\.obj:2: malformed line 'v 1 0 x+'\.\.\.") as info:
+        read_obj(path)
+    assert len(str(info.value)) < 250
+    face = tmp_path / "face.obj"
+    face.write_text("v 0 0 0\nf 1 2 " + "3 " * 50_000 + "\n", encoding="utf-8")
+    with pytest.raises(ObjFileError, match=r"face\.obj:2: face 'f 1 2 3 .*'\.\.\. refers") as info:
+        read_obj(face)
+    assert len(str(info.value)) < 250

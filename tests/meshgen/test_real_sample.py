@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import warnings
 from pathlib import Path
 
@@ -56,3 +57,42 @@ def test_real_sample_repairs_are_meaningful_and_silent(tmp_path: Path, real_samp
                 ]
     assert ratios
     assert all(0.0 < r <= 1.0 for r in ratios), ratios
+
+
+def test_real_sample_photos_are_all_found_and_every_piece_textured(
+    real_sample: Path, real_meshed: Path
+) -> None:
+    from meshgen.loaders import discover, load_source
+    from meshgen.objfile import read_obj
+    from meshgen.textures import TEXTURE_NAME
+
+    listing = discover(real_sample)
+    assert listing.fmt == "labelme"
+    found = {}
+    for source in listing.sources:
+        ann, _ = load_source(source, real_sample)
+        assert ann is not None
+        assert ann.photo is not None, ann.photo_searched
+        found[ann.stem] = ann.photo.name
+    assert len(found) == 60
+    assert all(name == f"images/{stem}.jpg" for stem, name in found.items())
+    summary = json.loads((real_meshed / "summary.json").read_text())
+    assert summary["warnings"] == []
+    pieces = textured_images = 0
+    for scene in sorted(real_meshed.glob("*/scene.csv")):
+        with scene.open(newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        if rows:
+            textured_images += 1
+            doc = json.loads((scene.parent / "scene.json").read_text())
+            assert doc["texture"]["source"] == "photo"
+            assert (scene.parent / TEXTURE_NAME).is_file()
+        for row in rows:
+            assert row["texture_path"] == TEXTURE_NAME
+            mesh = read_obj(scene.parent / row["mesh_path"])
+            assert mesh.uv is not None
+            assert ((mesh.uv >= 0.0) & (mesh.uv <= 1.0)).all()
+            pieces += 1
+    assert pieces == summary["objects"]
+    assert summary["textures"] == {"photo": textured_images}
+    assert textured_images >= 58

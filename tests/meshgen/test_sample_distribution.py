@@ -181,8 +181,12 @@ def test_same_seed_same_sample_other_seed_other_sample(tmp_path: Path) -> None:
     write_sample(tmp_path / "c", images=6, seed=5)
     for label in sorted((tmp_path / "a" / "labels").iterdir()):
         assert label.read_bytes() == (tmp_path / "b" / "labels" / label.name).read_bytes()
+    for photo in sorted((tmp_path / "a" / "images").iterdir()):
+        assert photo.read_bytes() == (tmp_path / "b" / "images" / photo.name).read_bytes()
     a = (tmp_path / "a" / "labels" / "sample_000.txt").read_text()
     assert a != (tmp_path / "c" / "labels" / "sample_000.txt").read_text()
+    photo = (tmp_path / "a" / "images" / "sample_000.jpg").read_bytes()
+    assert photo != (tmp_path / "c" / "images" / "sample_000.jpg").read_bytes()
 
 
 def test_malformed_statistics_file_names_file_and_field(tmp_path: Path) -> None:
