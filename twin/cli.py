@@ -55,6 +55,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("demo",), "experiments.demo", "the main job: sample, mesh, closed-loop runs, report"),
     (("picture",), "experiments.picture", "a PNG of the cell as the twin renders it"),
     (("player",), "experiments.player", "an episode's self-contained HTML player"),
+    (("fit",), "experiments.fit", "which tools fit a dataset's pieces, by the controllers' rules"),
 )
 
 
