@@ -128,6 +128,7 @@ def _run_episode(
         out=out,
         json=True,
         transport=transport,
+        replace=True,
     )
     with contextlib.redirect_stdout(io.StringIO()):
         return run_cmd.run(options)
@@ -189,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
     if code != 0:
         return code
     run_dirs.append(line_dir)
-    report = write_report(run_dirs, out / "report")
+    report = write_report(run_dirs, out / "report", replace=True)
     _print_table(
         f"Closed-loop episodes ({args.seconds:.0f} s each, lockstep, twin + controller processes)",
         [

@@ -55,8 +55,11 @@ from typing import Any
 from interfaces.cell import Cell, CellError, load_cell
 from interfaces.class_colours import class_rgb, dataset_class_rgb, rgb_hex
 from interfaces.contract import BELT_STATE, GROUND_TRUTH_TOPIC, PICK_TARGET, TCP_POSE
-from interfaces.errors import CdwTwinError
-from interfaces.fileio import write_atomic
+from interfaces.errors import CdwTwinError, cut
+from interfaces.fileio import MAX_JSON_BYTES, read_text_capped, write_atomic
+
+MAX_EVENTS_BYTES = 1_000_000_000
+"""The largest ``events.jsonl`` read (a day-long episode's is a few hundred MB)."""
 
 PAGE_NAME = "player.html"
 """The player's file name in an episode folder."""
@@ -378,8 +381,15 @@ def _events(path: Path, notes: list[str]) -> list[dict[str, Any]]:
     if not path.is_file():
         notes.append(f"{path}: missing; no events shown")
         return []
+    try:
+        text = read_text_capped(
+            path, max_bytes=MAX_EVENTS_BYTES, what="event log", error=PlayerError
+        )
+    except PlayerError as exc:
+        notes.append(f"{exc}; no events shown")
+        return []
     events = []
-    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for number, line in enumerate(text.splitlines(), start=1):
         if not line.strip():
             continue
         try:
@@ -393,8 +403,9 @@ def _events(path: Path, notes: list[str]) -> list[dict[str, Any]]:
                     "data": _round(raw["data"] if isinstance(raw.get("data"), dict) else {}),
                 }
             )
-        except (ValueError, KeyError, TypeError) as exc:
-            notes.append(f"{path}:{number}: unreadable event ({type(exc).__name__}: {exc})")
+        except (ValueError, KeyError, TypeError, RecursionError) as exc:
+            what = cut(str(exc), 200)
+            notes.append(f"{path}:{number}: unreadable event ({type(exc).__name__}: {what})")
     return events
 
 
@@ -441,8 +452,9 @@ def _cell_data(cell: Cell) -> dict[str, Any]:
 
 def _read_json(path: Path) -> dict[str, Any]:
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        text = read_text_capped(path, max_bytes=MAX_JSON_BYTES, what="JSON file", error=PlayerError)
+        data = json.loads(text)
+    except (PlayerError, ValueError, RecursionError):
         return {}
     return data if isinstance(data, dict) else {}
 
@@ -612,7 +624,7 @@ def write_player(episode: Path, run_dir: Path | None = None, out: Path | None = 
     data, notes = player_data(episode, run_dir)
     page = render_page(data)
     path = Path(episode) / PAGE_NAME if out is None else Path(out)
-    write_atomic(path, page)
+    write_atomic(path, page)  # an OSError is the caller's: the report writes elsewhere then
     return PlayerPage(path=path, size_bytes=len(page.encode("utf-8")), notes=tuple(notes))
 
 
@@ -628,7 +640,11 @@ def run(args: argparse.Namespace) -> int:
             msg = f"{episode}: not an episode folder"
             raise PlayerError(msg)
     for episode in args.episodes:
-        page = write_player(episode)
+        try:
+            page = write_player(episode)
+        except OSError as exc:
+            msg = f"{episode}: cannot write {PAGE_NAME}: {exc.strerror or exc}"
+            raise PlayerError(msg) from None
         print(f"{page.path} ({page.size_bytes / 1e6:.2f} MB)")
         for note in page.notes:
             print(f"  note: {note}")

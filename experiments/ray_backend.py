@@ -16,6 +16,14 @@ load of one lockstep episode (twin and controllers alternate, one core busy; see
 ``docs/benchmarks.md``), so Ray runs as many episodes at once on a node as it has cores.
 Without ``--address`` a Ray instance is started for the sweep with ``--workers`` CPUs.
 
+Connecting is bounded: an ``--address`` is first probed over TCP (a refused or unreachable
+port is a one-line error naming the address at once), then ``ray.init`` runs in a thread the
+driver waits for at most ``--connect-timeout`` seconds (:data:`CONNECT_TIMEOUT_S`); Ray's own
+client retries for ever and ignores SIGTERM meanwhile. A local instance that cannot start (an
+unusable ``RAY_TMPDIR``) is a one-line error too. The driver connects before it writes
+anything, so a sweep that cannot reach Ray leaves no folder, and ``sweep.json`` says ``ray``
+only when the episodes ran there.
+
 Failures: an episode whose twin or controller fails is a failed row, as locally. A task whose
 worker process or node dies (killed, out of memory, node lost) is retried once
 (:data:`RETRIES`) and listed in ``sweep.json``'s ``retried``; if the retry dies too the episode
@@ -28,6 +36,7 @@ import contextlib
 import dataclasses
 import hashlib
 import io
+import logging
 import os
 import resource
 import shutil
@@ -36,6 +45,7 @@ import socket
 import sys
 import tarfile
 import tempfile
+import threading
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,6 +62,12 @@ EPISODE_CPUS = 1.0
 
 RETRIES = 1
 """How often an episode whose Ray worker died is run again."""
+
+CONNECT_TIMEOUT_S = 120.0
+"""Longest the driver waits for ``ray.init`` (connecting to a cluster, or starting Ray here)."""
+
+PROBE_TIMEOUT_S = 10.0
+"""Longest the TCP probe of an ``--address`` waits for the port to answer."""
 
 RAY_INIT_OPTIONS: dict[str, Any] = {
     "include_dashboard": False,
@@ -214,19 +230,95 @@ def import_ray() -> Any:
     return ray
 
 
-def start(address: str | None, cpus: int) -> Any:
-    """Connect to the Ray cluster at ``address``, or start one on this machine with ``cpus``
-    CPUs; returns the ``ray`` module."""
-    ray = import_ray()
+def _host_port(address: str) -> tuple[str, int]:
+    """``HOST:PORT`` (optionally ``ray://HOST:PORT``, ``[IPv6]:PORT``) split; a one-line
+    :class:`RayBackendError` naming the address otherwise."""
+    text = address.removeprefix("ray://")
+    host, sep, port_text = text.rpartition(":")
+    host = host.removeprefix("[").removesuffix("]")
+    if not sep or not host or not port_text.isdigit() or not 0 < int(port_text) < 65536:
+        msg = f"--address {address[:200]!r}: expected HOST:PORT (the Ray head's address)"
+        raise RayBackendError(msg)
+    return host, int(port_text)
+
+
+def probe(address: str, timeout_s: float = PROBE_TIMEOUT_S) -> None:
+    """Check that the head's port at ``address`` accepts a TCP connection within
+    ``timeout_s``; :class:`RayBackendError` naming the address and why not."""
+    host, port = _host_port(address)
     try:
-        if address:
-            ray.init(address=address, **RAY_INIT_OPTIONS)
-        else:
-            ray.init(num_cpus=cpus, **RAY_INIT_OPTIONS)
-    except (ConnectionError, RuntimeError, ValueError) as exc:
-        where = f"the cluster at {address}" if address else "a local Ray instance"
-        msg = f"--backend ray: cannot connect to {where}: {exc}"
-        raise RayBackendError(msg) from exc
+        with socket.create_connection((host, port), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        why = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
+        msg = f"--backend ray: cannot connect to the cluster at {address}: {why}"
+        raise RayBackendError(msg) from None
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0][:300] if text else type(exc).__name__
+
+
+class _DropSigtermNotice(logging.Filter):
+    """Drops Ray's notice that a ``ray.init`` outside the main thread sets no SIGTERM
+    handler."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        """False for that notice."""
+        return not str(record.msg).startswith("SIGTERM handler is not set")
+
+
+def init_bounded(ray: Any, options: dict[str, Any], doing: str, timeout_s: float) -> None:
+    """``ray.init(**options)`` in a thread, waited for at most ``timeout_s``: a
+    :class:`RayBackendError` ``cannot <doing>: <why>`` when it fails or does not return in
+    time (the thread is left behind; the process is about to end). Ctrl-C and SIGTERM act
+    meanwhile."""
+    failure: list[BaseException] = []
+    done = threading.Event()
+
+    def connect() -> None:
+        try:
+            ray.init(**options)
+        except BaseException as exc:  # handed to the waiting thread
+            failure.append(exc)
+        finally:
+            done.set()
+
+    # ray.init outside the main thread says it sets no SIGTERM handler: that is the point
+    worker_log = logging.getLogger("ray._private.worker")
+    quiet = _DropSigtermNotice()
+    worker_log.addFilter(quiet)
+    threading.Thread(target=connect, name="ray.init", daemon=True).start()
+    finished = done.wait(timeout_s)
+    worker_log.removeFilter(quiet)
+    if not finished:
+        msg = f"--backend ray: cannot {doing}: no answer within {timeout_s:g} s (--connect-timeout)"
+        raise RayBackendError(msg)
+    if failure:
+        with contextlib.suppress(Exception):
+            ray.shutdown()
+        tmpdir = os.environ.get("RAY_TMPDIR")
+        hint = f" (RAY_TMPDIR={tmpdir})" if tmpdir and "address" not in options else ""
+        msg = f"--backend ray: cannot {doing}: {_first_line(failure[0])}{hint}"
+        raise RayBackendError(msg) from None
+
+
+def start(address: str | None, cpus: int, *, timeout_s: float = CONNECT_TIMEOUT_S) -> Any:
+    """Connect to the Ray cluster at ``address`` (probed first, :func:`probe`), or start one on
+    this machine with ``cpus`` CPUs, within ``timeout_s`` (:func:`init_bounded`); returns the
+    ``ray`` module."""
+    if not 0 < timeout_s <= 3600:
+        msg = f"--connect-timeout = {timeout_s}: must be in (0, 3600] s"
+        raise RayBackendError(msg)
+    ray = import_ray()
+    if address:
+        probe(address, min(timeout_s, PROBE_TIMEOUT_S))
+        doing = f"connect to the cluster at {address}"
+        init_bounded(ray, {"address": address, **RAY_INIT_OPTIONS}, doing, timeout_s)
+    else:
+        doing = "start a local Ray instance"
+        init_bounded(ray, {"num_cpus": cpus, **RAY_INIT_OPTIONS}, doing, timeout_s)
     return ray
 
 
@@ -320,6 +412,10 @@ class RaySweep:
                 done, _ = self.ray.wait(list(self.pending), num_returns=1, timeout=0.5)
                 for ref in done:
                     self.collect(ref)
+                if self.sweep.cancel.is_set():  # a table could not be written
+                    for ref in self.pending:
+                        self.ray.cancel(ref, force=True)
+                    self.pending.clear()
         except KeyboardInterrupt as exc:
             self.sweep.stopped.append(f"interrupted ({exc.args[0] if exc.args else 'SIGINT'})")
             self.sweep.cancel.set()
@@ -336,24 +432,69 @@ class RaySweep:
         }
 
 
-def execute_on_ray(
-    sweep: Sweep, address: str | None, workers: int, cpus_per_episode: float | None
-) -> None:
-    """Run ``sweep`` on the Ray cluster at ``address`` (None: a Ray instance started here with
-    ``workers`` x the episode's CPUs), then shut the connection down."""
+def episode_cpus(cpus_per_episode: float | None) -> float:
+    """The CPUs each task declares: ``--cpus-per-episode``, else :data:`EPISODE_CPUS`;
+    :class:`RayBackendError` unless it is positive and finite."""
     cpus = EPISODE_CPUS if cpus_per_episode is None else cpus_per_episode
-    if not cpus > 0:
-        msg = f"--cpus-per-episode = {cpus_per_episode}: must be > 0"
+    if not 0 < cpus <= 1024:
+        msg = f"--cpus-per-episode = {cpus_per_episode}: must be in (0, 1024]"
         raise RayBackendError(msg)
+    return cpus
+
+
+@dataclass
+class RaySession:
+    """A connection to Ray made before a sweep writes anything (:func:`connect`); run the
+    sweep on it (:meth:`execute`), then :meth:`close` it."""
+
+    ray: Any
+    address: str | None
+    cpus_per_episode: float
+
+    def execute(self, sweep: Sweep) -> None:
+        """Run every episode of ``sweep`` as a Ray task."""
+        with contextlib.redirect_stdout(sys.stderr):
+            RaySweep(sweep, self.ray, self.cpus_per_episode).execute()
+        sweep.backend["address"] = self.address or "local"
+
+    def close(self) -> None:
+        """Shut the connection down (and a Ray instance started here)."""
+        with contextlib.redirect_stdout(sys.stderr):
+            self.ray.shutdown()
+
+
+def connect(
+    address: str | None,
+    workers: int,
+    cpus_per_episode: float | None,
+    *,
+    timeout_s: float = CONNECT_TIMEOUT_S,
+) -> RaySession:
+    """Connect to the Ray cluster at ``address`` (None: start a Ray instance here with
+    ``workers`` x the episode's CPUs), bounded by ``timeout_s`` (:func:`start`)."""
+    cpus = episode_cpus(cpus_per_episode)
     # Ray's driver prints its cluster's news (a worker died, ...) to standard output, which
     # belongs to the sweep's own output (``--json``): send it to standard error instead
     with contextlib.redirect_stdout(sys.stderr):
-        ray = start(address, max(1, round(workers * cpus)))
-        try:
-            RaySweep(sweep, ray, cpus).execute()
-            sweep.backend["address"] = address or "local"
-        finally:
-            ray.shutdown()
+        ray = start(address, max(1, round(workers * cpus)), timeout_s=timeout_s)
+    return RaySession(ray=ray, address=address, cpus_per_episode=cpus)
+
+
+def execute_on_ray(
+    sweep: Sweep,
+    address: str | None,
+    workers: int,
+    cpus_per_episode: float | None,
+    *,
+    timeout_s: float = CONNECT_TIMEOUT_S,
+) -> None:
+    """Run ``sweep`` on the Ray cluster at ``address`` (None: a Ray instance started here with
+    ``workers`` x the episode's CPUs), then shut the connection down."""
+    session = connect(address, workers, cpus_per_episode, timeout_s=timeout_s)
+    try:
+        session.execute(sweep)
+    finally:
+        session.close()
 
 
 RAY_TEMP_PREFIX = "/tmp/cdwray-"

@@ -6,6 +6,10 @@ Example::
     cdw-twin report runs/            # a folder of run folders
 
 Writes ``report.html`` and one PNG per figure into ``--out`` (default: ``<first RUN_DIR>/report``).
+The report is built in a hidden folder next to ``--out`` and put in its place whole when it is
+finished (:mod:`experiments.outdir`): an interrupted report leaves the old one as it was. An
+existing non-empty ``--out`` is refused unless ``--replace`` is given, and then replaced only
+when it is a report (its ``.cdw-report`` marker file).
 The page references its PNGs relatively and loads nothing from the network (no scripts). Episodes
 of every run are pooled and grouped by belt speed. Figures:
 
@@ -66,7 +70,7 @@ from experiments.report_line import (
     recovery_by_stations,
 )
 from interfaces.errors import CdwTwinError
-from interfaces.fileio import write_atomic
+from interfaces.fileio import MAX_JSON_BYTES, read_text_capped, write_atomic
 from interfaces.metrics import BY_NAME, rate
 
 if TYPE_CHECKING:
@@ -193,11 +197,15 @@ def find_run_dirs(paths: Sequence[Path]) -> list[Path]:
 
 
 def _read_json(path: Path) -> Any:
+    text = read_text_capped(path, max_bytes=MAX_JSON_BYTES, what="JSON file", error=ReportError)
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         msg = f"{path}: not valid JSON (line {exc.lineno}): {exc.msg}"
-        raise ReportError(msg) from exc
+        raise ReportError(msg) from None
+    except RecursionError:
+        msg = f"{path}: not valid JSON: nested too deeply"
+        raise ReportError(msg) from None
 
 
 def _optional_json(path: Path, notes: list[str]) -> dict[str, Any] | None:
@@ -216,9 +224,14 @@ def _dataset_of(run_dir: Path, run: dict[str, Any], notes: list[str]) -> Path:
         return Path(run["dataset"])
     scenario = run_dir / "scenario.yaml"
     if scenario.is_file():
-        import yaml
+        from interfaces.errors import ConfigError
+        from interfaces.yamlio import load_yaml_file
 
-        data = yaml.safe_load(scenario.read_text(encoding="utf-8")) or {}
+        try:
+            data = load_yaml_file(scenario, what="scenario") or {}
+        except ConfigError as exc:
+            notes.append(f"{exc}; the built-in sample used")
+            data = {}
         name = data.get("dataset") if isinstance(data, dict) else None
         if isinstance(name, str) and name != "builtin":
             path = Path(name)
@@ -951,11 +964,14 @@ def _line_section(data: RunData) -> str:
     )
 
 
-def _players(data: RunData, out: Path, notes: list[str]) -> list[_Html]:
+def _players(
+    data: RunData, out: Path, notes: list[str], staging: Path | None = None
+) -> list[_Html]:
     """Write (or refresh) each episode's player; a link to it, relative to ``out``.
 
     A player is rewritten when it is older than its episode's files or than the player code.
-    An episode folder that cannot be written to gets its player in ``out/players/``.
+    An episode folder that cannot be written to gets its player in ``out/players/`` (written
+    into ``staging``, the folder that becomes ``out``, when given).
     """
     from experiments.player import PAGE_NAME, write_player
 
@@ -970,28 +986,59 @@ def _players(data: RunData, out: Path, notes: list[str]) -> list[_Html]:
             try:
                 written = write_player(ep.folder, ep.run_dir)
             except OSError:
-                page = out / "players" / ep.run_dir.name / f"{ep.folder.name}.html"
-                written = write_player(ep.folder, ep.run_dir, page)
+                name = Path("players") / ep.run_dir.name / f"{ep.folder.name}.html"
+                page = out / name
+                written = write_player(ep.folder, ep.run_dir, (staging or out) / name)
             notes.extend(f"{ep.name} player: {note}" for note in written.notes)
         href = html.escape(Path(os.path.relpath(page, out)).as_posix(), quote=True)
         links.append(_Html(f'<a class="player" href="{href}">play</a>'))
     return links
 
 
-def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
-    """Write ``report.html`` and its PNGs into ``out``; returns the HTML path.
+def write_report(run_dirs: Sequence[Path], out: Path, *, replace: bool = False) -> Path:
+    """Write ``report.html`` and its PNGs into ``out``, whole: built in a staging folder and
+    swapped in when finished (:mod:`experiments.outdir`); returns the HTML path.
 
-    Raises :class:`ReportError` when a path is not a run folder (nor a folder of them).
+    Raises :class:`ReportError` when a path is not a run folder (nor a folder of them), and
+    :class:`experiments.outdir.OutputError` when ``out`` exists and is not empty (unless
+    ``replace`` and it is a report) or cannot be written.
     """
+    from experiments.outdir import (
+        REPORT,
+        OutputError,
+        check_output,
+        discard,
+        reason,
+        staging_folder,
+        swap_in,
+    )
+
+    out = Path(out)
+    check_output(out, REPORT, replace=replace)
+    data = load_runs(run_dirs)
+    staging = staging_folder(out, REPORT, replace=replace)
+    try:
+        _write_pages(data, out, staging)
+        swap_in(staging, out, REPORT, replace=replace)
+    except OSError as exc:
+        discard(staging)
+        msg = f"--out {out}: cannot write the report: {reason(exc)}"
+        raise OutputError(msg) from None
+    except BaseException:
+        discard(staging)
+        raise
+    return out / "report.html"
+
+
+def _write_pages(data: RunData, out: Path, staging: Path) -> None:
+    """The figures, the players and ``report.html`` of ``data``, written into ``staging``
+    (links as from ``out``, where ``staging`` will be)."""
     import matplotlib as mpl
 
     mpl.use("Agg")
-    data = load_runs(run_dirs)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     sections = []
     for stem, heading, make in FIGURES:
-        png = out / f"{stem}.png"
+        png = staging / f"{stem}.png"
         try:
             fig = make(data)
         except Unavailable as exc:
@@ -1007,7 +1054,7 @@ def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
         sections.append(f"<figure><h2>{html.escape(heading)}</h2>{body}</figure>")
     player_notes: list[str] = []
     rows = episode_rows(data)
-    for row, link in zip(rows, _players(data, out, player_notes), strict=True):
+    for row, link in zip(rows, _players(data, out, player_notes, staging), strict=True):
         row["player"] = link
     runs = "".join(f"<li>{html.escape(str(p))}</li>" for p in data.run_dirs)
     sets = "".join(f"<li>{html.escape(str(p))}</li>" for p in data.datasets)
@@ -1030,21 +1077,22 @@ def write_report(run_dirs: Sequence[Path], out: Path) -> Path:
         + (f'<div class="notes"><p>Notes:</p><ul>{notes}</ul></div>' if notes else "")
         + "</body></html>\n"
     )
-    path = out / "report.html"
-    write_atomic(path, page)
-    return path
+    write_atomic(staging / "report.html", page)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the report options."""
+    from experiments.run import add_replace_option
+
     parser.add_argument("run_dirs", type=Path, nargs="+", metavar="RUN_DIR", help="run folders")
     parser.add_argument("--out", type=Path, default=None, help="folder (RUN_DIR/report)")
+    add_replace_option(parser, "report")
 
 
 def run(args: argparse.Namespace) -> int:
     """Write the report and print its path."""
     out = args.out if args.out is not None else args.run_dirs[0] / "report"
-    print(write_report(args.run_dirs, out))
+    print(write_report(args.run_dirs, out, replace=bool(getattr(args, "replace", False))))
     return 0
 
 

@@ -33,6 +33,15 @@ and the scenario path. Controller files: with one station ``controller.json`` an
 ``controller.log`` (a restarted controller's stats ``controller_1.json``, ...); with several,
 ``controller-<station>.json`` / ``controller-<station>_1.json`` and ``controller-<station>.log``.
 
+``--out`` (default ``runs/<scenario>-<stamp>``) must be new or empty: an existing non-empty
+folder is refused (exit 2, before anything is written) unless ``--replace`` is given, and then
+only a folder an earlier ``cdw-twin run`` wrote (its ``.cdw-run`` marker file) is replaced, whole
+(:mod:`experiments.outdir`); an existing file, or a place that cannot be written (read-only,
+under a file), is refused as well. A write that fails while the run goes (a full disk) ends it
+as failed: the episode is a failed row naming the file and the error, ``run.json`` says
+``"complete": false`` with it among its ``failures`` (rewritten over the old ``run.json``'s own
+blocks when no new file can be created), and the command exits 1 without a traceback.
+
 ``run.json`` says ``"complete": false`` until every episode has finished successfully. A run
 stopped early (Ctrl-C, SIGTERM, a failed episode) keeps the episodes finished so far in
 ``episodes.json``/``episodes.csv`` (each written atomically), stays ``"complete": false`` and
@@ -96,15 +105,15 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from contextlib import ExitStack
+from contextlib import ExitStack, suppress
 from dataclasses import dataclass, replace
 from pathlib import Path
 from types import FrameType
 from typing import IO, TYPE_CHECKING, Any, Literal
 
 from experiments.stats import mean_of
-from interfaces.errors import CdwTwinError
-from interfaces.fileio import write_atomic
+from interfaces.errors import CdwTwinError, cut, cut_message
+from interfaces.fileio import MAX_JSON_BYTES, read_text_capped, write_atomic
 from interfaces.lifecycle import PARENT_PID_VARIABLE
 from interfaces.metrics import in_scope
 
@@ -151,12 +160,14 @@ class EpisodeCancelledError(CdwTwinError):
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the run options (``--foxglove``, ``--foxglove-host`` and ``--gui`` go to every
     episode's twin node: see :mod:`twin.cmd_node`)."""
-    from twin.cmd_node import add_view_options
+    from twin.cmd_node import add_view_options, seed_argument
 
     parser.add_argument("scenario", type=Path, nargs="?", default=None, help="scenario YAML")
     parser.add_argument("--speed", type=float, default=None, help="belt speed m/s (override)")
-    parser.add_argument("--episodes", type=int, default=1, help="episodes (1)")
-    parser.add_argument("--seed", type=int, default=None, help="first seed (override)")
+    parser.add_argument("--episodes", type=_episodes_argument, default=1, help="episodes (1)")
+    parser.add_argument(
+        "--seed", type=seed_argument, default=None, help="first seed (override; 0 to 2**64 - 1)"
+    )
     parser.add_argument("--duration", type=float, default=None, help="episode seconds")
     parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     add_transport_option(parser)
@@ -165,6 +176,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--cell", default=None, help="cell file: a shipped name or a path (override)"
     )
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/...)")
+    add_replace_option(parser, "run")
     parser.add_argument("--json", action="store_true", help="print the run's metrics as JSON")
     parser.add_argument(
         "--no-record",
@@ -173,6 +185,34 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="write no recording.mcap (every message of every topic; about 10 MB a minute)",
     )
     add_view_options(parser)
+
+
+MAX_EPISODES = 100_000
+"""Most episodes one run may plan."""
+
+
+def _episodes_argument(text: str) -> int:
+    """``--episodes``: an integer in ``[1, MAX_EPISODES]`` (argparse's one-line error else)."""
+    try:
+        value = int(text)
+    except ValueError:
+        msg = f"invalid int value: {text[:40]!r}"
+        raise argparse.ArgumentTypeError(msg) from None
+    if not 1 <= value <= MAX_EPISODES:
+        msg = f"must be in [1, {MAX_EPISODES}], not {value}"
+        raise argparse.ArgumentTypeError(msg)
+    return value
+
+
+def add_replace_option(parser: argparse.ArgumentParser, command: str) -> None:
+    """``--replace``: replace an existing ``--out`` whole (run, sweep, report;
+    :mod:`experiments.outdir`)."""
+    parser.add_argument(
+        "--replace",
+        action="store_true",
+        help=f"replace an existing non-empty --out whole (only a folder `cdw-twin {command}` "
+        "wrote; without it such an --out is refused)",
+    )
 
 
 def add_transport_option(parser: argparse.ArgumentParser) -> None:
@@ -294,16 +334,21 @@ def controller_params(value: str, scenario_dir: Path | None) -> Path:
         path = DEFAULT_PARAMS.parent / f"{value}.yaml"
         if not path.is_file():
             known = ", ".join(sorted(p.stem for p in DEFAULT_PARAMS.parent.glob("*.yaml")))
-            msg = f"controller = {value!r}: no parameter file of that name (shipped: {known})"
+            msg = f"controller = {cut(value)}: no parameter file of that name (shipped: {known})"
             raise CdwTwinError(msg)
     else:
         path = Path(value).expanduser()
         if not path.is_absolute() and scenario_dir is not None:
             path = scenario_dir / path
+    try:  # bounded, UTF-8 and without NUL before the controller's own loader reads it
+        read_text_capped(path, what="controller parameter file", error=CdwTwinError)
+    except CdwTwinError as exc:
+        msg = f"controller = {cut(value)}: {exc}"
+        raise CdwTwinError(msg) from None
     try:
         load_config(path)
     except ControlConfigError as exc:
-        msg = f"controller = {value!r}: {exc}"
+        msg = cut_message(f"controller = {cut(value)}: {exc}")
         raise CdwTwinError(msg) from None
     return path.resolve()
 
@@ -676,7 +721,10 @@ def run_episode(
         msg = f"episode {episode.index} (seed {episode.seed}) cancelled"
         raise EpisodeCancelledError(msg)
     _check_outcome(options, episode, code, exited, None if watch is None else watch.time_s)
-    metrics = episode_metrics(episode.folder, options.mode)
+    try:
+        metrics = episode_metrics(episode.folder, options.mode)
+    except CdwTwinError as exc:
+        raise EpisodeFailedError(episode, f"unreadable episode files: {exc}") from None
     if not metrics["complete"]:
         summary = episode.folder / "twin" / "summary.json"
         reason = (
@@ -704,16 +752,32 @@ def controller_stats(folder: Path, stations: Sequence[str]) -> dict[str, list[di
         for path in folder.glob(f"{stem}*.json"):
             instance = _instance_of(path, stem)
             if instance is not None:
-                found.append((instance, json.loads(path.read_text(encoding="utf-8"))))
+                found.append((instance, read_json(path)))
         out[station] = [stats for _, stats in sorted(found, key=lambda pair: pair[0])]
     return out
+
+
+MAX_EVENTS_BYTES = 1_000_000_000
+"""The largest ``events.jsonl`` read (a day-long episode's is a few hundred MB)."""
+
+
+def read_json(path: Path) -> Any:
+    """A JSON result file of an episode (at most :data:`interfaces.fileio.MAX_JSON_BYTES`);
+    :class:`CdwTwinError` naming it when it cannot be read or parsed."""
+    text = read_text_capped(path, max_bytes=MAX_JSON_BYTES, what="JSON file", error=CdwTwinError)
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        msg = f"{path}: not valid JSON: {cut(str(exc), 200)}"
+        raise CdwTwinError(msg) from None
 
 
 def read_events(path: Path) -> list[Event]:
     """The events of an ``events.jsonl``."""
     from interfaces.events import Event
 
-    return [Event.from_json(line) for line in path.read_text(encoding="utf-8").splitlines()]
+    text = read_text_capped(path, max_bytes=MAX_EVENTS_BYTES, what="event log", error=CdwTwinError)
+    return [Event.from_json(line) for line in text.splitlines()]
 
 
 def episode_cell(folder: Path) -> Cell:
@@ -823,7 +887,7 @@ def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
     """
     from interfaces.metrics import class_scores, exit_station
 
-    summary = json.loads((folder / "twin" / "summary.json").read_text(encoding="utf-8"))
+    summary = read_json(folder / "twin" / "summary.json")
     cell = episode_cell(folder)
     names = tuple(s.name for s in cell.stations)
     record = EpisodeRecord(
@@ -952,12 +1016,17 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
     """Validate the scenario, its cell and its controller parameters, the display (``--gui``)
     and the live view's port (``--foxglove``); write the run folder's ``scenario.yaml``,
     ``cell.yaml`` and ``controller.yaml``."""
+    from experiments.outdir import RUN, OutputError, check_output, fresh_output, reason
     from twin.cmd_node import build_scenario, check_display
     from twin.live_view import DEFAULT_HOST, check_port
+    from twin.scenario import MAX_SEED
 
     if args.episodes < 1:
         msg = f"--episodes = {args.episodes}: must be >= 1"
         raise CdwTwinError(msg)
+    replace_out = bool(getattr(args, "replace", False))
+    if args.out is not None:
+        check_output(args.out, RUN, replace=replace_out)
     transport: Transport = getattr(args, "transport", "ros")
     gui = bool(getattr(args, "gui", False))
     if gui:
@@ -978,12 +1047,26 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
     )
     scenario, dataset, cell = build_scenario(node_args)
     check_transport(transport, args.mode, scenario.faults.controller_restart_at_s)
+    last_seed = scenario.seed + args.episodes - 1
+    if last_seed > MAX_SEED:
+        msg = (
+            f"--seed {scenario.seed} with --episodes {args.episodes}: the last episode's seed "
+            f"{last_seed} exceeds 2**64 - 1"
+        )
+        raise CdwTwinError(msg)
     scenario_dir = args.scenario.parent if args.scenario is not None else None
     params = controller_params(scenario.controller, scenario_dir)
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out: Path = args.out or Path("runs") / f"{scenario.name}-{stamp}"
     own_dataset = args.dataset is not None or scenario.dataset != "builtin"
-    files = write_run_scenario(scenario, params, cell, out, Path(dataset) if own_dataset else None)
+    fresh_output(out, RUN, replace=replace_out)
+    try:
+        files = write_run_scenario(
+            scenario, params, cell, out, Path(dataset) if own_dataset else None
+        )
+    except OSError as exc:
+        msg = f"--out {out}: cannot write the run folder: {reason(exc)}"
+        raise OutputError(msg) from None
     options = replace(
         run_options(files, cell, scenario, Path(dataset), args.mode),
         foxglove_port=foxglove,
@@ -1011,6 +1094,8 @@ def _run_episodes(
 ) -> tuple[list[dict[str, Any]], str | None, int]:
     """Run the episodes one after another; returns the rows, why the run stopped early (None
     when it did not) and the exit status."""
+    from experiments.outdir import reason
+
     rows: list[dict[str, Any]] = []
     speed = run.scenario.system.belt_speed_mps
     # SIGINT too: a process started in the background inherits SIGINT ignored, and Python then
@@ -1024,19 +1109,29 @@ def _run_episodes(
             if not quiet:
                 print(f"episode {i + 1}/{episodes} (seed {episode.seed}) ...", flush=True)
             progress = _terminal_progress(i + 1, episodes, run.scenario.duration_s) if tty else None
+            why: str | None = None
             try:
                 metrics = run_episode(run.options, episode, progress=progress)
             except EpisodeFailedError as exc:
-                rows.append(
-                    {**failed_row(episode, run.options.mode, exc.reason), "speed_mps": speed}
-                )
+                why = exc.reason
                 print(f"cdw-twin run: {exc}", file=sys.stderr)
-                return rows, failure_text(i, episode.seed, exc.reason), 1
+            except OSError as exc:
+                why = f"cannot write the episode folder: {reason(exc)}"
+                print(f"cdw-twin run: {failure_text(i, episode.seed, why)}", file=sys.stderr)
             finally:
                 if tty:
                     print()
-            rows.append({**metrics, "speed_mps": speed})
-            write_tables(run.out, rows, complete=False, extra=run.extra)
+            if why is None:
+                rows.append({**metrics, "speed_mps": speed})
+                try:
+                    write_tables(run.out, rows, complete=False, extra=run.extra)
+                except OSError as exc:
+                    why = f"cannot write the run's tables: {reason(exc)}"
+                    print(f"cdw-twin run: {failure_text(i, episode.seed, why)}", file=sys.stderr)
+                    rows.pop()
+            if why is not None:
+                rows.append({**failed_row(episode, run.options.mode, why), "speed_mps": speed})
+                return rows, failure_text(i, episode.seed, why), 1
     except KeyboardInterrupt as exc:
         return rows, f"interrupted ({exc.args[0] if exc.args else 'SIGINT'})", 130
     finally:
@@ -1045,11 +1140,49 @@ def _run_episodes(
     return rows, None, 0
 
 
+def note_failure(
+    out: Path, rows: list[dict[str, Any]], extra: dict[str, Any], why: str
+) -> dict[str, Any]:
+    """The run's tables could not be written (``why``: a full disk, a read-only folder): the
+    ``run.json`` of the rows, ``complete`` false, with ``why`` among its ``failures``, written
+    whole if it can be, else over the old ``run.json``'s own blocks without the means
+    (:func:`interfaces.fileio.overwrite_in_place`), else not at all. Returns it."""
+    from interfaces.fileio import overwrite_in_place
+
+    failed = failures(rows)
+    note = {
+        "complete": False,
+        "episodes": len(succeeded(rows)),
+        "failed": len(failed),
+        "failures": [*failed, why],
+        **extra,
+    }
+    summary = {
+        **note,
+        "mean": aggregate(rows),
+        "mean_by_station": aggregate_blocks(rows, "stations"),
+        "mean_by_class": aggregate_blocks(rows, "classes"),
+    }
+    path = out / "run.json"
+    try:
+        write_atomic(path, json.dumps(summary, indent=2) + "\n")
+    except OSError:
+        with suppress(OSError):
+            overwrite_in_place(path, json.dumps(note) + "\n")
+    return summary
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the episodes and summarise them."""
+    from experiments.outdir import OutputError, reason
+
     prepared = prepare_run(args)
     out = prepared.out
-    write_tables(out, [], complete=False, extra=prepared.extra)
+    try:
+        write_tables(out, [], complete=False, extra=prepared.extra)
+    except OSError as exc:
+        msg = f"--out {out}: cannot write the run's tables: {reason(exc)}"
+        raise OutputError(msg) from None
     tty = sys.stdout.isatty() and not args.json
     port = prepared.options.foxglove_port
     if port is not None and not args.json:
@@ -1060,7 +1193,13 @@ def run(args: argparse.Namespace) -> int:
         )
     rows, stopped, code = _run_episodes(prepared, args.episodes, quiet=args.json, tty=tty)
     extra = prepared.extra if stopped is None else {**prepared.extra, "stopped": stopped}
-    summary = write_tables(out, rows, complete=stopped is None, extra=extra)
+    try:
+        summary = write_tables(out, rows, complete=stopped is None, extra=extra)
+    except OSError as exc:
+        why = f"cannot write the run's tables: {reason(exc)}"
+        stopped = why if stopped is None else f"{stopped}; {why}"
+        code = code or 1
+        summary = note_failure(out, rows, {**prepared.extra, "stopped": stopped}, why)
     good = succeeded(rows)
     result = {
         **summary["mean"],

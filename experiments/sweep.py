@@ -40,7 +40,16 @@ cell and metric (the line's, or each station's for a per-station metric such as
 interval: the figures a benchmark grid (``experiments/grids/``) exists to measure.
 
 A grid's ``seeds`` must be distinct: a seed run twice in a cell would count one sample as two
-and narrow the interval for nothing.
+and narrow the interval for nothing; each is in ``[0, 2**64 - 1]``.
+
+``--out`` is refused when it exists and is not empty, unless ``--replace`` is given and it is a
+sweep's folder (its ``.cdw-sweep`` marker), which is then replaced whole
+(:mod:`experiments.outdir`). With ``--backend ray`` the driver connects to Ray before it writes
+anything, within ``--connect-timeout`` seconds (:mod:`experiments.ray_backend`), so a sweep that
+cannot reach Ray leaves no folder and ``sweep.json`` names ``ray`` only when its episodes ran
+there. A table that cannot be written (a full disk) stops the sweep: the running episodes are
+cancelled, ``sweep.json`` says ``"complete": false`` and why in ``stopped`` (rewritten in place
+when no new file can be created), and the command exits 1.
 
 An interrupted sweep (Ctrl-C, SIGTERM) stops the running episodes, keeps every finished one in
 its cell's tables and writes ``"complete": false`` with ``"stopped"`` (``--json`` prints it,
@@ -55,7 +64,9 @@ episodes that succeeded.
 from __future__ import annotations
 
 import argparse
+import collections
 import concurrent.futures
+import contextlib
 import csv
 import dataclasses
 import io
@@ -71,13 +82,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-import yaml
-
 from experiments.stats import student_t_interval, wilson_interval
 from interfaces.dataclass_io import from_data
-from interfaces.errors import CdwTwinError, ConfigError
-from interfaces.fileio import write_atomic
+from interfaces.errors import CdwTwinError, ConfigError, cut, cut_message
+from interfaces.fileio import overwrite_in_place, write_atomic
 from interfaces.metrics import BY_NAME, METRICS, RATES, Scope, in_scope
+from interfaces.yamlio import load_yaml_file
 
 if TYPE_CHECKING:
     from experiments.run import EpisodeSpec, RunOptions, Transport
@@ -107,6 +117,12 @@ CLASS_CI_METRICS = in_scope("class")
 
 CLASS_WILSON_RATES = _pooled_rates("class")
 """The per-class rates also given as Wilson intervals."""
+
+MAX_GRID_EPISODES = 100_000
+"""Most seeds (or episodes) of one grid cell."""
+
+MAX_SEED = 2**64 - 1
+"""Largest seed (:data:`twin.scenario.MAX_SEED`)."""
 
 REASON_BLOCKS = ("untargeted", "untargeted_share", "dropped_by_reason")
 """The per-reason blocks of an episode's metrics (the controllers' untargeted objects, their
@@ -177,36 +193,38 @@ class Grid:
         if self.episodes is not None and self.episodes < 1:
             msg = f"episodes = {self.episodes}: must be >= 1"
             raise ConfigError(msg)
+        if self.episodes is not None and self.episodes > MAX_GRID_EPISODES:
+            msg = f"episodes = {self.episodes}: at most {MAX_GRID_EPISODES}"
+            raise ConfigError(msg)
+        if len(self.seeds) > MAX_GRID_EPISODES:
+            msg = f"seeds: {len(self.seeds)} seeds, at most {MAX_GRID_EPISODES}"
+            raise ConfigError(msg)
         for i, seed in enumerate(self.seeds):
-            if seed < 0:
-                msg = f"seeds[{i}] = {seed}: must be >= 0"
+            if not 0 <= seed <= MAX_SEED:
+                msg = f"seeds[{i}] = {cut(seed)}: must be in [0, 2**64 - 1]"
                 raise ConfigError(msg)
-        repeated = sorted({seed for seed in self.seeds if self.seeds.count(seed) > 1})
+        counts = collections.Counter(self.seeds)
+        repeated = sorted(seed for seed, n in counts.items() if n > 1)
         if repeated:
+            shown = ", ".join(map(str, repeated[:8])) + (", ..." if len(repeated) > 8 else "")
             msg = (
-                f"seeds = {list(self.seeds)}: seed(s) {', '.join(map(str, repeated))} repeated; "
+                f"seeds = {cut(list(self.seeds))}: seed(s) {shown} repeated; "
                 "every seed of a cell must be distinct (a repeat fakes a narrower interval)"
             )
             raise ConfigError(msg)
 
     @classmethod
     def load(cls, path: Path) -> Grid:
-        """Read a grid file; errors name the file and the key."""
-        try:
-            data = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            msg = f"{path}: cannot read grid: {exc.strerror}"
-            raise ConfigError(msg) from None
-        except yaml.YAMLError as exc:
-            msg = f"{path}: not valid YAML: {exc}"
-            raise ConfigError(msg) from None
+        """Read a grid file (:func:`interfaces.yamlio.load_yaml_file`: size-capped, UTF-8, a key
+        given twice refused, alias bombs refused); errors name the file and the key."""
+        data = load_yaml_file(path, what="grid")
         if not isinstance(data, dict):
             msg = f"{path}: the top level must be a mapping"
             raise ConfigError(msg)
         try:
             return from_data(cls, data, "")
         except ConfigError as exc:
-            msg = f"{path}: {exc}"
+            msg = cut_message(f"{path}: {exc}")
             raise ConfigError(msg) from None
 
 
@@ -487,11 +505,12 @@ def sweep_csv(cells: Sequence[dict[str, Any]]) -> str:
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the sweep options."""
-    from experiments.run import add_transport_option
+    from experiments.run import add_replace_option, add_transport_option
 
     parser.add_argument("grid", type=Path, help="grid YAML (scenarios, seeds, overrides)")
-    parser.add_argument("--workers", type=int, default=1, help="episodes at once (1)")
+    parser.add_argument("--workers", type=_workers_argument, default=1, help="episodes at once (1)")
     parser.add_argument("--out", type=Path, default=None, help="sweep folder (default runs/...)")
+    add_replace_option(parser, "sweep")
     parser.add_argument(
         "--dataset", type=Path, default=None, help="meshgen output folder (overrides the grid's)"
     )
@@ -520,6 +539,30 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="CPUs a Ray task declares (default: the measured 1.0 of a lockstep episode)",
     )
+    parser.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="longest wait for Ray to connect or start (ray backend; default 120)",
+    )
+
+
+MAX_WORKERS = 256
+"""Most episodes a sweep runs at once on this machine."""
+
+
+def _workers_argument(text: str) -> int:
+    """``--workers``: an integer in ``[1, MAX_WORKERS]`` (argparse's one-line error else)."""
+    try:
+        value = int(text)
+    except ValueError:
+        msg = f"invalid int value: {text[:40]!r}"
+        raise argparse.ArgumentTypeError(msg) from None
+    if not 1 <= value <= MAX_WORKERS:
+        msg = f"must be in [1, {MAX_WORKERS}], not {value}"
+        raise argparse.ArgumentTypeError(msg)
+    return value
 
 
 @dataclass
@@ -633,6 +676,68 @@ def load_grid(grid_path: Path, dataset: Path | None = None) -> Grid:
     return grid
 
 
+def check_sweep(
+    grid_path: Path, *, dataset: Path | None = None, transport: Transport = "ros"
+) -> tuple[Grid, list[_Checked]]:
+    """Load the grid (its dataset replaced by ``dataset``, :func:`load_grid`) and check every
+    grid cell's scenario, cell, controller parameters, dataset and transport; nothing is
+    written."""
+    from experiments.run import check_transport
+
+    grid = load_grid(grid_path, dataset)
+    checked = _check_cells(grid, grid_path)
+    for c in checked:
+        try:
+            check_transport(transport, c.cell.mode, c.cell.scenario.faults.controller_restart_at_s)
+        except CdwTwinError as exc:
+            msg = f"{grid_path}: grid cell {c.cell.name}: {exc}"
+            raise ConfigError(msg) from exc
+    return grid, checked
+
+
+def write_sweep(
+    checked: Sequence[_Checked], out: Path, *, transport: Transport = "ros", record: bool = False
+) -> list[CellRun]:
+    """Write each checked grid cell's run folder under ``out`` (``scenario.yaml``,
+    ``cell.yaml``, ``controller.yaml``, empty tables); an ``OSError`` becomes an
+    :class:`experiments.outdir.OutputError` naming ``out``."""
+    from experiments.outdir import OutputError, reason
+    from experiments.run import run_options, write_run_scenario, write_tables
+
+    runs = []
+    try:
+        for c in checked:
+            folder = out / c.cell.name
+            files = write_run_scenario(
+                c.cell.scenario, c.params, c.station_cell, folder, c.own_dataset
+            )
+            options = dataclasses.replace(
+                run_options(files, c.station_cell, c.cell.scenario, c.dataset, c.cell.mode),
+                transport=transport,
+                record=record,
+            )
+            extra = {
+                "scenario": c.cell.scenario.name,
+                "scenario_path": str(c.cell.scenario_path),
+                "dataset": str(options.dataset),
+                "cell": c.station_cell.name,
+                "stations": list(options.stations),
+                "mode": c.cell.mode,
+                "transport": transport,
+                "record": record,
+                "speed_mps": c.cell.scenario.system.belt_speed_mps,
+                "duration_s": c.cell.scenario.duration_s,
+                "overrides": c.cell.overrides,
+                "episodes_planned": len(c.cell.seeds),
+            }
+            runs.append(CellRun(cell=c.cell, folder=folder, options=options, extra=extra))
+            write_tables(folder, [], complete=False, extra=extra)
+    except OSError as exc:
+        msg = f"--out {out}: cannot write the sweep folder: {reason(exc)}"
+        raise OutputError(msg) from None
+    return runs
+
+
 def prepare_sweep(
     grid_path: Path,
     out: Path,
@@ -640,47 +745,19 @@ def prepare_sweep(
     dataset: Path | None = None,
     transport: Transport = "ros",
     record: bool = False,
+    replace: bool = False,
 ) -> list[CellRun]:
-    """Check every grid cell (before anything is written), then write each one's run folder
-    (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``, empty tables). ``dataset``
-    overrides the grid's (:func:`load_grid`); every episode runs on ``transport``, recorded
-    when ``record``."""
-    from experiments.run import check_transport, run_options, write_run_scenario, write_tables
+    """Check every grid cell (before anything is written, :func:`check_sweep`), make ``out``
+    a fresh sweep folder (an existing non-empty one is refused unless ``replace`` and it is a
+    sweep's: :func:`experiments.outdir.fresh_output`), then write each grid cell's run folder
+    (:func:`write_sweep`). ``dataset`` overrides the grid's (:func:`load_grid`); every episode
+    runs on ``transport``, recorded when ``record``."""
+    from experiments.outdir import SWEEP, check_output, fresh_output
 
-    checked = _check_cells(load_grid(grid_path, dataset), grid_path)
-    for c in checked:
-        try:
-            check_transport(transport, c.cell.mode, c.cell.scenario.faults.controller_restart_at_s)
-        except CdwTwinError as exc:
-            msg = f"{grid_path}: grid cell {c.cell.name}: {exc}"
-            raise ConfigError(msg) from exc
-    out.mkdir(parents=True, exist_ok=True)
-    runs = []
-    for c in checked:
-        folder = out / c.cell.name
-        files = write_run_scenario(c.cell.scenario, c.params, c.station_cell, folder, c.own_dataset)
-        options = dataclasses.replace(
-            run_options(files, c.station_cell, c.cell.scenario, c.dataset, c.cell.mode),
-            transport=transport,
-            record=record,
-        )
-        extra = {
-            "scenario": c.cell.scenario.name,
-            "scenario_path": str(c.cell.scenario_path),
-            "dataset": str(options.dataset),
-            "cell": c.station_cell.name,
-            "stations": list(options.stations),
-            "mode": c.cell.mode,
-            "transport": transport,
-            "record": record,
-            "speed_mps": c.cell.scenario.system.belt_speed_mps,
-            "duration_s": c.cell.scenario.duration_s,
-            "overrides": c.cell.overrides,
-            "episodes_planned": len(c.cell.seeds),
-        }
-        runs.append(CellRun(cell=c.cell, folder=folder, options=options, extra=extra))
-        write_tables(folder, [], complete=False, extra=extra)
-    return runs
+    check_output(out, SWEEP, replace=replace)
+    _, checked = check_sweep(grid_path, dataset=dataset, transport=transport)
+    fresh_output(out, SWEEP, replace=replace)
+    return write_sweep(checked, out, transport=transport, record=record)
 
 
 class Sweep:
@@ -707,6 +784,7 @@ class Sweep:
         self.lock = threading.Lock()
         self.cancel = threading.Event()
         self.stopped: list[str] = []
+        self.write_errors: list[str] = []
         self.retried: list[str] = []
         self.backend: dict[str, Any] = {"name": "local"}
         self.quiet = quiet
@@ -729,8 +807,11 @@ class Sweep:
         data["backend"] = self.backend
         if self.retried:
             data["retried"] = list(self.retried)
-        if self.stopped:
-            data["stopped"] = "; ".join(self.stopped)
+        stopped = [*self.stopped, *self.write_errors]
+        if stopped:
+            data["stopped"] = "; ".join(stopped)
+        if self.write_errors:
+            data["complete"] = False
         return data
 
     def write_all(self, complete: bool) -> dict[str, Any]:
@@ -748,23 +829,41 @@ class Sweep:
         rows = run.ordered_rows()
         done = sum(1 for r in rows if not r.get("failed")) == len(run.cell.seeds)
         extra = dict(run.extra)
-        if not done and final and (run.failures or self.stopped):
-            extra["stopped"] = "; ".join(run.failures + self.stopped)
+        stopped = [*self.stopped, *self.write_errors]
+        if not done and final and (run.failures or stopped):
+            extra["stopped"] = "; ".join(run.failures + stopped)
         write_tables(run.folder, rows, complete=done, extra=extra)
 
     def record(self, run: CellRun, index: int, row: dict[str, Any], failure: str = "") -> int:
         """Keep one finished (or failed) episode's row and write the tables; returns how many
-        episodes have finished."""
+        episodes have finished. A table that cannot be written stops the sweep
+        (:meth:`write_failed`)."""
         with self.lock:
             run.rows[index] = row
             if failure:
                 run.failures.append(failure)
-            self.finish_cell(run, final=False)
-            self.write_all(False)
+            try:
+                self.finish_cell(run, final=False)
+                self.write_all(False)
+            except OSError as exc:
+                self.write_failed(exc)
             return sum(len(r.rows) for r in self.runs)
+
+    def write_failed(self, exc: OSError) -> None:
+        """A table could not be written (a full disk): the sweep stops (the running episodes
+        are cancelled), ``stopped`` says why and the sweep ends as failed."""
+        from experiments.outdir import reason
+
+        why = f"cannot write the sweep's tables: {reason(exc)}"
+        if why not in self.write_errors:
+            self.write_errors.append(why)
+            if not self.quiet:
+                print(f"cdw-twin sweep: {why}; stopping", file=sys.stderr)
+        self.cancel.set()
 
     def job(self, run: CellRun, episode: EpisodeSpec) -> None:
         """Run one episode (a worker thread's task) and record its row."""
+        from experiments.outdir import reason
         from experiments.run import EpisodeCancelledError, EpisodeFailedError, run_episode
 
         if self.cancel.is_set():
@@ -775,6 +874,11 @@ class Sweep:
             return
         except EpisodeFailedError as exc:
             self.finished(run, episode, None, exc.reason)
+            return
+        except OSError as exc:
+            with self.lock:
+                self.write_failed(exc)
+            self.finished(run, episode, None, f"cannot write the episode folder: {reason(exc)}")
             return
         self.finished(run, episode, metrics, "")
 
@@ -828,16 +932,28 @@ class Sweep:
                 signal.signal(signum, handler)
 
     def finish(self) -> tuple[dict[str, Any], int]:
-        """The final tables; returns the ``sweep.json`` content and the exit status."""
+        """The final tables; returns the ``sweep.json`` content and the exit status (1 when
+        an episode failed or a table could not be written, 130 when interrupted). When the
+        tables cannot be written, ``sweep.json`` is rewritten in place saying so, if even
+        that can be done (:func:`interfaces.fileio.overwrite_in_place`)."""
         failures = [f for r in self.runs for f in r.failures]
-        complete = not self.stopped and not failures
         if failures and not self.stopped:
             self.stopped.append(f"{len(failures)} episode(s) failed")
         with self.lock:
-            for run in self.runs:
-                self.finish_cell(run, final=True)
-            data = self.write_all(complete)
-        return data, 0 if complete else (130 if self.cancel.is_set() else 1)
+            try:
+                for run in self.runs:
+                    self.finish_cell(run, final=True)
+                data = self.write_all(not self.stopped and not self.write_errors)
+            except OSError as exc:
+                self.write_failed(exc)
+                data = self.summary(False)
+                note = {k: data[k] for k in ("complete", "grid", "episodes", "failed", "stopped")}
+                with contextlib.suppress(OSError):
+                    overwrite_in_place(self.out / "sweep.json", json.dumps(note) + "\n")
+        if data["complete"]:
+            return data, 0
+        interrupted = self.cancel.is_set() and not self.write_errors
+        return data, 130 if interrupted else 1
 
 
 @dataclass(frozen=True)
@@ -862,44 +978,74 @@ def run_sweep(
     quiet: bool = False,
     dataset: Path | None = None,
     backend: Backend | None = None,
+    replace: bool = False,
+    connect_timeout_s: float | None = None,
 ) -> tuple[dict[str, Any], int]:
     """Run a grid (its dataset replaced by ``dataset`` when given) on ``backend`` (default: the
-    local pool); returns the ``sweep.json`` content and the exit status."""
+    local pool) into ``out``; returns the ``sweep.json`` content and the exit status.
+
+    Before anything is written: ``out`` is checked (:func:`experiments.outdir.check_output`:
+    an existing non-empty folder only with ``replace``, and only a sweep's), every grid cell
+    (:func:`check_sweep`) and, with the Ray backend, the connection to Ray is made
+    (:func:`experiments.ray_backend.connect`, bounded by ``connect_timeout_s``)."""
+    from experiments.outdir import SWEEP, check_output, fresh_output
+
     if workers < 1:
         msg = f"--workers = {workers}: must be >= 1"
         raise ConfigError(msg)
     backend = backend or Backend()
+    check_output(out, SWEEP, replace=replace)
+    grid, checked = check_sweep(grid_path, dataset=dataset, transport=backend.transport)
+    session = None
     if backend.name == "ray":
-        from experiments.ray_backend import import_ray
+        from experiments.ray_backend import CONNECT_TIMEOUT_S, connect
 
-        import_ray()  # before anything is written
-    runs = prepare_sweep(
-        grid_path, out, dataset=dataset, transport=backend.transport, record=backend.record
-    )
-    names = Grid.load(grid_path).headline
-    sweep = Sweep(grid_path, out, workers, runs, quiet=quiet, headline=names)
-    sweep.write_all(False)
-    if backend.name == "ray":
-        from experiments.ray_backend import execute_on_ray
-
-        execute_on_ray(sweep, backend.address, workers, backend.cpus_per_episode)
-    else:
-        sweep.execute()
-    return sweep.finish()
+        timeout_s = CONNECT_TIMEOUT_S if connect_timeout_s is None else connect_timeout_s
+        session = connect(backend.address, workers, backend.cpus_per_episode, timeout_s=timeout_s)
+    try:
+        fresh_output(out, SWEEP, replace=replace)
+        runs = write_sweep(checked, out, transport=backend.transport, record=backend.record)
+        sweep = Sweep(grid_path, out, workers, runs, quiet=quiet, headline=grid.headline)
+        if session is not None:
+            sweep.backend = {"name": "ray", "address": backend.address or "local"}
+        try:
+            sweep.write_all(False)
+        except OSError as exc:
+            sweep.write_failed(exc)
+        if not sweep.write_errors:  # nothing runs that could not be recorded
+            if session is not None:
+                session.execute(sweep)
+            else:
+                sweep.execute()
+        return sweep.finish()
+    finally:
+        if session is not None:
+            session.close()
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the sweep and print its summary."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out: Path = args.out or Path("runs") / f"sweep-{args.grid.stem}-{stamp}"
+    connect_timeout_s = getattr(args, "connect_timeout", None)
     if args.backend != "ray" and (args.address or args.cpus_per_episode is not None):
         msg = "--address and --cpus-per-episode need --backend ray"
+        raise ConfigError(msg)
+    if args.backend != "ray" and connect_timeout_s is not None:
+        msg = "--connect-timeout needs --backend ray"
         raise ConfigError(msg)
     backend = Backend(
         args.backend, args.address, args.cpus_per_episode, args.transport, args.record
     )
     data, code = run_sweep(
-        args.grid, out, args.workers, quiet=args.json, dataset=args.dataset, backend=backend
+        args.grid,
+        out,
+        args.workers,
+        quiet=args.json,
+        dataset=args.dataset,
+        backend=backend,
+        replace=bool(getattr(args, "replace", False)),
+        connect_timeout_s=connect_timeout_s,
     )
     if args.json:
         print(json.dumps(data))

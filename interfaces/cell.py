@@ -22,6 +22,15 @@ The belt drive is a co-simulation FMU: ``builtin`` is ours (``fmus/belt_drive``,
 other value a path (relative to the cell file) to a third-party FMU whose variables
 ``mapping`` names; ``parameters`` are set before initialisation. Every error names the file and
 the dotted key.
+
+An impossible cell is refused when it is loaded (:func:`check_layout`): every physical quantity
+is finite and within its range (a positive size, gravity pointing down, a vacuum below the
+atmosphere's pressure), every pick window lies on the belt downstream of the infeed, no two
+robot bases stand within :data:`MIN_BASE_SEPARATION_M` of each other, no two bins overlap, no
+bin reaches over the belt or below the floor. What needs the robots' URDFs (each pick window
+within its robot's reach) is checked with the scenario (:mod:`twin.scenario_check`). The file
+is read through :func:`interfaces.yamlio.load_yaml_file`: at most 1 MB of UTF-8 without NUL,
+no key given twice, no alias bomb; an empty file is refused.
 """
 
 from __future__ import annotations
@@ -33,17 +42,20 @@ from pathlib import Path
 import yaml
 
 from interfaces.dataclass_io import from_data, to_data
-from interfaces.errors import ConfigError, require
+from interfaces.errors import ConfigError, cut, cut_message, require
 from interfaces.fileio import write_atomic
 from interfaces.robots import RobotSpec, robot_from_data
 from interfaces.tools import ToolSpec, tool_from_data
-from interfaces.yamlio import load_yaml_strict
+from interfaces.yamlio import load_yaml_file
 
 CELLS_DIR = Path(__file__).resolve().parent / "cells"
 """Folder of the cell files shipped with the project (``default``, ``two_pandas``, ...)."""
 
 DEFAULT_CELL = CELLS_DIR / "default.yaml"
 """The reference cell."""
+
+MAX_STATIONS = 64
+"""Most stations a cell may have."""
 
 
 class CellError(ConfigError):
@@ -69,18 +81,44 @@ class BeltSpec:
     lateral_friction: float = 0.8
 
     def __post_init__(self) -> None:
-        require(self.width_m > 0, "belt.width_m", self.width_m, "must be positive")
+        require(
+            0 < self.width_m <= MAX_BELT_WIDTH_M,
+            "belt.width_m",
+            self.width_m,
+            f"must be in (0, {MAX_BELT_WIDTH_M:g}] m",
+        )
         require(
             self.end_x_m > self.start_x_m, "belt.end_x_m", self.end_x_m, "must exceed start_x_m"
         )
+        require(
+            self.end_x_m - self.start_x_m <= MAX_BELT_LENGTH_M,
+            "belt.end_x_m",
+            self.end_x_m,
+            f"the belt may be at most {MAX_BELT_LENGTH_M:g} m long (end_x_m - start_x_m)",
+        )
+        for key in ("start_x_m", "end_x_m", "infeed_x_m", "centre_y_m", "surface_z_m"):
+            value: float = getattr(self, key)
+            require(
+                abs(value) <= MAX_COORDINATE_M,
+                f"belt.{key}",
+                value,
+                f"must be within +-{MAX_COORDINATE_M:g} m (finite)",
+            )
         require(
             self.start_x_m <= self.infeed_x_m < self.end_x_m,
             "belt.infeed_x_m",
             self.infeed_x_m,
             "must lie on the belt",
         )
-        require(self.thickness_m > 0, "belt.thickness_m", self.thickness_m, "must be positive")
-        require(self.lateral_friction >= 0, "belt.lateral_friction", self.lateral_friction, ">= 0")
+        require(
+            0 < self.thickness_m <= 1.0, "belt.thickness_m", self.thickness_m, "must be in (0, 1] m"
+        )
+        require(
+            0 <= self.lateral_friction <= MAX_FRICTION,
+            "belt.lateral_friction",
+            self.lateral_friction,
+            f"must be in [0, {MAX_FRICTION:g}]",
+        )
 
     @property
     def length_m(self) -> float:
@@ -91,6 +129,19 @@ class BeltSpec:
         """Whether a point's projection lies on the belt surface."""
         half = 0.5 * self.width_m
         return self.start_x_m <= x_m <= self.end_x_m and abs(y_m - self.centre_y_m) <= half
+
+
+MAX_BELT_WIDTH_M = 5.0
+"""Widest belt a cell may have."""
+
+MAX_BELT_LENGTH_M = 1000.0
+"""Longest belt a cell may have."""
+
+MAX_COORDINATE_M = 10_000.0
+"""Largest absolute world coordinate of anything in a cell."""
+
+MAX_FRICTION = 10.0
+"""Largest friction coefficient (real surfaces stay below 2)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -135,6 +186,12 @@ class DriveSpec:
 
     def __post_init__(self) -> None:
         require(bool(self.fmu), "drive.fmu", self.fmu, "must not be empty")
+        require(
+            len(self.fmu) <= 4096 and "\0" not in self.fmu,
+            "drive.fmu",
+            self.fmu,
+            "a path of at most 4096 characters, without NUL",
+        )
         if self.step_s is not None:
             require(
                 0 < self.step_s <= MAX_DRIVE_STEP_S,
@@ -169,24 +226,55 @@ class PhysicsSpec:
     gravity_mps2: float = 9.81
 
     def __post_init__(self) -> None:
-        require(self.physics_hz > 0, "physics.physics_hz", self.physics_hz, "must be positive")
         require(
-            self.solver_iterations >= 1, "physics.solver_iterations", self.solver_iterations, ">= 1"
+            0 < self.physics_hz <= MAX_PHYSICS_HZ,
+            "physics.physics_hz",
+            self.physics_hz,
+            f"must be in (0, {MAX_PHYSICS_HZ:g}] Hz",
         )
         require(
-            self.hull_merge_tolerance >= 0,
+            1 <= self.solver_iterations <= 1000,
+            "physics.solver_iterations",
+            self.solver_iterations,
+            "must be in [1, 1000]",
+        )
+        require(
+            0 <= self.hull_merge_tolerance <= 10,
             "physics.hull_merge_tolerance",
             self.hull_merge_tolerance,
-            "must be >= 0",
+            "must be in [0, 10]",
         )
         require(
-            self.max_convex_pieces >= 1, "physics.max_convex_pieces", self.max_convex_pieces, ">= 1"
+            1 <= self.max_convex_pieces <= 256,
+            "physics.max_convex_pieces",
+            self.max_convex_pieces,
+            "must be in [1, 256]",
+        )
+        require(
+            0 < self.gravity_mps2 <= MAX_GRAVITY_MPS2,
+            "physics.gravity_mps2",
+            self.gravity_mps2,
+            f"must be in (0, {MAX_GRAVITY_MPS2:g}] m/s^2: the magnitude of gravity, which "
+            "points down (-z)",
+        )
+        require(
+            abs(self.floor_z_m) <= MAX_COORDINATE_M,
+            "physics.floor_z_m",
+            self.floor_z_m,
+            f"must be within +-{MAX_COORDINATE_M:g} m",
         )
 
     @property
     def dt_s(self) -> float:
         """The physics step."""
         return 1.0 / self.physics_hz
+
+
+MAX_PHYSICS_HZ = 10_000.0
+"""Highest physics rate a cell may ask for."""
+
+MAX_GRAVITY_MPS2 = 100.0
+"""Largest gravity a cell may ask for (10 g)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -224,17 +312,43 @@ class BinSpec:
     drop_z_m: float = 0.15
 
     def __post_init__(self) -> None:
+        require(
+            0 < len(self.class_name) <= 64 and self.class_name.isprintable(),
+            "bins.class_name",
+            self.class_name,
+            "1 to 64 printable characters",
+        )
         key = f"bins[{self.class_name}]"
-        require(bool(self.class_name), "bins.class_name", self.class_name, "must not be empty")
+        require(self.wall_m > 0, f"{key}.wall_m", self.wall_m, "must be positive")
         require(
             self.size_m > 2 * self.wall_m,
             f"{key}.size_m",
             self.size_m,
             "must exceed twice the wall thickness",
         )
+        require(self.size_m <= 10.0, f"{key}.size_m", self.size_m, "must be at most 10 m")
         require(
             self.top_z_m > self.floor_z_m, f"{key}.top_z_m", self.top_z_m, "must be above floor"
         )
+        require(
+            self.drop_z_m > self.top_z_m,
+            f"{key}.drop_z_m",
+            self.drop_z_m,
+            "must be above the bin's top (top_z_m): the object is released over the bin",
+        )
+        for name in ("centre_x_m", "centre_y_m", "top_z_m", "floor_z_m", "drop_z_m"):
+            value: float = getattr(self, name)
+            require(
+                abs(value) <= MAX_COORDINATE_M,
+                f"{key}.{name}",
+                value,
+                f"must be within +-{MAX_COORDINATE_M:g} m",
+            )
+
+    @property
+    def half_m(self) -> float:
+        """Half the bin's outer side."""
+        return 0.5 * self.size_m
 
     @property
     def inner_half_m(self) -> float:
@@ -267,13 +381,14 @@ class StationSpec:
 
     def __post_init__(self) -> None:
         require(
-            bool(self.name) and self.name.replace("_", "").isalnum(),
+            bool(self.name) and len(self.name) <= 64 and self.name.replace("_", "").isalnum(),
             "station.name",
             self.name,
-            "letters, digits and underscores only",
+            "1 to 64 letters, digits and underscores only",
         )
         require(
-            self.namespace == "" or self.namespace.replace("_", "").isalnum(),
+            self.namespace == ""
+            or (len(self.namespace) <= 64 and self.namespace.replace("_", "").isalnum()),
             "station.namespace",
             self.namespace,
             "empty, or letters, digits and underscores (a ROS namespace without slashes)",
@@ -281,10 +396,17 @@ class StationSpec:
         lo, hi = self.pick_window_x_m
         require(lo < hi, "station.pick_window_x_m", self.pick_window_x_m, "needs min < max")
         require(
-            _finite(self.base_position_m),
+            _finite(self.base_position_m)
+            and all(abs(v) <= MAX_COORDINATE_M for v in self.base_position_m),
             "station.base_position_m",
             self.base_position_m,
-            "must be finite",
+            f"must be finite, within +-{MAX_COORDINATE_M:g} m",
+        )
+        require(
+            math.isfinite(self.base_yaw_rad) and abs(self.base_yaw_rad) <= 4 * math.pi,
+            "station.base_yaw_rad",
+            self.base_yaw_rad,
+            "must be finite, within +-4 pi",
         )
         classes = [b.class_name for b in self.bins]
         require(
@@ -349,6 +471,7 @@ class Cell:
                     (b.centre_x_m, b.centre_y_m),
                     "stands on the belt",
                 )
+        check_layout(self)
 
     @property
     def classes(self) -> tuple[str, ...]:
@@ -398,10 +521,98 @@ class Cell:
         write_atomic(path, self.to_yaml())
 
 
+# -- layout ---------------------------------------------------------------------------------
+MIN_BASE_SEPARATION_M = 0.3
+"""Closest two stations' robot bases may stand (their footprints would overlap)."""
+
+
+def _squares_overlap(a: BinSpec, b: BinSpec) -> bool:
+    """Whether the outer squares of two bins overlap (touching is fine)."""
+    reach = a.half_m + b.half_m - 1e-9
+    return abs(a.centre_x_m - b.centre_x_m) < reach and abs(a.centre_y_m - b.centre_y_m) < reach
+
+
+def _bin_over_belt(belt: BeltSpec, b: BinSpec) -> bool:
+    """Whether a bin's outer square overlaps the belt's surface (seen from above)."""
+    half_w = 0.5 * belt.width_m
+    return (
+        b.centre_x_m + b.half_m > belt.start_x_m + 1e-9
+        and b.centre_x_m - b.half_m < belt.end_x_m - 1e-9
+        and abs(b.centre_y_m - belt.centre_y_m) < half_w + b.half_m - 1e-9
+    )
+
+
+def check_layout(cell: Cell) -> None:
+    """Refuse a cell whose parts cannot stand where it puts them (:class:`ConfigError` naming
+    the key): a pick window that is not on the belt downstream of the infeed; two robot bases
+    within :data:`MIN_BASE_SEPARATION_M`; two bins (of any stations) whose squares overlap; a
+    bin that reaches over the belt; a bin or the belt below the physics floor; a camera that
+    sees none of the belt. The robots' reach needs their URDFs: see
+    :func:`interfaces.urdf.check_station_reach`."""
+    belt, floor = cell.belt, cell.physics.floor_z_m
+    require(
+        floor < belt.surface_z_m - belt.thickness_m,
+        "physics.floor_z_m",
+        floor,
+        f"must lie below the belt (surface_z_m {belt.surface_z_m:g} - thickness_m "
+        f"{belt.thickness_m:g})",
+    )
+    camera = cell.camera
+    require(
+        camera.fov_max_x_m > belt.start_x_m and camera.fov_min_x_m < belt.end_x_m,
+        "camera.fov_min_x_m",
+        [camera.fov_min_x_m, camera.fov_max_x_m],
+        f"the camera sees none of the belt (x from {belt.start_x_m:g} to {belt.end_x_m:g} m)",
+    )
+    for i, station in enumerate(cell.stations):
+        lo, hi = station.pick_window_x_m
+        require(
+            belt.start_x_m <= lo and hi <= belt.end_x_m and hi > belt.infeed_x_m,
+            f"stations[{i}].pick_window_x_m",
+            station.pick_window_x_m,
+            f"must lie on the belt (x from {belt.start_x_m:g} to {belt.end_x_m:g} m) and end "
+            f"downstream of its infeed ({belt.infeed_x_m:g} m)",
+        )
+        for j, other in enumerate(cell.stations[:i]):
+            gap = math.dist(station.base_position_m[:2], other.base_position_m[:2])
+            require(
+                gap >= MIN_BASE_SEPARATION_M,
+                f"stations[{i}].base_position_m",
+                station.base_position_m,
+                f"{gap:.3g} m from the base of stations[{j}] ({other.name}): two robots "
+                f"cannot stand closer than {MIN_BASE_SEPARATION_M:g} m",
+            )
+    placed: list[tuple[str, BinSpec]] = []
+    for i, station in enumerate(cell.stations):
+        for b in station.bins:
+            key = f"stations[{i}].bins[{b.class_name}]"
+            require(
+                not _bin_over_belt(belt, b),
+                key,
+                (b.centre_x_m, b.centre_y_m),
+                f"its {b.size_m:g} m square reaches over the belt",
+            )
+            require(
+                b.floor_z_m >= floor,
+                f"{key}.floor_z_m",
+                b.floor_z_m,
+                f"lies below the floor (physics.floor_z_m {floor:g})",
+            )
+            for other_key, earlier in placed:
+                require(
+                    not _squares_overlap(b, earlier),
+                    key,
+                    (b.centre_x_m, b.centre_y_m),
+                    f"overlaps {other_key} at {(earlier.centre_x_m, earlier.centre_y_m)}: two bins "
+                    "cannot stand in one place",
+                )
+            placed.append((key, b))
+
+
 # -- loading --------------------------------------------------------------------------------
 def _station_from_data(raw: object, where: str) -> StationSpec:
     if not isinstance(raw, dict):
-        msg = f"{where} = {raw!r}: expected a mapping"
+        msg = f"{where} = {cut(raw)}: expected a mapping"
         raise CellError(msg)
     data = dict(raw)
     for key in ("robot", "tool"):
@@ -424,13 +635,22 @@ def cell_from_data(data: object, where: str, *, base_dir: Path | None = None) ->
     raw = dict(data)
     raw_stations = raw.pop("stations", None)
     if not isinstance(raw_stations, list) or not raw_stations:
-        msg = f"{where}: stations = {raw_stations!r}: list at least one station"
+        msg = f"{where}: stations = {cut(raw_stations)}: list at least one station"
         raise CellError(msg)
-    stations = tuple(_station_from_data(s, f"stations[{i}]") for i, s in enumerate(raw_stations))
+    if len(raw_stations) > MAX_STATIONS:
+        msg = f"{where}: stations: {len(raw_stations)} stations, more than {MAX_STATIONS}"
+        raise CellError(msg)
+    try:
+        stations = tuple(
+            _station_from_data(s, f"stations[{i}]") for i, s in enumerate(raw_stations)
+        )
+    except ConfigError as exc:
+        msg = cut_message(f"{where}: {exc}")
+        raise CellError(msg) from None
     try:
         cell = from_data(Cell, {**raw, "stations": stations, "source": where}, "")
     except ConfigError as exc:
-        msg = f"{where}: {exc}"
+        msg = cut_message(f"{where}: {exc}")
         raise CellError(msg) from None
     fmu = cell.drive.fmu
     if not cell.drive.builtin and base_dir is not None and not Path(fmu).is_absolute():
@@ -442,17 +662,18 @@ def load_cell(path: Path | str | None = None) -> Cell:
     """Read a cell file: a path, a name of a shipped cell (``default``), or None (default)."""
     resolved = resolve_cell_path(path)
     try:
-        text = resolved.read_text(encoding="utf-8")
-    except OSError as exc:
-        msg = f"{resolved}: cannot read cell file: {exc.strerror}"
-        raise CellError(msg) from None
-    data = load_yaml_strict(text, str(resolved))
+        data = load_yaml_file(resolved, what="cell file")
+    except ConfigError as exc:
+        raise CellError(cut_message(str(exc))) from None
+    if data is None:
+        msg = f"{resolved}: the cell file is empty"
+        raise CellError(msg)
     try:
         return cell_from_data(data, str(resolved), base_dir=resolved.parent)
-    except CellError:
-        raise
+    except CellError as exc:
+        raise CellError(cut_message(str(exc))) from None
     except ConfigError as exc:
-        msg = f"{resolved}: {exc}"
+        msg = cut_message(f"{resolved}: {exc}")
         raise CellError(msg) from None
 
 
@@ -463,11 +684,14 @@ def resolve_cell_path(path: Path | str | None, base_dir: Path | None = None) -> 
     if path is None:
         return DEFAULT_CELL
     text = str(path)
+    if not text or "\0" in text or len(text) > 4096:
+        msg = f"cell = {cut(text)}: not a cell name or path (empty, NUL or over 4096 characters)"
+        raise CellError(msg)
     if "/" not in text and not text.endswith((".yaml", ".yml")):
         shipped = CELLS_DIR / f"{text}.yaml"
         if not shipped.is_file():
             known = ", ".join(sorted(p.stem for p in CELLS_DIR.glob("*.yaml")))
-            msg = f"cell = {text!r}: no shipped cell of that name (shipped: {known})"
+            msg = f"cell = {cut(text)}: no shipped cell of that name (shipped: {known})"
             raise CellError(msg)
         return shipped
     resolved = Path(text).expanduser()

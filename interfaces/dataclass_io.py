@@ -14,7 +14,7 @@ import types
 import typing
 from typing import Any, TypeVar, Union, get_args, get_origin, get_type_hints
 
-from interfaces.errors import ConfigError
+from interfaces.errors import ConfigError, cut
 
 T = TypeVar("T")
 
@@ -36,7 +36,7 @@ def from_data(cls: type[T], data: object, where: str) -> T:
 
 
 def _fail(where: str, value: object, what: str) -> typing.NoReturn:
-    msg = f"{where} = {value!r}: {what}"
+    msg = f"{where} = {cut(value)}: {what}"
     raise ConfigError(msg)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from interfaces.catalog import entry
+from interfaces.catalog import entry, is_part_name, missing_fields
 from interfaces.dataclass_io import from_data
 from interfaces.errors import ConfigError, require
 
@@ -48,6 +48,12 @@ class RobotSpec:
     inertia_from_file: bool = False
 
     def __post_init__(self) -> None:
+        require(
+            is_part_name(self.name),
+            "robot.name",
+            self.name,
+            "1 to 64 letters, digits, '_', '-' or '.', not starting with '.'",
+        )
         n = len(self.arm_joints)
         require(n > 0, "robot.arm_joints", self.arm_joints, "must not be empty")
         require(
@@ -79,11 +85,31 @@ class RobotSpec:
             self.joint_max_velocity_rps,
             "must be positive",
         )
+        for key in ("position_gain", "velocity_gain"):
+            gain: float = getattr(self, key)
+            require(0 < gain <= MAX_GAIN, f"robot.{key}", gain, f"must be in (0, {MAX_GAIN}]")
+        limits = self.joint_position_limits_rad
+        for key in ("home_joint_positions", "ready_joint_positions_rad") if limits else ():
+            values = getattr(self, key)
+            for i, (q, (lo, hi)) in enumerate(zip(values, limits, strict=True)):
+                require(
+                    lo - 1e-6 <= q <= hi + 1e-6,
+                    f"robot.{key}[{i}]",
+                    q,
+                    f"outside the joint's position limits [{lo}, {hi}] (joint_position_limits_rad)",
+                )
+
+
+MAX_GAIN = 100.0
+"""Largest joint motor gain (PyBullet's position and velocity gains are fractions near 1)."""
 
 
 def robot_from_data(value: object, where: str) -> RobotSpec:
-    """A robot from a catalogue name or a mapping."""
-    return from_data(RobotSpec, entry(value, "robots", where), where)
+    """A robot from a catalogue name or a mapping (a mapping lacking a required key, such as
+    ``name``, is refused naming ``where`` and the key)."""
+    data = entry(value, "robots", where)
+    missing_fields(RobotSpec, data, where, "robot")
+    return from_data(RobotSpec, data, where)
 
 
 def package_root(package: str) -> Path:

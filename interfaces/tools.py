@@ -10,9 +10,9 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
-from interfaces.catalog import entry
+from interfaces.catalog import entry, is_part_name, missing_fields
 from interfaces.dataclass_io import from_data
-from interfaces.errors import ConfigError, require
+from interfaces.errors import ConfigError, cut, require
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,10 +66,25 @@ class ParallelJawSpec:
     finger_length_m: float = 0.08
 
     def __post_init__(self) -> None:
+        _check_name(self.name)
         n = len(self.joints)
         if self.grip_force_N is not None:
-            require(self.grip_force_N > 0, "tool.grip_force_N", self.grip_force_N, "must be > 0")
+            require(
+                0 < self.grip_force_N <= MAX_FORCE_N,
+                "tool.grip_force_N",
+                self.grip_force_N,
+                f"must be in (0, {MAX_FORCE_N:g}] N",
+            )
+        require(
+            0 < self.min_finger_force_N <= MAX_FORCE_N,
+            "tool.min_finger_force_N",
+            self.min_finger_force_N,
+            f"must be in (0, {MAX_FORCE_N:g}] N",
+        )
         if self.mount == "flange":
+            for key in ("palm_height_m", "finger_length_m", "finger_width_m", "finger_depth_m"):
+                size: float = getattr(self, key)
+                require(size > 0, f"tool.{key}", size, "must be > 0 (a flange gripper's part)")
             require(n == 2, "tool.joints", self.joints, "a flange-mounted jaw has two fingers")
             require(len(self.links) == 2, "tool.links", self.links, "two finger links")
         require(n > 0, "tool.joints", self.joints, "must not be empty")
@@ -77,8 +92,18 @@ class ParallelJawSpec:
         require(
             len(self.joint_closed) == n, "tool.joint_closed", self.joint_closed, "one per joint"
         )
-        require(self.max_opening_m > 0, "tool.max_opening_m", self.max_opening_m, "must be > 0")
-        require(self.dwell_s >= 0, "tool.dwell_s", self.dwell_s, "must be >= 0")
+        require(
+            0 < self.max_opening_m <= MAX_SIZE_M,
+            "tool.max_opening_m",
+            self.max_opening_m,
+            f"must be in (0, {MAX_SIZE_M:g}] m",
+        )
+        require(
+            0 <= self.dwell_s <= MAX_TIME_S,
+            "tool.dwell_s",
+            self.dwell_s,
+            f"must be in [0, {MAX_TIME_S:g}] s",
+        )
         require(
             all(v > 0 for v in self.tcp_half_extents_m),
             "tool.tcp_half_extents_m",
@@ -94,7 +119,9 @@ class ParallelJawSpec:
             "palm_above_tcp_m",
         ):
             value: float = getattr(self, key)
-            require(value >= 0, f"tool.{key}", value, "must be >= 0")
+            require(
+                0 <= value <= MAX_SIZE_M, f"tool.{key}", value, f"must be in [0, {MAX_SIZE_M:g}] m"
+            )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -147,18 +174,25 @@ class SuctionCupSpec:
     tcp_half_extents_m: tuple[float, float, float] = (0.01, 0.01, 0.01)
 
     def __post_init__(self) -> None:
-        for key in (
-            "cup_diameter_m",
-            "stem_length_m",
-            "body_radius_m",
-            "vacuum_kPa",
-            "build_up_s",
-            "vent_s",
-            "max_tilt_rad",
-            "contact_tolerance_m",
+        _check_name(self.name)
+        for key, high in (
+            ("cup_diameter_m", MAX_SIZE_M),
+            ("stem_length_m", MAX_SIZE_M),
+            ("body_radius_m", MAX_SIZE_M),
+            ("vacuum_kPa", ATMOSPHERE_KPA),
+            ("build_up_s", MAX_TIME_S),
+            ("vent_s", MAX_TIME_S),
+            ("max_tilt_rad", 0.5 * math.pi),
+            ("contact_tolerance_m", MAX_SIZE_M),
         ):
             value: float = getattr(self, key)
-            require(value > 0, f"tool.{key}", value, "must be > 0")
+            require(0 < value <= high, f"tool.{key}", value, f"must be in (0, {high:g}]")
+        require(
+            all(v > 0 for v in self.tcp_half_extents_m),
+            "tool.tcp_half_extents_m",
+            self.tcp_half_extents_m,
+            "must be positive",
+        )
         for name, eta in {
             **self.seal_efficiency,
             "(default)": self.default_seal_efficiency,
@@ -184,6 +218,28 @@ class SuctionCupSpec:
         return f"{self.name}_vacuum"
 
 
+MAX_SIZE_M = 1.0
+"""Largest length of a tool's part (an opening, a cup, a stem, a finger), m."""
+
+MAX_TIME_S = 60.0
+"""Longest time constant of a tool (dwell, vacuum build-up, venting), s."""
+
+MAX_FORCE_N = 10_000.0
+"""Largest force of a tool's finger or grip, N."""
+
+ATMOSPHERE_KPA = 101.325
+"""Standard atmospheric pressure: a vacuum below ambient cannot exceed it."""
+
+
+def _check_name(name: str) -> None:
+    require(
+        is_part_name(name),
+        "tool.name",
+        name,
+        "1 to 64 letters, digits, '_', '-' or '.', not starting with '.'",
+    )
+
+
 ToolSpec = ParallelJawSpec | SuctionCupSpec
 """Every kind of tool a station may carry."""
 
@@ -198,11 +254,12 @@ def tool_from_data(value: object, where: str) -> ToolSpec:
     """A tool from a catalogue name or a mapping; ``kind`` chooses its class."""
     data = entry(value, "tools", where)
     if not isinstance(data, dict):
-        msg = f"{where} = {data!r}: expected a tool name or a mapping"
+        msg = f"{where} = {cut(data)}: expected a tool name or a mapping"
         raise ConfigError(msg)
     kind = data.get("kind", "parallel_jaw")
-    if kind not in TOOL_KINDS:
-        msg = f"{where}.kind = {kind!r}: unknown tool kind (known: {', '.join(TOOL_KINDS)})"
+    if not isinstance(kind, str) or kind not in TOOL_KINDS:
+        msg = f"{where}.kind = {cut(kind)}: unknown tool kind (known: {', '.join(TOOL_KINDS)})"
         raise ConfigError(msg)
+    missing_fields(TOOL_KINDS[kind], data, where, "tool")
     tool: ToolSpec = from_data(TOOL_KINDS[kind], data, where)
     return tool

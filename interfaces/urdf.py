@@ -12,9 +12,13 @@ result is written once per content under ``<cache>/urdf/``.
 from __future__ import annotations
 
 import hashlib
+import math
 import tempfile
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from interfaces.cache import cache_root
 from interfaces.errors import ConfigError
@@ -252,3 +256,98 @@ def _parallel_jaw(tool: ParallelJawSpec, flange: str) -> list[ET.Element]:
         _link(tool.tcp_link, 0.001),
     ]
     return elements
+
+
+# -- reach ----------------------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class Reach:
+    """How far a station's TCP can get: ``origin_m`` is the first arm joint's origin in the
+    robot's base frame, ``reach_m`` an upper bound of the TCP's distance from it in any
+    configuration (the sum of the fixed offsets between the following arm joints' origins and
+    on to the TCP: the triangle inequality; loose where links are offset sideways, but what
+    lies beyond it can never be reached). The same bound as the controller's IK uses."""
+
+    origin_m: tuple[float, float, float]
+    reach_m: float
+
+
+def _rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def _numbers(text: str, where: str) -> tuple[float, float, float]:
+    try:
+        values = tuple(float(v) for v in text.split())
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        msg = f"{where}: expected three finite numbers, got {text[:80]!r}"
+        raise ConfigError(msg)
+    return values[0], values[1], values[2]
+
+
+def _origin(joint: ET.Element, source: Path) -> np.ndarray:
+    """The 4x4 transform of a joint's ``<origin>`` (the joint at its zero position)."""
+    transform = np.eye(4)
+    origin = joint.find("origin")
+    if origin is None:
+        return transform
+    where = f"{source}: joint {joint.get('name', '')!r} origin"
+    transform[:3, :3] = _rpy_matrix(*_numbers(origin.get("rpy", "0 0 0"), where))
+    transform[:3, 3] = _numbers(origin.get("xyz", "0 0 0"), where)
+    return transform
+
+
+def station_reach(robot: RobotSpec, tool: ToolSpec) -> Reach:
+    """The :class:`Reach` of ``robot`` carrying ``tool``, from the station's URDF
+    (:func:`station_urdf`); :class:`ConfigError` naming the URDF when its chain from the base
+    to the tool's TCP link does not pass through every arm joint."""
+    path = station_urdf(robot, tool)
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as exc:
+        msg = f"{path}: cannot read the station's URDF: {exc}"
+        raise ConfigError(msg) from None
+    by_child = {_attr(j, "child"): j for j in root.findall("joint")}
+    chain: list[ET.Element] = []
+    link = tool.tcp_link
+    if not any(element.get("name") == link for element in root.findall("link")):
+        msg = f"{path}: tool {tool.name!r}: no link named {link!r} (tool.tcp_link)"
+        raise ConfigError(msg)
+    while link in by_child and len(chain) <= len(by_child):
+        joint = by_child[link]
+        chain.append(joint)
+        link = _attr(joint, "parent")
+    chain.reverse()
+    names = [j.get("name", "") for j in chain]
+    missing = [name for name in robot.arm_joints if name not in names]
+    if missing:
+        msg = (
+            f"{path}: arm joints {missing} are not on the chain from the base to the TCP link "
+            f"{tool.tcp_link!r} (robot.arm_joints, tool.tcp_link)"
+        )
+        raise ConfigError(msg)
+    first = names.index(robot.arm_joints[0])
+    to_first = np.eye(4)
+    for joint in chain[: first + 1]:
+        to_first = to_first @ _origin(joint, path)
+    length_m = 0.0
+    since = np.eye(4)
+    for joint in chain[first + 1 :]:
+        since = since @ _origin(joint, path)
+        if joint.get("name") in robot.arm_joints:
+            length_m += float(np.linalg.norm(since[:3, 3]))
+            since = np.eye(4)
+    tcp = since[:3, :3] @ np.asarray(tool.tcp_offset_m, dtype=float) + since[:3, 3]
+    length_m += float(np.linalg.norm(tcp))
+    x, y, z = (float(v) for v in to_first[:3, 3])
+    return Reach(origin_m=(x, y, z), reach_m=length_m + 1e-6)

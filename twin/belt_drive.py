@@ -16,6 +16,7 @@ import ctypes
 import math
 import numbers
 import shutil
+import zipfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +24,7 @@ from types import TracebackType
 from typing import Any, Self
 
 from interfaces.cell import MAX_DRIVE_STEP_S, DriveMapping
+from interfaces.errors import cut
 from twin.errors import FmuError
 
 _FLOAT_TYPES = {"Real", "Float64"}
@@ -65,6 +67,9 @@ def _as_int(value: object) -> int | None:
     return int(number)
 
 
+_SHOWN = 500
+"""The most characters of a refused value an error quotes."""
+
 _NOT_A_NUMBER = "needs a real number (not a bool or a string)"
 _FINITE = "needs a finite number"
 
@@ -86,6 +91,126 @@ class BeltState:
 VariableMapping = DriveMapping
 """Names of the FMU variables that play each role (a cell's ``drive.mapping``); the defaults are
 our BeltDrive FMU's."""
+
+
+@dataclass(frozen=True)
+class FmuPlan:
+    """What the wrapper needs of an FMU file before it instantiates it: its model description,
+    FMI version, the value references of the mapped inputs and outputs (in the order the
+    wrapper binds them) and the parameters' value references with their checked values."""
+
+    description: Any
+    fmi_version: int
+    inputs: tuple[int, ...]
+    outputs: tuple[int, ...]
+    float_parameters: tuple[tuple[int, float], ...]
+    int_parameters: tuple[tuple[int, int], ...]
+
+
+def _fail(path: Path, what: str) -> FmuError:
+    return FmuError(f"{path}: {what}")
+
+
+def _resolve(path: Path, variables: Mapping[str, Any], field: str, name: str) -> int:
+    variable = variables.get(name)
+    if variable is None:
+        raise _fail(
+            path, f"mapping field {field!r} names variable {cut(name)}, which the FMU lacks"
+        )
+    if variable.type not in _FLOAT_TYPES:
+        raise _fail(path, f"mapped variable {cut(name)} ({field}) is {variable.type}, not Real")
+    return int(variable.valueReference)
+
+
+def _float_parameter(path: Path, name: str, value: object) -> float:
+    number = _as_float(value)
+    if number is None or not math.isfinite(number):
+        what = _NOT_A_NUMBER if number is None else _FINITE
+        raise _fail(
+            path, f"parameter {cut(name)} = {cut(value, _SHOWN)} is invalid: Float64 {what}"
+        )
+    return number
+
+
+def _int_parameter(path: Path, name: str, value: object) -> int:
+    number = _as_int(value)
+    if number is None:
+        raise _fail(
+            path, f"parameter {cut(name)} = {cut(value, _SHOWN)} is invalid: Int32 needs an integer"
+        )
+    if not INT32_MIN <= number <= INT32_MAX:
+        raise _fail(
+            path,
+            f"parameter {cut(name)} = {cut(value, _SHOWN)} is invalid: outside the Int32 range "
+            f"[{INT32_MIN}, {INT32_MAX}]",
+        )
+    return number
+
+
+def read_description(path: Path) -> Any:
+    """The model description of the FMU file ``path`` (fmpy's), checked to be FMI 2.0 or 3.0
+    co-simulation; :class:`FmuError` naming the file when it is missing, not a zip archive, has
+    no readable ``modelDescription.xml``, or is of another kind."""
+    from fmpy import read_model_description
+
+    if not path.is_file():
+        raise _fail(path, "FMU file not found (build ours with `cdw-twin fmu build`)")
+    if not zipfile.is_zipfile(path):
+        raise _fail(path, "not a valid FMU: not a zip archive")
+    try:
+        description = read_model_description(str(path))
+    except Exception as exc:
+        raise _fail(path, f"not a valid FMU: {cut(str(exc), 300)}") from exc
+    if description.fmiVersion not in {"2.0", "3.0"}:
+        raise _fail(path, f"FMI version {cut(description.fmiVersion)} is not supported (2.0, 3.0)")
+    if description.coSimulation is None:
+        raise _fail(path, "the FMU does not support co-simulation")
+    return description
+
+
+def plan_fmu(path: Path, mapping: VariableMapping, parameters: Mapping[str, object]) -> FmuPlan:
+    """Read and check the FMU ``path`` against ``mapping`` and ``parameters`` without
+    instantiating it (cheap: the model description only), so a cell's drive can be checked
+    before anything starts. :class:`FmuError` names the file and the variable: a mapped
+    variable the FMU lacks or that is not Real, a parameter it lacks, of a type the wrapper
+    cannot set, or whose value does not fit its type."""
+    description = read_description(path)
+    variables = {v.name: v for v in description.modelVariables}
+    inputs = [_resolve(path, variables, "speed_setpoint", mapping.speed_setpoint)]
+    if mapping.load_mass is not None:
+        inputs.append(_resolve(path, variables, "load_mass", mapping.load_mass))
+    outputs = [
+        _resolve(path, variables, "belt_speed", mapping.belt_speed),
+        _resolve(path, variables, "belt_position", mapping.belt_position),
+    ]
+    if mapping.motor_torque is not None:
+        outputs.append(_resolve(path, variables, "motor_torque", mapping.motor_torque))
+    if mapping.motor_current is not None:
+        outputs.append(_resolve(path, variables, "motor_current", mapping.motor_current))
+    floats: list[tuple[int, float]] = []
+    ints: list[tuple[int, int]] = []
+    for name, value in parameters.items():
+        variable = variables.get(name)
+        if variable is None:
+            raise _fail(path, f"parameter {cut(name)} is not a variable of the FMU")
+        if variable.type in _FLOAT_TYPES:
+            floats.append((variable.valueReference, _float_parameter(path, name, value)))
+        elif variable.type in _INT_TYPES:
+            ints.append((variable.valueReference, _int_parameter(path, name, value)))
+        else:
+            raise _fail(
+                path,
+                f"parameter {cut(name)} is of type {variable.type}, which the wrapper cannot set "
+                "(only Float64/Real and Int32/Integer)",
+            )
+    return FmuPlan(
+        description=description,
+        fmi_version=int(description.fmiVersion[0]),
+        inputs=tuple(inputs),
+        outputs=tuple(outputs),
+        float_parameters=tuple(floats),
+        int_parameters=tuple(ints),
+    )
 
 
 class BeltDrive:
@@ -142,86 +267,23 @@ class BeltDrive:
             raise
 
     def _open(self, parameters: Mapping[str, float]) -> None:
-        from fmpy import extract, read_model_description
+        from fmpy import extract
 
-        if not self.path.is_file():
-            msg = f"{self.path}: FMU file not found (build ours with `cdw-twin fmu build`)"
-            raise FmuError(msg)
-        try:
-            description = read_model_description(str(self.path))
-        except Exception as exc:
-            msg = f"{self.path}: not a valid FMU: {exc}"
-            raise FmuError(msg) from exc
-        if description.fmiVersion not in {"2.0", "3.0"}:
-            msg = f"{self.path}: FMI version {description.fmiVersion} is not supported (2.0, 3.0)"
-            raise FmuError(msg)
-        if description.coSimulation is None:
-            msg = f"{self.path}: the FMU does not support co-simulation"
-            raise FmuError(msg)
-        self.fmi_version = int(description.fmiVersion[0])
-        variables = {v.name: v for v in description.modelVariables}
-        inputs = [self._resolve(variables, "speed_setpoint", self.mapping.speed_setpoint)]
-        if self.mapping.load_mass is not None:
-            inputs.append(self._resolve(variables, "load_mass", self.mapping.load_mass))
-        outputs = [
-            self._resolve(variables, "belt_speed", self.mapping.belt_speed),
-            self._resolve(variables, "belt_position", self.mapping.belt_position),
-        ]
+        plan = plan_fmu(self.path, self.mapping, parameters)
+        self.fmi_version = plan.fmi_version
         self._has_torque = self.mapping.motor_torque is not None
         self._has_current = self.mapping.motor_current is not None
-        if self.mapping.motor_torque is not None:
-            outputs.append(self._resolve(variables, "motor_torque", self.mapping.motor_torque))
-        if self.mapping.motor_current is not None:
-            outputs.append(self._resolve(variables, "motor_current", self.mapping.motor_current))
-        float_params: list[tuple[int, float]] = []
-        int_params: list[tuple[int, int]] = []
-        for name, value in parameters.items():
-            variable = variables.get(name)
-            if variable is None:
-                msg = f"{self.path}: parameter {name!r} is not a variable of the FMU"
-                raise FmuError(msg)
-            if variable.type in _FLOAT_TYPES:
-                float_params.append((variable.valueReference, self._float_parameter(name, value)))
-            elif variable.type in _INT_TYPES:
-                int_params.append((variable.valueReference, self._int_parameter(name, value)))
-            else:
-                msg = (
-                    f"{self.path}: parameter {name!r} is of type {variable.type}, which the "
-                    f"wrapper cannot set (only Float64/Real and Int32/Integer)"
-                )
-                raise FmuError(msg)
         self._unzip_dir = extract(str(self.path))
-        self._instantiate(description)
-        self._bind(inputs, outputs)
-        self._initialize(float_params, int_params)
-
-    def _float_parameter(self, name: str, value: object) -> float:
-        number = _as_float(value)
-        if number is None or not math.isfinite(number):
-            what = _NOT_A_NUMBER if number is None else _FINITE
-            msg = f"{self.path}: parameter {name!r} = {value!r} is invalid: Float64 {what}"
-            raise FmuError(msg)
-        return number
-
-    def _int_parameter(self, name: str, value: object) -> int:
-        number = _as_int(value)
-        if number is None:
-            msg = f"{self.path}: parameter {name!r} = {value!r} is invalid: Int32 needs an integer"
-            raise FmuError(msg)
-        if not INT32_MIN <= number <= INT32_MAX:
-            msg = (
-                f"{self.path}: parameter {name!r} = {value!r} is invalid: outside the Int32 range "
-                f"[{INT32_MIN}, {INT32_MAX}]"
-            )
-            raise FmuError(msg)
-        return number
+        self._instantiate(plan.description)
+        self._bind(list(plan.inputs), list(plan.outputs))
+        self._initialize(list(plan.float_parameters), list(plan.int_parameters))
 
     def _input(self, name: str, value: object) -> float:
         """A refused-or-converted input value (the slow path of :meth:`step`)."""
         number = _as_float(value)
         if number is None or not math.isfinite(number):
             what = _NOT_A_NUMBER if number is None else _FINITE
-            msg = f"{self.path}: input {name} = {value!r} is invalid: Float64 {what}"
+            msg = f"{self.path}: input {name} = {cut(value, _SHOWN)} is invalid: Float64 {what}"
             raise FmuError(msg)
         return number
 
@@ -230,23 +292,11 @@ class BeltDrive:
         number = _as_float(dt_s)
         if number is None or not 0.0 < number <= MAX_STEP_S:
             msg = (
-                f"{self.path}: step dt_s = {dt_s!r} is invalid: needs a number in "
+                f"{self.path}: step dt_s = {cut(dt_s)} is invalid: needs a number in "
                 f"(0, {MAX_STEP_S}] s (MAX_STEP_S)"
             )
             raise FmuError(msg)
         return number
-
-    def _resolve(self, variables: Mapping[str, Any], field: str, name: str) -> int:
-        variable = variables.get(name)
-        if variable is None:
-            msg = (
-                f"{self.path}: mapping field {field!r} names variable {name!r}, which the FMU lacks"
-            )
-            raise FmuError(msg)
-        if variable.type not in _FLOAT_TYPES:
-            msg = f"{self.path}: mapped variable {name!r} ({field}) is {variable.type}, not Real"
-            raise FmuError(msg)
-        return int(variable.valueReference)
 
     def _log(self, status: int, category: bytes | None, message: bytes | None) -> None:
         text = (message or b"").decode("utf-8", "replace")

@@ -24,7 +24,12 @@ the stand-alone recorder for a cell the twin does not run).
 ``--foxglove [PORT]`` serves the same messages live over Foxglove's WebSocket protocol
 (:mod:`twin.live_view`; port 8765 unless given, on ``--foxglove-host``, loopback by default):
 open Foxglove, *Open connection*, ``ws://127.0.0.1:8765``, and watch the episode as it runs. A
-port in use is a one-line error (exit 2) before the episode starts. ``--gui`` opens PyBullet's
+port in use, or one that is no TCP port (outside 0 to 65535), is a one-line error (exit 2)
+before the episode starts; so is a ``--seed`` outside ``[0, 2**64 - 1]`` and an
+``--ack-timeout`` that is not a positive number of seconds (at most an hour). A file of the
+episode folder that cannot be written (a full disk) ends the episode: ``status.json`` says
+``failed`` with the error (rewritten in place when no new file can be created) and the node
+exits with status 2 and one line naming the file. ``--gui`` opens PyBullet's
 own window on the cell; without a display that can be opened (``DISPLAY``) it is a one-line
 error (exit 2) before anything starts::
 
@@ -35,6 +40,7 @@ error (exit 2) before anything starts::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ctypes
 import ctypes.util
 import dataclasses
@@ -47,7 +53,7 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any, Protocol
 
-from interfaces.errors import CdwTwinError
+from interfaces.errors import CdwTwinError, cut_message
 from interfaces.lifecycle import STOP_SIGNALS, die_with_parent
 
 if TYPE_CHECKING:
@@ -101,12 +107,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--speed", type=float, default=None, help="belt speed m/s (override)")
     parser.add_argument("--duration", type=float, default=None, help="episode seconds (override)")
-    parser.add_argument("--seed", type=int, default=None, help="seed (override)")
+    parser.add_argument(
+        "--seed", type=seed_argument, default=None, help="seed (override; 0 to 2**64 - 1)"
+    )
     parser.add_argument("--objects", type=int, default=None, help="max objects (override)")
     parser.add_argument("--prefill", type=float, default=None, help="prefill metres (override)")
     parser.add_argument("--mode", choices=("realtime", "lockstep"), default="realtime")
     parser.add_argument("--perception", choices=("default", "zero"), default="default")
-    parser.add_argument("--ack-timeout", type=float, default=2.0, help="lockstep wait (s)")
+    parser.add_argument(
+        "--ack-timeout", type=_ack_timeout_argument, default=2.0, help="lockstep wait (s)"
+    )
     parser.add_argument("--out", type=Path, default=None, help="episode log folder")
     parser.add_argument(
         "--record",
@@ -118,13 +128,58 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_view_options(parser)
 
 
+MAX_SEED = 2**64 - 1
+"""Largest seed the command line takes (:data:`twin.scenario.MAX_SEED`)."""
+
+MAX_ACK_TIMEOUT_S = 3600.0
+"""Longest lockstep wait ``--ack-timeout`` takes."""
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        msg = f"invalid int value: {text[:40]!r}"
+        raise argparse.ArgumentTypeError(msg) from None
+
+
+def seed_argument(text: str) -> int:
+    """``--seed``: an integer in ``[0, 2**64 - 1]`` (argparse's one-line error otherwise)."""
+    value = _integer(text)
+    if not 0 <= value <= MAX_SEED:
+        msg = f"must be in [0, 2**64 - 1], not {text[:40]}"
+        raise argparse.ArgumentTypeError(msg)
+    return value
+
+
+def port_argument(text: str) -> int:
+    """``--foxglove PORT``: a TCP port, ``[0, 65535]`` (0: any free port)."""
+    value = _integer(text)
+    if not 0 <= value <= 65535:
+        msg = f"a TCP port is in [0, 65535] (0: any free one), not {text[:40]}"
+        raise argparse.ArgumentTypeError(msg)
+    return value
+
+
+def _ack_timeout_argument(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        msg = f"invalid float value: {text[:40]!r}"
+        raise argparse.ArgumentTypeError(msg) from None
+    if not 0.0 < value <= MAX_ACK_TIMEOUT_S:
+        msg = f"must be in (0, {MAX_ACK_TIMEOUT_S:g}] s, not {text[:40]}"
+        raise argparse.ArgumentTypeError(msg)
+    return value
+
+
 def add_view_options(parser: argparse.ArgumentParser) -> None:
     """``--foxglove [PORT]``, ``--foxglove-host`` and ``--gui`` (twin-node and run)."""
     from twin.live_view import DEFAULT_HOST, DEFAULT_PORT
 
     parser.add_argument(
         "--foxglove",
-        type=int,
+        type=port_argument,
         nargs="?",
         const=DEFAULT_PORT,
         default=None,
@@ -344,7 +399,7 @@ def _run_episode(
     args: argparse.Namespace, stop: list[int], peers: InprocPeers | None = None
 ) -> bool:
     """The episode; True when a stop signal ended it before its duration."""
-    from twin.episode_log import start_episode_folder, write_status
+    from twin.episode_log import EpisodeWriteError, start_episode_folder, write_status
     from twin.perception import PerceptionConfig
     from twin.ros_isolation import clean_stale_fastdds_shm, local_ros_defaults
     from twin.sim import Twin
@@ -380,7 +435,13 @@ def _run_episode(
             return _serve(args, twin, stop, log, view, peers)
     except BaseException as exc:
         if out is not None:
-            write_status(out, "failed", error=f"{type(exc).__name__}: {exc}")
+            error = cut_message(f"{type(exc).__name__}: {exc}", 1000)
+            with contextlib.suppress(CdwTwinError):
+                write_status(out, "failed", error=error)
+        if isinstance(exc, OSError):
+            where = f"{exc.filename}: " if exc.filename else ""
+            msg = f"{where}cannot write the episode: {exc.strerror or exc}"
+            raise EpisodeWriteError(msg) from None
         raise
 
 
@@ -401,8 +462,13 @@ def _serve(
     controllers to start and match is ``match_wall_seconds``."""
     from rclpy.utilities import try_shutdown
 
-    from interfaces.fileio import write_atomic
-    from twin.episode_log import tracking_summary, write_status, write_summary
+    from twin.episode_log import (
+        EpisodeWriteError,
+        tracking_summary,
+        write_episode_file,
+        write_status,
+        write_summary,
+    )
 
     scenario = twin.scenario
     gui = getattr(args, "gui", False)
@@ -420,7 +486,11 @@ def _serve(
     interrupted, first, end = _step(args, node, StoppableExecutor(executor, stop), peers, detach)
     wall = end - first
     if recording is not None:
-        recording.close()
+        try:
+            recording.close()
+        except OSError as exc:
+            msg = f"{args.record}: cannot write the recording: {exc.strerror or exc}"
+            raise EpisodeWriteError(msg) from None
     if log is not None:
         log.close()
     twin.finish_pursuits()
@@ -450,6 +520,7 @@ def _serve(
         "published": dict(node.counters.published),
         "received_commands": node.counters.received_commands,
         "rejected_commands": dict(node.counters.rejected),
+        "unlogged_rejections": node.counters.unlogged,
         "lockstep_timeouts": node.counters.lockstep_timeouts,
         "priorities": list(node.priorities),
         "final_state": _final_state(twin),
@@ -459,7 +530,7 @@ def _serve(
         summary["stopped_by"] = signal.Signals(stop[0]).name
     out: Path | None = args.out
     if out is not None:
-        write_atomic(out / "telemetry.json", node.telemetry.to_json())
+        write_episode_file(out, "telemetry.json", node.telemetry.to_json())
         write_summary(out, summary)
         write_status(
             out,

@@ -11,6 +11,11 @@ Files:
   that has no ``summary.json`` belongs to a process that was killed;
 - ``summary.json``: scores, tracking, counters, timing, written atomically when the episode
   ends (``"complete": false`` when it was interrupted). A folder without it is incomplete.
+
+A write that fails (a full disk, a folder made read-only) ends the episode: the event log
+keeps the error of its flushing thread and raises :class:`EpisodeWriteError` at the next event
+or at :meth:`EventLog.close`; ``status.json`` then says ``failed`` with the error, rewritten in
+place over the old one when no new file can be created (:func:`write_status`).
 """
 
 from __future__ import annotations
@@ -25,8 +30,9 @@ from typing import Any
 
 import numpy as np
 
+from interfaces.errors import CdwTwinError
 from interfaces.events import Event
-from interfaces.fileio import write_atomic
+from interfaces.fileio import overwrite_in_place, write_atomic
 from twin.target_metric import TrackingResult
 
 DEFAULT_FLUSH_INTERVAL_S = 0.5
@@ -34,6 +40,14 @@ DEFAULT_FLUSH_INTERVAL_S = 0.5
 
 EPISODE_END_FILES = ("summary.json", "telemetry.json")
 """Files an episode writes when it ends: removed when a new episode starts in the folder."""
+
+
+class EpisodeWriteError(CdwTwinError):
+    """A file of the episode folder cannot be written (the message names it and why)."""
+
+
+def _write_error(path: Path, exc: OSError) -> EpisodeWriteError:
+    return EpisodeWriteError(f"{path}: cannot write: {exc.strerror or exc}")
 
 
 def tracking_summary(results: Iterable[TrackingResult]) -> dict[str, Any]:
@@ -56,13 +70,19 @@ class EventLog:
     :meth:`append` (the twin's ``event_sink``) only queues the event's line; a background
     thread writes and flushes the queue every ``flush_interval_s`` of wall time, so the step
     loop never waits for the disk and there is no fsync. :meth:`close` writes what is left.
-    Opening truncates an older log of the same path.
+    Opening truncates an older log of the same path. A failed write stops the thread and is
+    raised (:class:`EpisodeWriteError`) by the next :meth:`append`, :meth:`flush` or
+    :meth:`close`.
     """
 
     def __init__(self, path: Path, *, flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
-        self._handle = path.open("w", encoding="utf-8")
+        try:
+            self._handle = path.open("w", encoding="utf-8")
+        except OSError as exc:
+            raise _write_error(path, exc) from None
+        self.error: EpisodeWriteError | None = None
         self._interval_s = flush_interval_s
         self._pending: list[str] = []
         self._queue_lock = threading.Lock()
@@ -84,6 +104,8 @@ class EventLog:
 
     def append(self, event: Event) -> None:
         """Queue one event's line; it is on disk within ``flush_interval_s``."""
+        if self.error is not None:
+            raise self.error
         line = event.to_json() + "\n"
         with self._queue_lock:
             self._pending.append(line)
@@ -91,15 +113,24 @@ class EventLog:
     def flush(self) -> None:
         """Write and flush every queued line now."""
         with self._write_lock:
+            if self.error is not None:
+                raise self.error
             with self._queue_lock:
                 lines, self._pending = self._pending, []
             if lines and not self._handle.closed:
-                self._handle.write("".join(lines))
-                self._handle.flush()
+                try:
+                    self._handle.write("".join(lines))
+                    self._handle.flush()
+                except OSError as exc:
+                    self.error = _write_error(self.path, exc)
+                    raise self.error from None
 
     def _flush_loop(self) -> None:
         while not self._closing.wait(self._interval_s):
-            self.flush()
+            try:
+                self.flush()
+            except EpisodeWriteError:
+                return  # kept in self.error: the step loop raises it
 
     def close(self) -> None:
         """Stop the flushing thread, write what is left and close the file."""
@@ -107,26 +138,55 @@ class EventLog:
             return
         self._closing.set()
         self._thread.join()
-        self.flush()
-        self._handle.close()
+        try:
+            self.flush()
+        finally:
+            try:
+                self._handle.close()
+            except OSError as exc:
+                self.error = self.error or _write_error(self.path, exc)
+        if self.error is not None:
+            raise self.error
 
 
 def write_status(out: Path, state: str, **fields: Any) -> None:
-    """Write ``status.json``: the episode's ``state`` and whether it is ``complete``."""
+    """Write ``status.json``: the episode's ``state`` and whether it is ``complete``.
+
+    When no new file can be created (a full disk) the old ``status.json`` is rewritten over
+    its own blocks (:func:`interfaces.fileio.overwrite_in_place`), so a failed episode never
+    keeps saying ``running``; :class:`EpisodeWriteError` when even that fails."""
     data = {"state": state, "complete": state == "finished", "pid": os.getpid(), **fields}
-    write_atomic(out / "status.json", json.dumps(data, indent=2, sort_keys=True) + "\n")
+    path = out / "status.json"
+    try:
+        write_atomic(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
+    except OSError as exc:
+        try:
+            overwrite_in_place(path, json.dumps(data, sort_keys=True) + "\n")
+        except OSError:
+            raise _write_error(path, exc) from None
+
+
+def write_episode_file(out: Path, name: str, text: str) -> None:
+    """Write ``out/name`` atomically; :class:`EpisodeWriteError` naming it when it fails."""
+    try:
+        write_atomic(out / name, text)
+    except OSError as exc:
+        raise _write_error(out / name, exc) from None
 
 
 def start_episode_folder(out: Path, **fields: Any) -> EventLog:
     """Prepare ``out`` for a new episode: remove the end files of an older one, write
     ``status.json`` (``running``) and open the streaming ``events.jsonl``."""
-    out.mkdir(parents=True, exist_ok=True)
-    for name in EPISODE_END_FILES:
-        (out / name).unlink(missing_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for name in EPISODE_END_FILES:
+            (out / name).unlink(missing_ok=True)
+    except OSError as exc:
+        raise _write_error(out, exc) from None
     write_status(out, "running", **fields)
     return EventLog(out / "events.jsonl")
 
 
 def write_summary(out: Path, summary: dict[str, Any]) -> None:
     """Write ``summary.json`` (atomically) into ``out``."""
-    write_atomic(out / "summary.json", json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    write_episode_file(out, "summary.json", json.dumps(summary, indent=2, sort_keys=True) + "\n")

@@ -54,12 +54,16 @@ class LiveViewError(CdwTwinError):
 def check_port(host: str, port: int) -> None:
     """Raise :class:`LiveViewError` when ``host:port`` cannot be listened on now (a runner's
     check before it starts episodes whose twin nodes serve there in turn)."""
+    if not 0 <= port <= 65535:
+        msg = f"--foxglove: port {port} is not a TCP port (0 to 65535)"
+        raise LiveViewError(msg)
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as probe:
         probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             probe.bind((host, port))
-        except OSError as exc:
-            reason = "in use" if exc.errno == errno.EADDRINUSE else f"not available ({exc})"
+        except (OSError, OverflowError, UnicodeError) as exc:
+            in_use = isinstance(exc, OSError) and exc.errno == errno.EADDRINUSE
+            reason = "in use" if in_use else f"not available ({exc})"
             msg = f"--foxglove: port {port} on {host} is {reason}"
             raise LiveViewError(msg) from None
 
@@ -120,6 +124,9 @@ class LiveView:
             if topic.qos.latched:
                 self._kept[wire] = deque(maxlen=max(1, topic.qos.depth))
         self._subscriptions = _Subscriptions()
+        if not 0 <= port <= 65535:
+            msg = f"--foxglove: port {port} is not a TCP port (0 to 65535)"
+            raise LiveViewError(msg)
         try:
             self._server = foxglove.start_server(
                 name=name,

@@ -15,9 +15,18 @@ the latched ``cell/bins`` (static configuration, published once at start).
 ``/events`` carries every event the twin logs, in the order of :attr:`twin.sim.Twin.events`:
 the monitor's, rejected commands, controller timeouts and injected faults alike.
 
-Claims: the node keeps the line's claims board (one entry per station and track, from each
-station's ``line/claim``) and relays it on ``/line/claims`` after every step in which it
-changed, a counted topic of the tick; it allocates nothing.
+Claims: the node keeps the line's claims board (:class:`twin.claims.ClaimsBoard`: one entry per
+station and track, from each station's ``line/claim``, every field checked, bounded per station
+and in total) and relays it on ``/line/claims`` after every step in which it changed, a counted
+topic of the tick; it allocates nothing.
+
+The node trusts no client. Over ROS 2 every subscription takes the serialized bytes, and a
+message longer than its topic's bound (:func:`max_message_bytes`) is refused before it is
+decoded into Python objects (fault ``oversized``); what a message may cost afterwards is
+bounded by that size. Every refusal is counted (``rejected_commands`` of the summary); the
+first :data:`MAX_FAULT_EVENTS_PER_S` of each topic per second of sim time are also ``fault``
+events on ``/events`` and ``/faults``, the rest counted only (``unlogged_rejections``), so a
+client flooding the twin with bad messages cannot flood its event log.
 
 Scene (``docs/interfaces.md``, :mod:`twin.scene`): ``/tf`` (every link of every station, each
 TCP, every object in the simulation; at the ground-truth tick), ``/tf_static`` (each station's
@@ -36,6 +45,7 @@ from __future__ import annotations
 
 import gc
 import json
+import math
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -75,10 +85,12 @@ from interfaces.class_colours import class_rgb, dataset_class_rgb
 from interfaces.contract import Topic
 from interfaces.detections import Detection as PerceivedDetection
 from interfaces.detections import DetectionFrame
+from interfaces.errors import cut
 from interfaces.events import Event
 from interfaces.inproc import Bus, InprocLogger, WireExact
 from interfaces.ros import RosWire, message_class, msg_stamp_ns, msg_stamp_s, time_msg
 from twin import scene as sc
+from twin.claims import ClaimFields, ClaimsBoard
 from twin.commands import (
     JointTarget,
     Rejected,
@@ -117,12 +129,40 @@ class EndpointOptions(TypedDict, total=False):
 
 @dataclass
 class NodeCounters:
-    """What the node has seen and done; written to the episode log."""
+    """What the node has seen and done; written to the episode log. ``unlogged`` counts the
+    refusals beyond :data:`MAX_FAULT_EVENTS_PER_S` that were not logged as events."""
 
     published: Counter[str]
     received_commands: int = 0
     rejected: Counter[str] = field(default_factory=Counter)
     lockstep_timeouts: int = 0
+    unlogged: int = 0
+
+
+DEFAULT_MAX_MESSAGE_BYTES = 4096
+"""Longest serialized message the twin takes on a subscribed topic without its own bound
+(a claim, a pick target, an ack, a ping, a gripper command or a setpoint is under 300 bytes)."""
+
+MAX_MESSAGE_BYTES: dict[str, int] = {
+    c.ARM_TRAJECTORY.name: 65_536,
+    c.PRIORITIES.name: 16_384,
+}
+"""Longest serialized message per topic (its contract name) where the default is too small:
+a one-point trajectory of 7 joints is about 300 bytes, a priority list of every class of a
+dataset under 1 kB."""
+
+MAX_FAULT_EVENTS_PER_S = 20
+"""Refusals of one topic logged as ``fault`` events per second of sim time (the rest are
+counted only)."""
+
+MAX_ACKS_AHEAD = 10_000
+"""Farthest ahead of the current tick an acknowledgement is kept (a controller acknowledges the
+tick it handled); beyond, it is refused (``bad_ack``)."""
+
+
+def max_message_bytes(topic: Topic) -> int:
+    """The longest serialized message the twin takes on ``topic``."""
+    return MAX_MESSAGE_BYTES.get(topic.name, DEFAULT_MAX_MESSAGE_BYTES)
 
 
 @dataclass
@@ -269,9 +309,13 @@ class TwinEndpoint:
         self._tick_counts: Counter[str] = Counter()  # by contract name (joint_states, ...)
         self._last_stamp_ns: dict[str, int] = {}
         self._events_sent = 0
-        self._board: dict[tuple[int, int], Any] = {}  # (station index, track id) -> Claim
-        self._board_changed = False
+        self.board = ClaimsBoard(
+            [s.spec.name for s in twin.stations],
+            twin.cell.belt,
+            duration_s=twin.scenario.duration_s,
+        )
         self._board_sent = False
+        self._fault_budget: dict[str, tuple[int, int]] = {}  # topic -> (sim second, logged)
         self._claims_refresh_steps = max(1, round(CLAIMS_REFRESH_S / twin.dt_s))
         self.pub_clock = self._publisher(c.CLOCK_TOPIC)
         self.pub_belt = self._publisher(c.BELT_STATE)
@@ -302,8 +346,10 @@ class TwinEndpoint:
         self._objects = sc.ObjectMarkers(mesh=twin.object_mesh, colour=self._colour)
         self._marker_msgs: dict[tuple[str, int], tuple[sc.SceneMarker, Marker]] = {}
         self.links = [self._station_link(station) for station in twin.stations]
-        self._cell_command_subs = [self._subscribe(c.BELT_SETPOINT, self._on_setpoint)]
-        self._subscribe(c.PRIORITIES, self._on_priorities)
+        self._cell_command_subs = [
+            self._subscribe(c.BELT_SETPOINT, self._on_setpoint, command=True)
+        ]
+        self._subscribe(c.PRIORITIES, self._on_priorities, command=True)
         self._subscribe(c.PING, self._on_ping)
         for link in self.links:
             self._send(link.pub_bins, self.bins_message(link))  # latched, once
@@ -321,12 +367,15 @@ class TwinEndpoint:
             joint_names=[*station.spec.robot.arm_joints, *station.tool.joint_names],
         )
         link.command_subs = [
-            self._subscribe(c.ARM_TRAJECTORY, partial(self._on_trajectory, link), ns),
-            self._subscribe(c.GRIPPER_COMMAND, partial(self._on_gripper, link), ns),
-            self._subscribe(c.PICK_TARGET, partial(self._on_target, link), ns),
-            self._subscribe(c.CLAIM, partial(self._on_claim, link), ns),
+            self._subscribe(topic, partial(handler, link), ns, link=link, command=True)
+            for topic, handler in (
+                (c.ARM_TRAJECTORY, self._on_trajectory),
+                (c.GRIPPER_COMMAND, self._on_gripper),
+                (c.PICK_TARGET, self._on_target),
+                (c.CLAIM, self._on_claim),
+            )
         ]
-        link.sub_ack = self._subscribe(c.LOCKSTEP_ACK, partial(self._on_ack, link), ns)
+        link.sub_ack = self._subscribe(c.LOCKSTEP_ACK, partial(self._on_ack, link), ns, link=link)
         return link
 
     # -- the wire: every message in or out also goes to the tap (the episode's recording) ---
@@ -375,15 +424,30 @@ class TwinEndpoint:
         if self._tap is not None:
             self._tap(publisher.topic_name, data, time.time_ns())
 
-    def _subscribe(self, topic: Topic, callback: Callable[[Any], None], namespace: str = "") -> Any:
-        """Subscribe ``callback``; with a tap, take the serialized bytes and record them too."""
+    def _subscribe(
+        self,
+        topic: Topic,
+        callback: Callable[[Any], None],
+        namespace: str = "",
+        *,
+        link: StationLink | None = None,
+        command: bool = False,
+    ) -> Any:
+        """Subscribe ``callback``; with a tap, record the serialized bytes too.
+
+        Over ROS 2 the subscription takes the serialized bytes, and a message longer than
+        :func:`max_message_bytes` is refused undecoded (fault ``oversized``; a ``command``
+        still counts as received, as the controller counted it in its ack). On the in-process
+        bus the messages are the controllers' own objects, taken as they are."""
         msg_type = message_class(topic)
         name = topic.resolve(namespace)
         qos = topic.qos
         tap = self._tap
-        if tap is None:
-            return self._subscribed(self._wire.create_subscription(msg_type, name, callback, qos))
         if not self._wire_takes_bytes:
+            if tap is None:
+                return self._subscribed(
+                    self._wire.create_subscription(msg_type, name, callback, qos)
+                )
 
             def on_msg(msg: Any) -> None:
                 data = serialize_message(msg)  # as received: a callback may change msg
@@ -392,11 +456,19 @@ class TwinEndpoint:
                 tap(name, data, received_ns)
 
             return self._subscribed(self._wire.create_subscription(msg_type, name, on_msg, qos))
+        limit = max_message_bytes(topic)
 
         def on_bytes(data: bytes) -> None:
             received_ns = time.time_ns()
+            if len(data) > limit:
+                if command:
+                    self._received(link)
+                detail = f"{len(data)} bytes, more than the {limit} this topic takes"
+                self._reject(name, Rejected("oversized", detail), link)
+                return
             callback(deserialize_message(data, msg_type))  # first: a ping's echo waits for nothing
-            tap(name, data, received_ns)
+            if tap is not None:
+                tap(name, data, received_ns)
 
         return self._subscribed(
             self._wire.create_subscription(msg_type, name, on_bytes, qos, raw=True)
@@ -409,8 +481,18 @@ class TwinEndpoint:
             link.pending += 1
 
     def _reject(self, topic: str, rejected: Rejected, link: StationLink | None = None) -> None:
+        """Count a refused message; log it as a fault (``/faults``, ``/events``, the node's
+        log) unless its topic already logged :data:`MAX_FAULT_EVENTS_PER_S` this sim second."""
         self.counters.rejected[rejected.reason] += 1
-        text = f"{topic}: rejected ({rejected.reason}): {rejected.detail}"
+        second = int(self.twin.time_s)
+        start, logged = self._fault_budget.get(topic, (second, 0))
+        if start != second:
+            logged = 0
+        if logged >= MAX_FAULT_EVENTS_PER_S:
+            self.counters.unlogged += 1
+            return
+        self._fault_budget[topic] = (second, logged + 1)
+        text = f"{topic}: rejected ({rejected.reason}): {cut_text(rejected.detail)}"
         self._log.error(text)
         self._send(self.pub_faults, String(data=text))
         self.twin.record_fault(rejected.reason, text, None if link is None else link.name)
@@ -454,26 +536,45 @@ class TwinEndpoint:
 
     def _on_target(self, link: StationLink, msg: PickTarget) -> None:
         self._received(link)
-        p = msg.grasp_point
+        p, v = msg.grasp_point, msg.velocity
+        values = (p.x, p.y, p.z, v.x, v.y, v.z)
+        if not all(math.isfinite(x) for x in values) or len(msg.phase) > 64:
+            detail = f"grasp point and velocity {cut(values)}, phase {cut(msg.phase, 70)}"
+            self._reject(link.wire(c.PICK_TARGET), Rejected("not_finite", detail), link)
+            return
         self.twin.announce_target(int(msg.track_id), (p.x, p.y, p.z), msg.phase, link.station.index)
         if msg.phase in PURSUIT_PHASES:
-            v = msg.velocity
             link.target = sc.Target((p.x, p.y, p.z), (v.x, v.y, v.z), msg_stamp_s(msg.header.stamp))
         else:
             link.target = None
 
     def _on_claim(self, link: StationLink, msg: Claim) -> None:
-        """A station's claim goes on the board (one entry per station and track); the board is
-        relayed on ``/line/claims`` after the next step. The twin only relays: it allocates
-        nothing."""
+        """A station's claim goes on the board (one entry per station and track) when every
+        field passes :meth:`twin.claims.ClaimsBoard.offer` (else a ``bad_claim`` or
+        ``claims_full`` fault); the board is relayed on ``/line/claims`` after the next step.
+        The twin only relays: it allocates nothing."""
         self._received(link)
-        if msg.state not in c.CLAIM_STATES:
-            text = f"state {msg.state!r} is not one of {', '.join(c.CLAIM_STATES)}"
-            self._reject(link.wire(c.CLAIM), Rejected("bad_claim", text), link)
-            return
+        p, v = msg.position, msg.velocity
+        fields = ClaimFields(
+            station=msg.station,
+            track_id=int(msg.track_id),
+            class_name=msg.class_name,
+            frame_id=msg.header.frame_id,
+            stamp_s=msg_stamp_s(msg.header.stamp),
+            position_m=(p.x, p.y, p.z),
+            velocity_mps=(v.x, v.y, v.z),
+            radius_m=msg.radius_m,
+            state=msg.state,
+        )
         msg.station = link.name
-        self._board[(link.station.index, int(msg.track_id))] = msg
-        self._board_changed = True
+        refusal = self.board.offer(link.station.index, fields, msg)
+        if refusal is None:
+            return
+        if refusal.reason == "claims_full":
+            rejected = Rejected("claims_full", refusal.detail)
+        else:
+            rejected = Rejected("bad_claim", refusal.detail)
+        self._reject(link.wire(c.CLAIM), rejected, link)
 
     def publish_claims(self, stamp: Any, step: int) -> None:
         """``/line/claims``: the whole board, ordered by station then track, when it changed
@@ -482,20 +583,22 @@ class TwinEndpoint:
         gets one to wait for); ``released`` and ``picked`` entries are relayed once and
         dropped."""
         refresh = self._board_sent and step % self._claims_refresh_steps == 0
-        if not (self._board_changed or refresh):
+        if not (self.board.changed or refresh):
             return
         self._board_sent = True
         msg = ClaimArray()
         msg.header.stamp = stamp
         msg.header.frame_id = "world"
-        msg.claims = [self._board[key] for key in sorted(self._board)]
+        msg.claims = self.board.take()
         self._send(self.pub_claims, msg)
         self._count(c.CLAIMS, c.CLAIMS.name, msg_stamp_ns(stamp))
-        self._board = {k: v for k, v in self._board.items() if v.state == "claimed"}
-        self._board_changed = False
 
     def _on_ack(self, link: StationLink, msg: StepAck) -> None:
         tick = int(msg.tick)
+        if tick > self.twin.step_count + MAX_ACKS_AHEAD or len(link.acks) > MAX_ACKS_AHEAD:
+            detail = f"tick {tick} while the twin is at tick {self.twin.step_count}"
+            self._reject(link.wire(c.LOCKSTEP_ACK), Rejected("bad_ack", detail), link)
+            return
         link.acks[tick] = int(msg.n_commands)
         link.last_ack_tick = max(link.last_ack_tick, tick)
         link.next_tick = max(link.next_tick, int(msg.next_tick))
@@ -906,6 +1009,12 @@ class InprocTwin(TwinEndpoint):
         for subscription in self._subscriptions:
             subscription.destroy()
         self._subscriptions.clear()
+
+
+def cut_text(text: str, limit: int = 300) -> str:
+    """``text``, at most ``limit`` characters (a refusal's detail may quote a client's
+    string)."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _marker_msg(marker: sc.SceneMarker, stamp: Any) -> Marker:

@@ -35,7 +35,8 @@ import yaml
 
 from interfaces.cell import Cell, load_cell, resolve_cell_path
 from interfaces.dataclass_io import from_data, to_data
-from interfaces.fileio import write_atomic
+from interfaces.errors import cut, cut_message
+from interfaces.fileio import read_text_capped, write_atomic
 from interfaces.yamlio import load_yaml_strict
 from twin.errors import ConfigError
 from twin.perception import PerceptionConfig
@@ -43,7 +44,7 @@ from twin.perception import PerceptionConfig
 
 def _check(condition: bool, key: str, value: object, what: str) -> None:
     if not condition:
-        msg = f"{key} = {value!r}: {what}"
+        msg = f"{key} = {cut(value)}: {what}"
         raise ConfigError(msg)
 
 
@@ -235,9 +236,21 @@ class FaultLevel:
         return any(start <= time_s < end for start, end in self.belt_stall)
 
 
+MAX_NAME_CHARS = 100
+"""Longest scenario name (it names a folder, with a time stamp after it)."""
+
+MAX_SEED = 2**64 - 1
+"""Largest seed (a 64-bit unsigned integer, as every generator and message takes one)."""
+
+
 def _is_folder_name(name: str) -> bool:
     """Whether ``name`` is one path part that stays inside its parent folder."""
-    return bool(name.strip(".")) and not any(c in name for c in ("/", "\\", "\0"))
+    return (
+        bool(name.strip("."))
+        and len(name) <= MAX_NAME_CHARS
+        and name.isprintable()
+        and not any(c in name for c in ("/", "\\", "\0"))
+    )
 
 
 @dataclass(frozen=True)
@@ -269,12 +282,18 @@ class Scenario:
             _is_folder_name(self.name),
             "name",
             self.name,
-            "must be a plain folder name (not empty or only dots, no '/', '\\' or NUL): "
-            "runs go to runs/<name>-<stamp>",
+            f"must be a plain folder name (not empty or only dots, at most {MAX_NAME_CHARS} "
+            "printable characters, no '/', '\\' or NUL): runs go to runs/<name>-<stamp>",
         )
-        _check(bool(self.controller), "controller", self.controller, "must not be empty")
-        _check(bool(self.cell), "cell", self.cell, "must not be empty")
-        _check(self.seed >= 0, "seed", self.seed, "must be >= 0")
+        for key in ("controller", "cell", "dataset"):
+            value: str = getattr(self, key)
+            _check(
+                0 < len(value) <= 4096 and "\0" not in value,
+                key,
+                value,
+                "must be a name or a path (not empty, at most 4096 characters, no NUL)",
+            )
+        _check(0 <= self.seed <= MAX_SEED, "seed", self.seed, "must be in [0, 2**64 - 1]")
         _check(
             0.0 < self.duration_s <= 86400.0,
             "duration_s",
@@ -292,25 +311,25 @@ class Scenario:
         twice, which is an error rather than the last one winning)."""
         data = load_yaml_strict(text, where)
         if data is None:
-            data = {}
+            msg = (
+                f"{where}: the scenario is empty; write at least its name (`name: default`) "
+                "to run the defaults"
+            )
+            raise ConfigError(msg)
         if not isinstance(data, dict):
             msg = f"{where}: the top level must be a mapping, got {type(data).__name__}"
             raise ConfigError(msg)
         try:
             return from_data(cls, data, "")
         except ConfigError as exc:
-            msg = f"{where}: {exc}"
+            msg = cut_message(f"{where}: {exc}")
             raise ConfigError(msg) from None
 
     @classmethod
     def load(cls, path: Path) -> Scenario:
         """Read a scenario file; a relative ``cell`` path is made absolute from the file's
         folder (so the scenario names the same cell wherever it is used from)."""
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            msg = f"{path}: cannot read scenario: {exc.strerror}"
-            raise ConfigError(msg) from None
+        text = read_text_capped(path, what="scenario")
         scenario = cls.from_yaml(text, where=str(path))
         cell = scenario.cell
         if _is_cell_path(cell) and not Path(cell).expanduser().is_absolute():
@@ -334,7 +353,7 @@ def scenario_cell(scenario: Scenario, base_dir: Path | None = None, where: str =
     try:
         return load_cell(path)
     except ConfigError as exc:
-        msg = f"{prefix}cell = {scenario.cell!r}: {exc}"
+        msg = cut_message(f"{prefix}cell = {cut(scenario.cell)}: {exc}")
         raise ConfigError(msg) from None
 
 

@@ -19,7 +19,14 @@ episode that runs without objects. Checked:
 - the cell (the scenario's ``cell``, or the one passed): every class that can enter the belt
   (the classes of the objects the filters keep) has a bin at some station (the error names
   the class and the cell file); a scenario that enables the belt perturbation needs a drive
-  with a perturbation mapping; a third-party drive's FMU file exists;
+  with a perturbation mapping; a third-party drive's FMU file is an FMU (a zip archive with
+  an FMI 2.0 or 3.0 co-simulation model description) that has every variable the drive's
+  ``mapping``, ``parameters`` and perturbation mapping name (:func:`twin.belt_drive.plan_fmu`:
+  the model description only, nothing is instantiated);
+- every station's robot: its URDF can be read and carries the arm joints and the tool's TCP
+  link, and the station's pick window, along the belt's centreline, lies within the robot's
+  reach (:func:`interfaces.urdf.station_reach`, an upper bound: what lies beyond it can never be
+  reached);
 - ``system.prefill_m``: at most the belt's run from the infeed to its end, the farthest the
   stream can have been carried while still on the belt;
 - fault and schedule times: every ``faults.detection_dropout`` and ``faults.belt_stall`` window,
@@ -36,13 +43,17 @@ Example::
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 from interfaces.cell import Cell
+from interfaces.errors import cut
+from interfaces.urdf import station_reach
 from meshgen.outdir import MARKER_NAME, is_meshgen_output
-from twin.errors import ConfigError, SceneError
+from twin.belt_drive import plan_fmu
+from twin.errors import ConfigError, FmuError, SceneError
 from twin.objects import ImageLayout, ObjectSpec, load_dataset
 from twin.scenario import PhysicsLevel, Scenario, scenario_cell
 
@@ -85,6 +96,7 @@ def check_scenario(
     _check_times(scenario, where)
     _check_prefill(scenario, cell, where)
     _check_drive(scenario, cell, where)
+    _check_stations(cell, where)
     layouts = _read_dataset(dataset_dir, where)
     classes = tuple(sorted({spec.class_name for lay in layouts for spec in lay.objects}))
     _check_class_names(scenario, classes, where)
@@ -95,7 +107,7 @@ def check_scenario(
 
 
 def _fail(where: str, key: str, value: object, what: str) -> ConfigError:
-    msg = f"{where}: {key} = {value!r}: {what}"
+    msg = f"{where}: {key} = {cut(value)}: {what}"
     return ConfigError(msg)
 
 
@@ -129,9 +141,47 @@ def _check_drive(scenario: Scenario, cell: Cell, where: str) -> None:
             "mapping (drive.perturbation)"
         )
         raise _fail(where, "system.perturbation.enabled", True, what)
-    if not drive.builtin and not Path(drive.fmu).is_file():
-        msg = f"{where}: the cell {_cell_file(cell)}: drive.fmu = {drive.fmu!r}: no such file"
+    if drive.builtin:
+        return
+    if not Path(drive.fmu).is_file():
+        msg = f"{where}: the cell {_cell_file(cell)}: drive.fmu = {cut(drive.fmu)}: no such file"
         raise ConfigError(msg)
+    parameters: dict[str, object] = dict(drive.parameters)
+    names = drive.perturbation
+    if names is not None:
+        parameters.setdefault(names.force_std, 0.0)
+        parameters.setdefault(names.correlation_time, 0.5)
+        parameters.setdefault(names.seed, 0)
+    try:
+        plan_fmu(Path(drive.fmu), drive.mapping, parameters)
+    except FmuError as exc:
+        msg = f"{where}: the cell {_cell_file(cell)}: drive: {exc}"
+        raise ConfigError(msg) from None
+
+
+def _check_stations(cell: Cell, where: str) -> None:
+    """Every station's URDF reads and its pick window lies within its robot's reach."""
+    belt = cell.belt
+    for i, station in enumerate(cell.stations):
+        key = f"stations[{i}] ({station.name})"
+        try:
+            reach = station_reach(station.robot, station.tool)
+        except ConfigError as exc:
+            msg = f"{where}: the cell {_cell_file(cell)}: {key}: {exc}"
+            raise ConfigError(msg) from None
+        origin = station.to_world(reach.origin_m)
+        for x_m in station.pick_window_x_m:
+            point = (x_m, belt.centre_y_m, belt.surface_z_m)
+            distance = math.dist(origin, point)
+            if distance > reach.reach_m:
+                msg = (
+                    f"{where}: the cell {_cell_file(cell)}: stations[{i}].pick_window_x_m = "
+                    f"{list(station.pick_window_x_m)}: the belt's centreline at x = {x_m:g} m "
+                    f"is {distance:.3f} m from the robot's first joint, beyond the reach of "
+                    f"{station.robot.name} with {station.tool.name} "
+                    f"(at most {reach.reach_m:.3f} m); move the base or the window"
+                )
+                raise ConfigError(msg)
 
 
 def _check_times(scenario: Scenario, where: str) -> None:

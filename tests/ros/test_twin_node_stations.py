@@ -20,6 +20,7 @@ from twin_helpers import box_px
 
 from interfaces import contract
 from interfaces.cell import Cell, load_cell
+from interfaces.tools import ParallelJawSpec
 from twin.scenario import Scenario, SystemLevel
 from twin.sim import Twin
 
@@ -113,6 +114,7 @@ def _check_streams(got: dict[str, list[Any]], cell: Cell) -> None:
     for ns, station in (("s1", cell.stations[0]), ("s2", cell.stations[1])):
         joints = got[f"/{ns}/joint_states"]
         assert len(joints) > 100
+        assert isinstance(station.tool, ParallelJawSpec)
         assert list(joints[-1].name) == [*station.robot.arm_joints, *station.tool.joints]
         (bins,) = got[f"/{ns}/cell/bins"]
         assert [(b.class_name, b.position.x) for b in bins.bins] == [
@@ -131,15 +133,20 @@ def _twin_node(env: dict[str, str], dataset: Path, out: Path) -> subprocess.Pope
         *("--duration", "2.0", "--speed", "0.4", "--prefill", "2.5", "--objects", "20"),
         *("--seed", "3", "--ack-timeout", "1.0"),
     ]
-    return start_twin_node(env, args)
+    proc: subprocess.Popen[bytes] = start_twin_node(env, args)
+    return proc
 
 
 def _peer(env: dict[str, str], out: Path, ns: str, *args: str) -> subprocess.Popen[bytes]:
-    return start(env, str(PEER), "lockstep", str(out), "--namespace", ns, *args)
+    proc: subprocess.Popen[bytes] = start(
+        env, str(PEER), "lockstep", str(out), "--namespace", ns, *args
+    )
+    return proc
 
 
 def _finish(proc: subprocess.Popen[bytes], timeout_s: float = 120.0) -> int:
-    return finish(proc, timeout_s)
+    code: int = finish(proc, timeout_s)
+    return code
 
 
 def test_lockstep_waits_for_every_station_and_loses_one_controller_alone(
@@ -174,6 +181,7 @@ def test_lockstep_waits_for_every_station_and_loses_one_controller_alone(
     with (out / "recording.mcap").open("rb") as handle:
         stats = make_reader(handle).get_summary()
     assert stats is not None
+    assert stats.statistics is not None
     counts = {
         stats.channels[i].topic: n for i, n in stats.statistics.channel_message_counts.items()
     }
@@ -187,7 +195,7 @@ def test_the_claims_board_is_relayed_with_the_station_and_counted_in_the_tick(
     """The upstream station's controller sends the claims of ``twin_peer.CLAIMS`` on
     ``/s1/line/claim``; both controllers get the same boards on ``/line/claims``, each in the
     tick after the claim (the claims of tick k are commands of tick k: they change the board
-    relayed after step k + 1), named ``upstream`` whatever the controller wrote, a released or
+    relayed after step k + 1), named ``upstream`` (the controller left it empty), a released or
     picked entry relayed once and then gone, each board counted by its tick. The bad state is
     a ``bad_claim`` fault and changes nothing."""
     out = tmp_path / "run"

@@ -12,6 +12,9 @@ python twin_peer.py listen OUT.json SECONDS  (counted from the first message)
     records what arrives on /conveyor/state (setpoints) and how many messages per topic
 """
 
+# rclpy's annotations are partial.
+# mypy: disable-error-code="no-untyped-call"
+
 from __future__ import annotations
 
 import argparse
@@ -53,8 +56,9 @@ CLAIMS: dict[int, tuple[int, str]] = {
 
 
 def _claim(track_id: int, state: str) -> Claim:
-    """A claim as a controller sends it; ``station`` is deliberately wrong (the twin sets it)."""
-    msg = Claim(station="not_my_name", track_id=track_id, class_name="brick", state=state)
+    """A claim as a controller sends it; ``station`` is left empty (the twin sets it: a claim
+    naming another station is refused)."""
+    msg = Claim(station="", track_id=track_id, class_name="brick", state=state)
     msg.header.frame_id = "world"
     msg.position.x, msg.position.y = -1.5 + 0.01 * track_id, 0.5
     msg.velocity.x = 0.4

@@ -48,9 +48,19 @@ def test_round_trip_through_a_file(tmp_path: Path) -> None:
     assert not list(tmp_path.glob("*.tmp"))
 
 
-def test_empty_file_gives_the_defaults(tmp_path: Path) -> None:
+@pytest.mark.parametrize("text", ["", "# only a comment\n", "---\n"])
+def test_an_empty_file_is_refused_rather_than_running_the_defaults(
+    tmp_path: Path, text: str
+) -> None:
     path = tmp_path / "empty.yaml"
-    path.write_text("", encoding="utf-8")
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"empty\.yaml: the scenario is empty"):
+        Scenario.load(path)
+
+
+def test_an_explicit_empty_mapping_gives_the_defaults(tmp_path: Path) -> None:
+    path = tmp_path / "defaults.yaml"
+    path.write_text("{}\n", encoding="utf-8")
     assert Scenario.load(path) == Scenario()
 
 
