@@ -35,7 +35,7 @@ from interfaces.cell import BeltSpec, Cell, StationSpec, default_cell
 from interfaces.dataclass_io import from_data
 from interfaces.errors import ConfigError
 from interfaces.robots import RobotSpec
-from interfaces.yamlio import load_yaml_strict
+from interfaces.yamlio import load_yaml_file
 
 Vec3 = tuple[float, float, float]
 
@@ -131,7 +131,10 @@ class MotionConfig:
     its datasheet acceleration to follow them (near the base and at the edge of the reach a
     vertical tool's height takes large shoulder and elbow accelerations: a descent the joints
     cannot follow lags, then overshoots the grasp point catching up); 0 (the default) leaves
-    the limits as they are.
+    the limits as they are. It budgets every axis at its limit at once; in the descent, where
+    the tool follows the object at its constant velocity and mostly goes down,
+    ``descend_posture_axes`` (x, y, z, yaw in [0, 1]) says which share of each axis's limit the
+    budget counts (all 1: the same budget as every other move).
     """
 
     control_period_s: float = 1.0 / 120.0
@@ -145,6 +148,7 @@ class MotionConfig:
     transfer_speed_scale: float = 0.9
     joint_velocity_margin: float = 1.0
     posture_acceleration_margin: float = 0.0
+    descend_posture_axes: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
 
     def __post_init__(self) -> None:
         """Validate every field."""
@@ -189,6 +193,13 @@ class MotionConfig:
             self.posture_acceleration_margin,
             "must be in [0, 1] (0: off)",
         )
+        _require(
+            len(self.descend_posture_axes) == 4
+            and all(0.0 <= v <= 1.0 for v in self.descend_posture_axes),
+            "motion.descend_posture_axes",
+            self.descend_posture_axes,
+            "must be four numbers in [0, 1] (x, y, z, yaw)",
+        )
 
 
 APPROACH_SPACES = ("cartesian", "joint")
@@ -230,6 +241,13 @@ class PickConfig:
     the object the gripper is commanded to close.
     ``drop_tolerance_m``: the release point may lie this far from the bin's drop point along x
     and y (less half the object's length).
+    ``ready_tcp_position_m`` (base frame; empty: the robot's ``ready_tcp_position_m``): where
+    the arm waits for its next target, pointing down with the robot's ready yaw; nearer the
+    belt and the window's entry, every pursuit from it is shorter.
+    ``handover_tolerance_m`` (joint approach; 0: off): when the joint-space move ends with the
+    setpoint this near the moving target (and moving with it), the descent starts at once,
+    without waiting for the joint command to settle on the Cartesian setpoint (the descent
+    itself corrects the last millimetres on the way down).
 
     The waits come from the tool (:meth:`control.tools.ControllerTool.timing`): a gripper's are
     ``dwell_s``, ``close_s``, ``close_overlap_s`` and ``release_s``; a suction cup does not
@@ -278,6 +296,8 @@ class PickConfig:
     seal_search_speed_mps: float = 0.04
     seal_search_max_s: float = 0.3
     seal_search_settled_m: float = 0.002
+    handover_tolerance_m: float = 0.0
+    ready_tcp_position_m: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         """Validate every field."""
@@ -287,8 +307,15 @@ class PickConfig:
             self.approach_space,
             f"must be one of {', '.join(APPROACH_SPACES)}",
         )
+        _require(
+            len(self.ready_tcp_position_m) in (0, 3)
+            and all(math.isfinite(v) for v in self.ready_tcp_position_m),
+            "pick.ready_tcp_position_m",
+            self.ready_tcp_position_m,
+            "must be empty (the robot's ready pose) or three finite numbers (m, base frame)",
+        )
         for item in fields(self):
-            if item.name == "approach_space":
+            if item.name in ("approach_space", "ready_tcp_position_m"):
                 continue
             value = cast(float, getattr(self, item.name))
             _require(value >= 0.0 and math.isfinite(value), f"pick.{item.name}", value, ">= 0")
@@ -333,6 +360,9 @@ class SchedulerConfig:
     ``replan_period_s``: a station that found no target looks again only that much later (0:
     every control update); with joint-space approaches every candidate's meeting is an IK
     solve and a joint plan, and the tracks change only with the camera's frames.
+    ``base_turn_fraction`` (0: off): the fraction of the first joint's datasheet velocity that
+    following a target past the base may take (:func:`control.scheduler._followable`); a target
+    that needs more is ``out_of_reach``.
     """
 
     class_priorities: dict[str, float] = field(default_factory=dict)
@@ -348,9 +378,16 @@ class SchedulerConfig:
     carry_acceleration_mps2: float = 10.0
     settle_tolerance_mps: float = math.inf
     replan_period_s: float = 0.0
+    base_turn_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field."""
+        _require(
+            0.0 <= self.base_turn_fraction <= 1.0,
+            "scheduler.base_turn_fraction",
+            self.base_turn_fraction,
+            "must be in [0, 1] (0: off)",
+        )
         _require(
             self.replan_period_s >= 0.0 and math.isfinite(self.replan_period_s),
             "scheduler.replan_period_s",
@@ -575,7 +612,11 @@ class ControllerConfig:
 
     @property
     def ready_tcp_position_m(self) -> Vec3:
-        """The ready TCP position in the world frame."""
+        """The ready TCP position in the world frame: ``pick.ready_tcp_position_m`` if set,
+        else the robot's."""
+        wait = self.pick.ready_tcp_position_m
+        if len(wait) == 3:
+            return self.station.to_world((wait[0], wait[1], wait[2]))
         return self.station.ready_tcp_position_world_m()
 
     @property
@@ -731,12 +772,7 @@ def load_config(
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        msg = f"{path}: cannot read controller config: {exc.strerror}"
-        raise ControlConfigError(msg) from None
-    try:
-        document = load_yaml_strict(text, str(path))
+        document = load_yaml_file(path, what="controller config")
     except ConfigError as exc:
         raise ControlConfigError(str(exc)) from None
     if not isinstance(document, Mapping) or node_name not in document:

@@ -509,6 +509,9 @@ class PickController:
                 self._planner.state.position[3],
                 self._cfg.tool.grasp_yaw_period_rad,
             )
+            handed_over = True
+        else:
+            handed_over = False
         assert pursuit.target is not None
         rise_m = approach_rise_m(pursuit.target, self._cfg)
         target, aim = self._following_target(now.t_s, now.belt_velocity_mps, rise_m)
@@ -516,7 +519,8 @@ class PickController:
         yaw_ready = (
             yaw_error < pick.yaw_tolerance_rad or motion.yaw_remaining_s <= pick.descend_yaw_lead_s
         )
-        if yaw_ready and self._arrived(target):
+        near = handed_over and self._on_target(target, pick.handover_tolerance_m)
+        if yaw_ready and (near or self._arrived(target)):
             self._set_phase(Phase.DESCEND, now.t_s)
             return Transition(phase=Phase.DESCEND, tracks=now.tracks, checked=True)
         return Goal(target=target, aim_m=aim, min_duration_s=self._meeting_in_s(target, now.t_s))
@@ -967,6 +971,11 @@ class PickController:
         command on the setpoint (not still catching up within the joint limits)."""
         if not self._commander.on_goal:
             return False
+        return self._on_target(target, self._cfg.pick.arrive_tolerance_m)
+
+    def _on_target(self, target: CartesianTarget, tolerance_m: float) -> bool:
+        """True when the setpoint is within ``tolerance_m`` of the moving target, as it was a
+        control period ago, and moves with it (``pick.arrive_speed_tolerance_mps``)."""
         state = self._planner.state
         period_s = self._cfg.motion.control_period_s
         previous = [
@@ -974,7 +983,7 @@ class PickController:
         ]
         relative_speed = math.dist(state.velocity[:3], target.velocity[:3])
         return (
-            math.dist(state.position_m, previous) <= self._cfg.pick.arrive_tolerance_m
+            math.dist(state.position_m, previous) <= tolerance_m
             and relative_speed <= self._cfg.pick.arrive_speed_tolerance_mps
         )
 
@@ -1029,12 +1038,17 @@ class PickController:
     def _posture_scale(self) -> float:
         """The scale of the Cartesian acceleration limits that the joints can follow in the
         current posture (``motion.posture_acceleration_margin`` of their datasheet limits, with
-        every axis at its limit at once; 1 when that is more than the limits, or off)."""
-        margin = self._cfg.motion.posture_acceleration_margin
+        every axis at its limit at once, or in the descent the shares
+        ``motion.descend_posture_axes`` of them; 1 when that is more than the limits, or off)."""
+        motion = self._cfg.motion
+        margin = motion.posture_acceleration_margin
         if margin <= 0.0:
             return 1.0
         rates = np.abs(self._kin.tilt_held_rates(self._commander.q))
-        needed = rates @ np.asarray(self._cfg.motion.max_acceleration)
+        budget = np.asarray(motion.max_acceleration)
+        if self._phase == Phase.DESCEND:
+            budget = budget * np.asarray(motion.descend_posture_axes)
+        needed = rates @ budget
         limits = margin * np.asarray(self._kin.acceleration_limit_rps2)
         scale = float(np.min(limits / np.maximum(needed, 1e-12)))
         return min(1.0, max(scale, MIN_POSTURE_SCALE))

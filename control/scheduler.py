@@ -404,7 +404,7 @@ def _timing_reason(
     others: Sequence[Track] = (),
 ) -> str | None:
     """The reasons that depend on when the arm can meet the track (after :func:`_static_reason`)."""
-    belt, sched = config.belt, config.scheduler
+    belt = config.belt
     if not math.isfinite(approach_s):  # cannot be met within the search horizon
         return "too_late" if track.velocity_mps[0] > 0.0 else "out_of_reach"
     intercept_s = approach_s + descend_after_s(config)
@@ -421,14 +421,50 @@ def _timing_reason(
     if x_above < x_min:
         return "upstream"
     z = grasp_height_m(track, config)
-    base = config.base_position_m
-    reaches = (math.dist(base, (x_meet, y_meet, z)), math.dist(base, (x_done, y_done, z)))
     off_belt = abs(track.position_m[1] - belt.centre_y_m) > belt.width_m / 2
-    if off_belt or max(reaches) > sched.max_reach_m or min(reaches) < sched.min_reach_m:
+    if off_belt or not _followable(track, (x_meet, y_meet), (x_done, y_done), z, config):
         return "out_of_reach"
     if blocked_by(track, others, config) is not None:
         return "blocked"
     return None
+
+
+def _followable(
+    track: Track,
+    meet_xy: tuple[float, float],
+    done_xy: tuple[float, float],
+    z_m: float,
+    config: ControllerConfig,
+) -> bool:
+    """Whether the grasp point stays within reach while the tool follows it from ``meet_xy``
+    to ``done_xy`` (at height ``z_m``): between ``scheduler.min_reach_m`` and ``max_reach_m``
+    from the base all along that straight path (its farthest point is an end, its nearest may
+    lie between them), and, with ``scheduler.base_turn_fraction``, slow enough for the base
+    joint: following a point moving at ``v`` past the base's vertical axis turns the base at
+    ``|v| d / r**2`` (``d`` the path's distance from the axis, ``r`` the point's), fastest
+    where the path comes nearest, and that must stay within the fraction of the first joint's
+    datasheet velocity (a Panda following a piece at 0.6 m/s 0.25 m from its base would turn
+    it at 2.4 rad/s, beyond its 2.175)."""
+    sched = config.scheduler
+    bx, by, bz = config.base_position_m
+    ax, ay = meet_xy[0] - bx, meet_xy[1] - by
+    ex, ey = done_xy[0] - bx, done_xy[1] - by
+    dz = z_m - bz
+    far_sq = max(ax * ax + ay * ay, ex * ex + ey * ey)
+    sx, sy = ex - ax, ey - ay
+    length_sq = sx * sx + sy * sy
+    along = 0.0 if length_sq == 0.0 else min(1.0, max(0.0, -(ax * sx + ay * sy) / length_sq))
+    nx, ny = ax + along * sx, ay + along * sy
+    near_sq = nx * nx + ny * ny
+    if far_sq + dz * dz > sched.max_reach_m**2 or near_sq + dz * dz < sched.min_reach_m**2:
+        return False
+    fraction = sched.base_turn_fraction
+    velocities = config.robot.joint_max_velocity_rps
+    if fraction <= 0.0 or not velocities or near_sq == 0.0:
+        return fraction <= 0.0 or not velocities
+    vx, vy = track.velocity_mps
+    turn_rate = abs(vx * ay - vy * ax) / near_sq  # |v x r| is the same all along the path
+    return turn_rate <= fraction * velocities[0]
 
 
 def schedule(
