@@ -145,7 +145,7 @@ def line_of(config: ControllerConfig) -> tuple[StationView, ...]:
                 name=spec.name,
                 order=order[i],
                 window_x_m=spec.pick_window_x_m,
-                tool=make_tool(spec.tool),
+                tool=make_tool(spec.tool, config.cell.materials),
                 classes=binned[i],
                 preferred=preferred,
             )

@@ -6,9 +6,18 @@ Examples::
     python -m control --cell two_pandas --station downstream --params-file my_tuning.yaml
 
 The controller drives one station of a cell: ``--cell`` names the cell file (a path, or a
-shipped cell such as ``two_pandas``; default: the reference cell) and ``--station`` the station
-(default: the cell's first); the station's robot, tool, pick window and bins, and its topics'
-namespace, come from there. ``--params-file`` is the controller's tuning.
+shipped cell such as ``two_pandas``; default: the scenario's, else the reference cell) and
+``--station`` the station (default: the cell's first); the station's robot, tool, pick window
+and bins, and its topics' namespace, come from there. ``--params-file`` is the controller's
+tuning. The cell's bin slots take the classes of the dataset (``--dataset``, a meshgen output,
+or the scenario's) as the twin gives them (:func:`twin.scenario.episode_cell`, with the
+scenario's ``bins:`` map: ``--scenario``); without either, the cell's own class table's (the
+shipped one unless the cell file has ``materials:``). ``cdw-twin run`` hands each controller the
+run's resolved ``cell.yaml``, whose bins all name their class::
+
+    cdw-twin twin-node --scenario experiments/scenarios/line.yaml --dataset out/meshes
+    cdw-twin controller --scenario experiments/scenarios/line.yaml --dataset out/meshes \
+        --station s1 --params-file control/config/line.yaml
 
 The node keeps sim time: ``/clock`` in realtime, the ticks' stamps in lockstep. On shutdown
 it writes its counters (pick statistics, rejected detections, skipped commands, control-loop
@@ -26,13 +35,14 @@ import signal
 import sys
 from pathlib import Path
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from control.config import DEFAULT_PARAMS
 from interfaces.fileio import write_atomic
 from interfaces.lifecycle import die_with_parent
 
-DEFAULT_PARAMS = Path(__file__).resolve().parent / "config" / "default.yaml"
-"""The reference cell's parameter file."""
+if TYPE_CHECKING:
+    from interfaces.cell import Cell
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -42,6 +52,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="cell file: a path or a shipped cell's name (default: the reference cell)",
     )
     parser.add_argument("--station", help="the station to drive (default: the cell's first)")
+    parser.add_argument(
+        "--scenario",
+        type=Path,
+        help="scenario YAML: its cell, dataset and bins map (the twin's; default: none)",
+    )
+    parser.add_argument(
+        "--dataset",
+        type=Path,
+        help="meshgen output whose classes the cell's bin slots take (default: the scenario's)",
+    )
     add_params_option(parser)
     parser.add_argument(
         "--lockstep",
@@ -64,6 +84,29 @@ def add_params_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def controller_cell(args: argparse.Namespace) -> Cell:
+    """The cell the controller drives a station of, its bin slots resolved as the twin
+    resolves them: with ``--scenario``, for the scenario's dataset (or ``--dataset``) and
+    ``bins:`` map (:func:`twin.scenario.episode_cell`); with ``--dataset`` alone, for that
+    dataset's class table; else as the cell file gives them."""
+    from interfaces.cell import load_cell, resolve_cell
+    from interfaces.materials import dataset_table
+
+    scenario_path: Path | None = getattr(args, "scenario", None)
+    dataset: Path | None = getattr(args, "dataset", None)
+    if scenario_path is None:
+        cell = load_cell(args.cell)
+        return cell if dataset is None else resolve_cell(cell, dataset_table(dataset))
+    from twin.scenario import Scenario, episode_cell, scenario_cell, scenario_dataset
+
+    where = str(scenario_path)
+    scenario = Scenario.load(scenario_path)
+    base = scenario_path.parent
+    cell = load_cell(args.cell) if args.cell else scenario_cell(scenario, base, where)
+    table = dataset_table(dataset if dataset is not None else scenario_dataset(scenario, base))
+    return episode_cell(scenario, cell, table, where)
+
+
 def write_json_atomic(path: Path, data: Any) -> None:
     """Write ``data`` as JSON to ``path`` atomically (:func:`interfaces.fileio.write_atomic`)."""
     text = json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n"
@@ -79,14 +122,13 @@ def run(args: argparse.Namespace) -> int:
 
     from control.config import load_config
     from control.node import ControllerNode
-    from interfaces.cell import load_cell
     from interfaces.errors import CdwTwinError
 
     if args.duration is not None and not args.duration > 0.0:
         print(f"--duration: {args.duration!r} must be > 0 s", file=sys.stderr)
         return 2
     try:
-        cell = load_cell(args.cell)
+        cell = controller_cell(args)
         if args.station:
             cell.station(args.station)  # an unknown name: the cell file's error
         config = load_config(args.params_file, cell=cell, station=args.station or "")

@@ -33,11 +33,17 @@ from control.errors import ControlConfigError
 from control.tools import ControllerTool, GraspTiming, make_tool
 from interfaces.cell import BeltSpec, Cell, StationSpec, default_cell
 from interfaces.dataclass_io import from_data
-from interfaces.errors import ConfigError
+from interfaces.errors import ConfigError, cut_message
 from interfaces.robots import RobotSpec
 from interfaces.yamlio import load_yaml_file
 
 Vec3 = tuple[float, float, float]
+
+PARAMS_DIR = Path(__file__).resolve().parent / "config"
+"""The shipped controller parameter files (``default``, ``throughput``, ``line``, ...)."""
+
+DEFAULT_PARAMS = PARAMS_DIR / "default.yaml"
+"""The reference cell's parameter file."""
 
 
 def _require(condition: bool, key: str, value: object, requirement: str) -> None:
@@ -133,8 +139,8 @@ class MotionConfig:
     cannot follow lags, then overshoots the grasp point catching up); 0 (the default) leaves
     the limits as they are. It budgets every axis at its limit at once; in the descent, where
     the tool follows the object at its constant velocity and mostly goes down,
-    ``descend_posture_axes`` (x, y, z, yaw in [0, 1]) says which share of each axis's limit the
-    budget counts (all 1: the same budget as every other move).
+    ``vertical_posture_axes`` (x, y, z, yaw in [0, 1]) says which share of each axis's limit the
+    budget counts (all 1: the same budget as every other move); the same in the lift.
     """
 
     control_period_s: float = 1.0 / 120.0
@@ -148,7 +154,7 @@ class MotionConfig:
     transfer_speed_scale: float = 0.9
     joint_velocity_margin: float = 1.0
     posture_acceleration_margin: float = 0.0
-    descend_posture_axes: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    vertical_posture_axes: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
 
     def __post_init__(self) -> None:
         """Validate every field."""
@@ -194,10 +200,10 @@ class MotionConfig:
             "must be in [0, 1] (0: off)",
         )
         _require(
-            len(self.descend_posture_axes) == 4
-            and all(0.0 <= v <= 1.0 for v in self.descend_posture_axes),
-            "motion.descend_posture_axes",
-            self.descend_posture_axes,
+            len(self.vertical_posture_axes) == 4
+            and all(0.0 <= v <= 1.0 for v in self.vertical_posture_axes),
+            "motion.vertical_posture_axes",
+            self.vertical_posture_axes,
             "must be four numbers in [0, 1] (x, y, z, yaw)",
         )
 
@@ -244,6 +250,12 @@ class PickConfig:
     ``ready_tcp_position_m`` (base frame; empty: the robot's ``ready_tcp_position_m``): where
     the arm waits for its next target, pointing down with the robot's ready yaw; nearer the
     belt and the window's entry, every pursuit from it is shorter.
+    ``dwell_from_overlap``: a jaw's dwell counts from when the measured TCP's grasp box first
+    reaches onto the target on the way down (as the twin's grasp rule counts it), not from the
+    end of the descent (:meth:`control.pick.PickController._note_overlap`).
+    ``approach_clear_radius_m`` (0: off): the approach ends at least ``approach_clear_m`` above
+    the top of every other object whose footprint comes this near the grasp point
+    (:func:`control.scheduler.clearance_rise_m`), not only above the target's.
     ``handover_tolerance_m`` (joint approach; 0: off): when the joint-space move ends with the
     setpoint this near the moving target (and moving with it), the descent starts at once,
     without waiting for the joint command to settle on the Cartesian setpoint (the descent
@@ -298,6 +310,9 @@ class PickConfig:
     seal_search_settled_m: float = 0.002
     handover_tolerance_m: float = 0.0
     ready_tcp_position_m: tuple[float, ...] = ()
+    approach_clear_radius_m: float = 0.0
+    approach_clear_m: float = 0.02
+    dwell_from_overlap: bool = False
 
     def __post_init__(self) -> None:
         """Validate every field."""
@@ -363,6 +378,12 @@ class SchedulerConfig:
     ``base_turn_fraction`` (0: off): the fraction of the first joint's datasheet velocity that
     following a target past the base may take (:func:`control.scheduler._followable`); a target
     that needs more is ``out_of_reach``.
+    ``check_mass``: leave ``too_heavy`` an object the tool could not carry at
+    ``carry_acceleration_mps2`` (:func:`control.scheduler.holds_estimate`), its mass estimated
+    from its seen box, ``fill_fraction`` full, and its class's density: the cell's class table's
+    (``materials:``, the dataset's in a run's resolved cell), or ``class_density_kg_m3``'s, an
+    explicit override per class; without ``check_mass`` only the classes that names are
+    checked.
     """
 
     class_priorities: dict[str, float] = field(default_factory=dict)
@@ -373,6 +394,7 @@ class SchedulerConfig:
     min_confidence: float = 0.3
     clearance_m: float = 0.008
     rank: Literal["urgency", "cycle"] = "urgency"
+    check_mass: bool = False
     class_density_kg_m3: dict[str, float] = field(default_factory=dict)
     fill_fraction: float = 0.85
     carry_acceleration_mps2: float = 10.0
@@ -547,7 +569,7 @@ class ControllerConfig:
             self.cell.station(self.station_name) if self.station_name else self.cell.stations[0]
         )
         object.__setattr__(self, "station", station)
-        object.__setattr__(self, "tool", make_tool(station.tool))
+        object.__setattr__(self, "tool", make_tool(station.tool, self.cell.materials))
         object.__setattr__(self, "timing", self.tool.timing(self.pick))
         object.__setattr__(self, "bins", {b.class_name: b.drop_point_m for b in station.bins})
         classes = self.cell.classes
@@ -791,3 +813,36 @@ def load_config(
     return config_from_mapping(
         cast(Mapping[str, object], params), source=str(path), cell=cell, station=station
     )
+
+
+def params_path(value: str, base_dir: Path | None = None) -> Path:
+    """The parameter file a scenario's ``controller`` (or ``--controller``) names: a bare name
+    (no ``/``, no ``.yaml``) is a file shipped in ``control/config/`` (:data:`PARAMS_DIR`),
+    anything else a path, relative to ``base_dir`` when given. :class:`ControlConfigError`
+    when there is no such shipped file (the caller names the key and the value)."""
+    if "/" not in value and not value.endswith((".yaml", ".yml")):
+        path = PARAMS_DIR / f"{value}.yaml"
+        if not path.is_file():
+            known = ", ".join(sorted(p.stem for p in PARAMS_DIR.glob("*.yaml")))
+            msg = f"no parameter file of that name (shipped: {known})"
+            raise ControlConfigError(msg)
+        return path
+    path = Path(value).expanduser()
+    if not path.is_absolute() and base_dir is not None:
+        path = base_dir / path
+    return path
+
+
+def station_configs(path: str | os.PathLike[str], cell: Cell) -> tuple[ControllerConfig, ...]:
+    """Every station's configuration from the parameter file ``path`` for ``cell``, in the
+    cell's order: the file checked against the cell it drives (its classes, stations, robots
+    and tools). :class:`ControlConfigError` naming the file, the station and the key."""
+    configs = []
+    for station in cell.stations:
+        try:
+            configs.append(load_config(path, cell=cell, station=station.name))
+        except ControlConfigError as exc:
+            where = f"station {station.name!r} of the cell {cell.source or cell.name}"
+            msg = cut_message(f"{exc} (for {where})")
+            raise ControlConfigError(msg) from None
+    return tuple(configs)

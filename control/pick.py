@@ -62,6 +62,8 @@ from control.poses import (
 from control.scheduler import (
     Schedule,
     approach_rise_m,
+    base_lift_m,
+    clearance_rise_m,
     grasp_height_m,
     nearest_grasp_yaw,
     schedule,
@@ -190,6 +192,10 @@ MIN_POSTURE_SCALE = 0.05
 """The least :meth:`PickController._posture_scale` (near a singularity the joints' needs grow
 without bound; the Cartesian moves still finish)."""
 
+OVERLAP_MARGIN_M = 0.003
+"""How far into the grasp box's reach the measured TCP must be before :meth:`PickController.
+_note_overlap` counts the overlap as begun (the box's edge against the top's, measured)."""
+
 JOINT_REPLAN_UNTIL_S = 0.1
 """The joint-space approach is re-planned to the target's latest prediction until this long
 (s) before it arrives; later corrections are left to the Cartesian approach that follows."""
@@ -212,6 +218,11 @@ class _Pursuit:
     """How far below the grasp point the seal search has taken the setpoint."""
     seal_wait_s: float = 0.0
     """How long the close has waited for a seal to start (its deadlines move on by it)."""
+    clear_rise_m: float = 0.0
+    """How much higher the approach ends to pass over the neighbours (at the pick's start)."""
+    overlap_s: float = math.nan
+    """When the measured TCP's grasp box came down onto the target (``pick.dwell_from_overlap``;
+    NaN: not yet)."""
 
 
 @dataclass(kw_only=True, eq=False)
@@ -513,7 +524,7 @@ class PickController:
         else:
             handed_over = False
         assert pursuit.target is not None
-        rise_m = approach_rise_m(pursuit.target, self._cfg)
+        rise_m = approach_rise_m(pursuit.target, self._cfg, pursuit.clear_rise_m)
         target, aim = self._following_target(now.t_s, now.belt_velocity_mps, rise_m)
         yaw_error = abs(self._planner.state.position[3] - target.position[3])
         yaw_ready = (
@@ -529,6 +540,7 @@ class PickController:
         """Down to the grasp point, moving with the object; then the dwell (a tool without one
         goes on to its close in the same tick, once the yaw is aligned)."""
         target, aim = self._following_target(now.t_s, now.belt_velocity_mps, 0.0)
+        self._note_overlap(now.t_s, aim)
         if self._arrived(target):
             self._set_phase(Phase.DWELL, now.t_s)
             if self._cfg.timing.dwell_s == 0.0:
@@ -539,12 +551,34 @@ class PickController:
         """At the grasp point for the dwell; the tool closes once the yaw is aligned."""
         pick = self._cfg.pick
         target, aim = self._following_target(now.t_s, now.belt_velocity_mps, 0.0)
+        self._note_overlap(now.t_s, aim)
         yaw_error = abs(self._planner.state.position[3] - target.position[3])
         timing = self._cfg.timing
-        dwelt = now.t_s - self._phase_start_s >= timing.dwell_s - timing.close_overlap_s
+        since_s = min(self._phase_start_s, self._pursuit.overlap_s)  # NaN: the phase's start
+        since_s = since_s if math.isfinite(since_s) else self._phase_start_s
+        dwelt = now.t_s - since_s >= timing.dwell_s - timing.close_overlap_s
         if dwelt and yaw_error < pick.yaw_tolerance_rad and self._commander.on_goal:
             self._set_phase(Phase.CLOSE, now.t_s)
         return Goal(target=target, aim_m=aim)
+
+    def _note_overlap(self, t_s: float, aim_m: Vec3) -> None:
+        """With ``pick.dwell_from_overlap``: note when the measured TCP's grasp box (a jaw's
+        ``tcp_half_extents_m``) first reaches down onto the target, within the box's half width
+        of the grasp point and its half height of the target's top. The twin's grasp rule (the
+        reference's) counts the dwell from that overlap, which begins during the descent: the
+        dwell then need not wait its whole length again at the bottom."""
+        pursuit, pick = self._pursuit, self._cfg.pick
+        half = getattr(self._cfg.station.tool, "tcp_half_extents_m", None)
+        if not pick.dwell_from_overlap or half is None or math.isfinite(pursuit.overlap_s):
+            return
+        target = pursuit.target
+        if target is None:
+            return
+        x, y, z = self._measured.position_m
+        top_z = self._cfg.belt.surface_z_m + base_lift_m(target, self._cfg) + target.height_m
+        near = math.hypot(x - aim_m[0], y - aim_m[1]) <= min(half[0], half[1])
+        if near and z <= top_z + half[2] - OVERLAP_MARGIN_M:
+            pursuit.overlap_s = t_s
 
     def _on_close(self, now: TickInput) -> Goal | Transition:
         """The tool grasps while following; then the grip check and the lift.
@@ -702,11 +736,15 @@ class PickController:
         )
         self._set_phase(Phase.LIFT, t_s)
 
-    def _start_pick(self, track: Track, decision: Schedule, t_s: float) -> None:
+    def _start_pick(
+        self, track: Track, decision: Schedule, t_s: float, tracks: Sequence[Track]
+    ) -> None:
         pursuit, motion, book = self._pursuit, self._motion, self._book
+        pursuit.clear_rise_m = clearance_rise_m(track, tracks, self._cfg)
         intercept_s = decision.intercept_s
         pursuit.target = track
         pursuit.seen_s = t_s
+        pursuit.overlap_s = math.nan
         pursuit.counted = track.track_id not in book.grip_misses  # a retry is not a new target
         book.targeted += pursuit.counted
         self._claim("claimed", t_s)
@@ -718,7 +756,7 @@ class PickController:
         motion.joint_approach = None
         if self._cfg.pick.approach_space == "joint" and motion.joint_mode:
             # the joint planner continues from the current joint move
-            motion.joint_approach = self._plan_joint_approach(track, t_s)
+            motion.joint_approach = self._plan_joint_approach(track, t_s, tracks)
         motion.joint_mode = motion.joint_approach is not None
         pursuit.grasp_yaw_rad = (
             motion.joint_approach.yaw_rad
@@ -769,7 +807,7 @@ class PickController:
         if self._cfg.pick.approach_space == "joint" and self._motion.joint_mode:
 
             def estimate(track: Track) -> float:
-                meeting = self._joint_meeting(track, t_s)
+                meeting = self._joint_meeting(track, t_s, tracks)
                 return math.inf if meeting is None else meeting.goal.arrive_s - t_s
 
         book = self._book
@@ -787,7 +825,7 @@ class PickController:
             if item.track_id not in book.targeted_ids:
                 book.untargeted[item.track_id] = item.reason
         if result.target is not None:
-            self._start_pick(result.target, result, t_s)
+            self._start_pick(result.target, result, t_s, tracks)
         else:
             self._next_schedule_s = t_s + self._cfg.scheduler.replan_period_s - 1e-9
 
@@ -805,7 +843,9 @@ class PickController:
 
         return allow
 
-    def _joint_meeting(self, track: Track, t_s: float) -> JointApproach | None:
+    def _joint_meeting(
+        self, track: Track, t_s: float, tracks: Sequence[Track]
+    ) -> JointApproach | None:
         """:func:`~control.poses.solve_meeting` from the current joint state, cached per track
         for the tick ``t_s`` (the scheduler's estimate and the chosen move are the same
         computation)."""
@@ -822,12 +862,15 @@ class PickController:
                 q_now=np.array(self._commander.q),
                 q_ready=self.q_ready,
                 tcp_yaw_rad=self._planner.state.position[3],
+                clear_rise_m=clearance_rise_m(track, tracks, self._cfg),
             )
         return self._meetings[track.track_id]
 
-    def _plan_joint_approach(self, track: Track, t_s: float) -> JointApproach | None:
+    def _plan_joint_approach(
+        self, track: Track, t_s: float, tracks: Sequence[Track]
+    ) -> JointApproach | None:
         """Start the joint-space move of :meth:`_joint_meeting`; None when there is none."""
-        meeting = self._joint_meeting(track, t_s)
+        meeting = self._joint_meeting(track, t_s, tracks)
         if meeting is None:
             return None
         goal = meeting.goal
@@ -863,7 +906,7 @@ class PickController:
             return
         (x, y, z), (vx, vy, _) = obj
         assert self._pursuit.target is not None
-        z += approach_rise_m(self._pursuit.target, cfg)
+        z += approach_rise_m(self._pursuit.target, cfg, self._pursuit.clear_rise_m)
         planned = self._kin.fk(goal.q).translation
         if math.dist((x, y, z), planned) <= 0.5 * cfg.pick.arrive_tolerance_m:
             return
@@ -1038,16 +1081,16 @@ class PickController:
     def _posture_scale(self) -> float:
         """The scale of the Cartesian acceleration limits that the joints can follow in the
         current posture (``motion.posture_acceleration_margin`` of their datasheet limits, with
-        every axis at its limit at once, or in the descent the shares
-        ``motion.descend_posture_axes`` of them; 1 when that is more than the limits, or off)."""
+        every axis at its limit at once, or in the descent and the lift the shares
+        ``motion.vertical_posture_axes`` of them; 1 when that is more than the limits, or off)."""
         motion = self._cfg.motion
         margin = motion.posture_acceleration_margin
         if margin <= 0.0:
             return 1.0
         rates = np.abs(self._kin.tilt_held_rates(self._commander.q))
         budget = np.asarray(motion.max_acceleration)
-        if self._phase == Phase.DESCEND:
-            budget = budget * np.asarray(motion.descend_posture_axes)
+        if self._phase in (Phase.DESCEND, Phase.LIFT):
+            budget = budget * np.asarray(motion.vertical_posture_axes)
         needed = rates @ budget
         limits = margin * np.asarray(self._kin.acceleration_limit_rps2)
         scale = float(np.min(limits / np.maximum(needed, 1e-12)))

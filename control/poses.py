@@ -93,7 +93,7 @@ def meeting_lead_s(config: ControllerConfig) -> float:
     return config.motion.command_latency_s - config.motion.control_period_s
 
 
-def solve_meeting(
+def solve_meeting(  # noqa: PLR0913 (keyword-only: the state it plans from, and where)
     track: Track,
     t_s: float,
     *,
@@ -103,8 +103,10 @@ def solve_meeting(
     q_now: FloatArray,
     q_ready: FloatArray,
     tcp_yaw_rad: float,
+    clear_rise_m: float = 0.0,
 ) -> JointApproach | None:
-    """Where and when a joint-space move from the current joint state meets ``track``.
+    """Where and when a joint-space move from the current joint state meets ``track``,
+    ``clear_rise_m`` above its usual approach height (:func:`control.scheduler.clearance_rise_m`).
 
     The meeting time is a fixed point: the time-optimal duration of the move (Ruckig, from the
     current joint state of ``joint_planner``) to the pose above where the object will be then.
@@ -117,7 +119,7 @@ def solve_meeting(
     """
     period_rad = config.tool.grasp_yaw_period_rad
     vx, vy = track.velocity_mps
-    z = approach_z_m(track, config)
+    z = approach_z_m(track, config, clear_rise_m)
     dt_s = JOINT_APPROACH_GUESS_S
     lead_s = meeting_lead_s(config)
     near = nearest_grasp_yaw(track.yaw_rad, tcp_yaw_rad, period_rad)

@@ -24,14 +24,21 @@ from dataclasses import dataclass
 from control.config import ControllerConfig
 from control.tracking import Track
 
-UNTARGETED_REASONS: tuple[str, ...] = (
-    "low_confidence",
+STATIC_REASONS: tuple[str, ...] = (
     "no_bin",
     "too_wide",
     "too_flat",
     "too_small",
     "too_tilted",
     "too_heavy",
+)
+"""The reasons a station refuses a piece whatever the timing, clutter or other stations
+(:func:`static_reason`), in the order they are checked."""
+
+
+UNTARGETED_REASONS: tuple[str, ...] = (
+    "low_confidence",
+    *STATIC_REASONS,
     "excluded",
     "unsettled",
     "claimed_by_other",
@@ -120,16 +127,43 @@ def grasp_height_m(track: Track, config: ControllerConfig) -> float:
     return grasp_z_m(track.height_m, config) + base_lift_m(track, config) - drop_m
 
 
-def approach_rise_m(track: Track, config: ControllerConfig) -> float:
+def approach_rise_m(track: Track, config: ControllerConfig, clear_rise_m: float = 0.0) -> float:
     """How far above the grasp point the approach ends: ``pick.approach_height_m`` above the
     object's top, not above a suction point lower than the top (a tipped piece's), which would
-    bring the tool in sideways into the piece's raised part."""
-    return config.pick.approach_height_m + config.tool.grasp_drop_m(track)
+    bring the tool in sideways into the piece's raised part; ``clear_rise_m`` higher still to
+    pass over the neighbours (:func:`clearance_rise_m`)."""
+    return config.pick.approach_height_m + config.tool.grasp_drop_m(track) + clear_rise_m
 
 
-def approach_z_m(track: Track, config: ControllerConfig) -> float:
+def approach_z_m(track: Track, config: ControllerConfig, clear_rise_m: float = 0.0) -> float:
     """World z of the TCP where the approach to ``track`` ends (:func:`approach_rise_m`)."""
-    return grasp_height_m(track, config) + approach_rise_m(track, config)
+    return grasp_height_m(track, config) + approach_rise_m(track, config, clear_rise_m)
+
+
+def clearance_rise_m(track: Track, others: Sequence[Track], config: ControllerConfig) -> float:
+    """How much higher than :func:`approach_rise_m` the approach to ``track`` must end for the
+    tool to pass over every other object whose footprint comes within
+    ``pick.approach_clear_radius_m`` of the grasp point: the TCP ``pick.approach_clear_m``
+    above the tallest such top (a joint-space move comes down on its end point along no
+    straight line, and a hand ending beside a taller neighbour sweeps its fingers through it).
+    0 when off (a radius of 0) or when no neighbour is that tall. The tracks move together
+    with the belt, so their relative positions hold until the meeting."""
+    pick = config.pick
+    radius = pick.approach_clear_radius_m
+    if radius <= 0.0:
+        return 0.0
+    gx, gy = grasp_xy_at(track, config, track.stamp_s)
+    top_z = -math.inf
+    for other in others:
+        if other.track_id == track.track_id:
+            continue
+        reach = radius + math.hypot(other.length_m, other.width_m) / 2
+        if math.hypot(other.position_m[0] - gx, other.position_m[1] - gy) > reach:
+            continue
+        top_z = max(top_z, config.belt.surface_z_m + base_lift_m(other, config) + other.height_m)
+    if not math.isfinite(top_z):
+        return 0.0
+    return max(0.0, top_z + pick.approach_clear_m - approach_z_m(track, config))
 
 
 INTERCEPT_HORIZON_S = 5.0
@@ -335,11 +369,22 @@ def carry_time_s(track: Track, meet_s: float, config: ControllerConfig) -> float
     )
 
 
+def class_density_kg_m3(class_name: str, config: ControllerConfig) -> float | None:
+    """The density the controller estimates a piece of ``class_name``'s mass with:
+    ``scheduler.class_density_kg_m3``'s, else (``scheduler.check_mass``) the cell's class
+    table's (what the cell file the controller reads says: a run's resolved cell carries its
+    dataset's); None when it checks no mass of that class."""
+    sched = config.scheduler
+    density = sched.class_density_kg_m3.get(class_name)
+    if density is None and sched.check_mass:
+        density = config.cell.materials.material(class_name).density_kg_m3
+    return density
+
+
 def estimated_mass_kg(track: Track, config: ControllerConfig) -> float | None:
-    """The track's mass from its seen box and its class's density
-    (``scheduler.class_density_kg_m3``, times ``scheduler.fill_fraction``); None for a class
-    with no density."""
-    density = config.scheduler.class_density_kg_m3.get(track.class_name)
+    """The track's mass from its seen box, ``scheduler.fill_fraction`` full, and its class's
+    density (:func:`class_density_kg_m3`); None for a class with no density."""
+    density = class_density_kg_m3(track.class_name, config)
     if density is None:
         return None
     volume_m3 = track.length_m * track.width_m * track.height_m * config.scheduler.fill_fraction
@@ -355,20 +400,21 @@ def holds_estimate(track: Track, config: ControllerConfig) -> bool:
     return config.tool.holds(track.class_name, mass_kg, config.scheduler.carry_acceleration_mps2)
 
 
-def _static_reason(
-    track: Track, config: ControllerConfig, excluded_ids: Collection[int]
-) -> str | None:
-    """The reasons that need no timing: checked first, before any intercept search."""
-    sched = config.scheduler
-    if track.class_confidence < sched.min_confidence:
-        return "low_confidence"
+def static_reason(track: Track, config: ControllerConfig) -> str | None:
+    """Why the station ``config`` drives would never take the piece ``track`` stands for (one
+    of :data:`STATIC_REASONS`), None when it could: its class has no bin at the station
+    (``no_bin``), the tool does not fit its seen box and suction point
+    (:meth:`~control.tools.ControllerTool.misfit` with ``scheduler.grasp_width_margin_m``:
+    ``too_wide``, ``too_flat``, ``too_small``, ``too_tilted``), or the tool could not carry
+    its estimated mass (:func:`holds_estimate`: ``too_heavy``). The scheduler's own first
+    checks, and the judgement of :mod:`control.fit`."""
     if track.class_name not in config.bins:
         return "no_bin"
     misfit = config.tool.misfit(
         length_m=track.length_m,
         width_m=track.width_m,
         height_m=track.height_m,
-        width_margin_m=sched.grasp_width_margin_m,
+        width_margin_m=config.scheduler.grasp_width_margin_m,
         face_radius_m=track.suction_radius_m,
         face_tilt_rad=track.suction_tilt_rad,
     )
@@ -376,6 +422,19 @@ def _static_reason(
         return misfit
     if not holds_estimate(track, config):
         return "too_heavy"
+    return None
+
+
+def _static_reason(
+    track: Track, config: ControllerConfig, excluded_ids: Collection[int]
+) -> str | None:
+    """The reasons that need no timing: checked first, before any intercept search (a track
+    of too low a confidence, :func:`static_reason`, an excluded track)."""
+    if track.class_confidence < config.scheduler.min_confidence:
+        return "low_confidence"
+    reason = static_reason(track, config)
+    if reason is not None:
+        return reason
     if track.track_id in excluded_ids:
         return "excluded"
     return None

@@ -7,15 +7,16 @@ Examples::
     cdw-twin fit out/real_meshes --stations 4
 
 For every piece of a meshgen output folder, lying flat on the belt as the stream spawns it, and
-for every station judged, :func:`experiments.fit_rules.takeable` says whether the station's
-controller could ever target it, or why not (``no_bin``, ``too_wide``, ``too_flat``,
-``too_small``, ``too_tilted``, ``too_heavy``): the static checks of its scheduler, with its
-tool, its parameter file's margins and class densities and the suction point its camera
-reports. Timing, reach and clutter (``too_late``, ``blocked``, ...) are not judged: a piece a
-station can take may still pass it. The stations judged are one per catalogue tool (each on its
-robot, :func:`~experiments.fit_rules.catalogue_setups`) and those of ``--cell`` (default
-``line``, with its controllers' parameter file: ``--controller``, default the shipped file of
-the cell file's name, else ``default``).
+for every station judged, :func:`control.fit.takeable` says whether the station's controller
+could ever target it, or why not (``no_bin``, ``too_wide``, ``too_flat``, ``too_small``,
+``too_tilted``, ``too_heavy``): the static checks of its scheduler, with its tool, its parameter
+file's margins, the dataset's class densities and the suction point its camera reports (the
+twin marks every spawned piece by the same rule). Timing, reach and clutter (``too_late``,
+``blocked``, ...) are not judged: a piece a station can take may still pass it. The stations
+judged are one per catalogue tool (each on its robot,
+:func:`~experiments.fit_rules.catalogue_setups`) and those of ``--cell`` (default ``line``, its
+bin slots taking the dataset's classes as in an episode, with its controllers' parameter file:
+``--controller``, default the shipped file of the cell file's name, else ``default``).
 
 A tool mix for a line of ``--stations`` stations (default: the cell's count) is suggested
 (:func:`suggest_mix`): greedy cover of the pieces by tools, each piece counting once (so each
@@ -311,20 +312,21 @@ def fit_dataset(
     file ``controller`` (a shipped name or a path; empty: the cell's,
     :func:`~experiments.fit_rules.default_params`) and a mix of ``stations`` (0: the cell's
     count). Raises a :class:`~interfaces.errors.CdwTwinError` naming what was wrong."""
-    from interfaces.cell import load_cell, resolve_cell_path
-    from twin.objects import dataset_class_table, load_dataset
+    from interfaces.cell import load_cell, resolve_cell, resolve_cell_path
+    from interfaces.materials import dataset_table
+    from twin.objects import load_dataset
 
     check_meshgen_folder(dataset)
+    table = dataset_table(dataset)
     cell_file = resolve_cell_path(cell)
-    the_cell = load_cell(cell_file)
+    the_cell = resolve_cell(load_cell(cell_file), table)
     params = params_path(controller) if controller else default_params(cell_file)
-    classes = dataset_class_table(dataset)
     objects = [o for layout in load_dataset(dataset) for o in layout.objects]
     return fit_report(
         dataset=dataset.resolve(),
         pieces=flat_pieces(objects),
-        classes=classes,
-        catalogue=catalogue_setups(classes),
+        classes=table.names,
+        catalogue=catalogue_setups(table),
         cell_name=the_cell.name,
         cell_file=cell_file,
         cell=cell_setups(the_cell, params),

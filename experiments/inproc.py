@@ -34,14 +34,12 @@ if TYPE_CHECKING:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    """The twin node's options, the controllers' parameter file and their stats files."""
-    from control.cmd_controller import add_params_option
+    """The twin node's options (its ``--params-file`` is the controllers' too) and the
+    controllers' stats files."""
     from twin.cmd_node import configure as configure_node
 
     configure_node(parser)
     parser.set_defaults(mode="lockstep")
-    add_params_option(parser)
-    parser.set_defaults(params_file=None)  # the scenario's ``controller`` (see :func:`run`)
     parser.add_argument(
         "--controller-stats",
         action="append",
@@ -123,15 +121,19 @@ def run(args: argparse.Namespace) -> int:
 
 def scenario_params(args: argparse.Namespace) -> Path:
     """Without ``--params-file``: the file the scenario's ``controller`` names (as ``cdw-twin
-    run`` takes it), or the default parameters without a scenario."""
-    from control.cmd_controller import DEFAULT_PARAMS
-    from experiments.run import controller_params
+    run`` takes it, :func:`control.config.params_path`), or the default parameters without a
+    scenario."""
+    from control.config import DEFAULT_PARAMS, params_path
     from twin.scenario import Scenario
 
     if not args.scenario:
         return DEFAULT_PARAMS
     scenario = Scenario.load(args.scenario)
-    return controller_params(scenario.controller, Path(args.scenario).parent)
+    try:
+        return params_path(scenario.controller, Path(args.scenario).parent).resolve()
+    except CdwTwinError as exc:
+        msg = f"{args.scenario}: controller = {scenario.controller!r}: {exc}"
+        raise CdwTwinError(msg) from None
 
 
 __all__ = ["Controllers", "configure", "run", "stats_paths"]

@@ -12,10 +12,10 @@ from the infeed, so every station has waste in front of it) and run ``--time`` s
 simulated time. PyBullet's TinyRenderer (CPU, no display needed) then draws it from a camera
 on the stations' side of the belt, above it and turned towards the upstream end, placed to
 frame the belt, the robots and the bins (:func:`frame_camera`). Objects are drawn in their
-class colours (:func:`interfaces.class_colours.class_rgb`, the dataset's ``materials.mtl``
-first), each bin in the colour of the class it takes, the belt and the floor in
-:data:`BELT_RGB` and :data:`FLOOR_RGB`; the robots keep their URDF's colours. The PNG is
-written through a temporary file and a rename.
+class colours (the class table's, the episode cell's ``materials``:
+:func:`interfaces.class_colours.class_colour`), each bin in the colour of the class it takes,
+the belt and the floor in :data:`BELT_RGB` and :data:`FLOOR_RGB`; the robots keep their URDF's
+colours. The PNG is written through a temporary file and a rename.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import io
 import math
 import os
 import secrets
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from interfaces.class_colours import RGB, class_rgb, dataset_class_rgb
+from interfaces.class_colours import RGB, class_colour
 from interfaces.errors import CdwTwinError
 
 if TYPE_CHECKING:
@@ -273,8 +273,10 @@ def bounding_points(client: int, bodies: Sequence[int]) -> FloatArray:
     return np.asarray(corners, dtype=float)
 
 
-def paint(client: int, bodies: SceneBodies, colours: dict[str, RGB]) -> None:
-    """Colour the floor, the belt, the bins and the objects (the robots keep their own)."""
+def paint(client: int, bodies: SceneBodies, colours: Callable[[str], RGB]) -> None:
+    """Colour the floor, the belt, the bins and the objects (the robots keep their own); a
+    bin or an object in its class's colour (``colours``: the class table's,
+    :func:`interfaces.class_colours.class_colour`)."""
     import pybullet as pb
 
     def colour(body: int, rgb: RGB) -> None:
@@ -293,7 +295,7 @@ def paint(client: int, bodies: SceneBodies, colours: dict[str, RGB]) -> None:
     if bodies.belt is not None:
         colour(bodies.belt, BELT_RGB)
     for body, name in (*bodies.bins.items(), *bodies.objects.items()):
-        colour(body, class_rgb(name, colours))
+        colour(body, colours(name))
 
 
 def render(client: int, camera: Camera) -> ImageArray:
@@ -344,7 +346,7 @@ def take_picture(
         for _ in range(round(time_s / twin.dt_s)):
             twin.advance()
         bodies = scene_bodies(twin.client, cell, twin.observe_objects())
-        paint(twin.client, bodies, dataset_class_rgb(dataset_dir))
+        paint(twin.client, bodies, class_colour(twin.cell.materials))
         framed = [b for b in (bodies.belt, *bodies.robots, *bodies.bins) if b is not None]
         stations_y = sum(s.base_position_m[1] for s in cell.stations) / len(cell.stations)
         camera = frame_camera(

@@ -5,17 +5,17 @@ Example::
     cdw-twin player runs/a/ep000      # writes runs/a/ep000/player.html
 
 ``cdw-twin report`` writes one for every episode it lists and links it from ``report.html``.
-The page loads nothing (no network, no server: open the file): the episode's data is a JSON
-block inside it, drawn by inline JavaScript on a ``<canvas>``. It shows a top view of the belt
-(the run's ``cell.yaml``) with every station's pick window, base and bins, every object's
-footprint coloured by class (:mod:`interfaces.class_colours`, the dataset's ``materials.mtl``
-first) at its recorded pose (``recording.mcap``, ``/objects/ground_truth``, 30 Hz), each
-station's TCP with its last two seconds of path (``tcp_pose``, taken at 30 Hz) and its
-controller's current target (``controller/target``, moved on with the target's velocity since
-its stamp), and the episode's events (``twin/events.jsonl``) on a timeline. Play, pause, speed
-and a scrub bar; clicking an object shows its ground truth now and its events (click an event
-to go to it). Multi-station lines read each station's topics under its namespace
-(:func:`interfaces.contract.resolved_topics`).
+The page loads nothing (no network, no server: open the file): the episode's data is a JSON block
+inside it, drawn by inline JavaScript on a ``<canvas>``. It shows a top view of the belt (the run's
+``cell.yaml``) with every station's pick window, base and bins, every object's footprint coloured by
+class (the class table's colour: the run's ``cell.yaml`` ``materials``, else the dataset's
+``classes.yaml``, :mod:`interfaces.materials`) at its recorded pose (``recording.mcap``,
+``/objects/ground_truth``, 30 Hz), each station's TCP with its last two seconds of path
+(``tcp_pose``, taken at 30 Hz) and its controller's current target (``controller/target``, moved on
+with the target's velocity since its stamp), and the episode's events (``twin/events.jsonl``) on a
+timeline. Play, pause, speed and a scrub bar; clicking an object shows its ground truth now and its
+events (click an event to go to it). Multi-station lines read each station's topics under its
+namespace (:func:`interfaces.contract.resolved_topics`).
 
 Footprints: the outline of the object's mesh (``<dataset>/<image>/<source_id>.obj``, the
 ``source_id`` of its ``spawned`` event) projected onto the object's own xy plane, with the z
@@ -53,7 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from interfaces.cell import Cell, CellError, load_cell
-from interfaces.class_colours import class_rgb, dataset_class_rgb, rgb_hex
+from interfaces.class_colours import class_colour, dataset_colour, rgb_hex
 from interfaces.contract import BELT_STATE, GROUND_TRUTH_TOPIC, PICK_TARGET, TCP_POSE
 from interfaces.errors import CdwTwinError, cut
 from interfaces.fileio import MAX_JSON_BYTES, read_text_capped, write_atomic
@@ -566,7 +566,7 @@ def player_data(episode: Path, run_dir: Path | None = None) -> tuple[dict[str, A
         notes.append(f"{recording}: missing; no objects, TCPs or targets drawn")
     classes.update(dict.fromkeys(o["cls"] for o in objects))
     classes.update(dict.fromkeys(e["cls"] for e in events if e["cls"]))
-    overrides = dataset_class_rgb(dataset) if dataset is not None else {}
+    colour = class_colour(cell.materials) if cell is not None else dataset_colour(dataset)
     ends = [*times[-1:], *(e["t"] for e in events)]
     ends += [tcp["t"][-1] for tcp in tcps if tcp["t"]]
     duration = summary.get("sim_seconds")
@@ -579,7 +579,7 @@ def player_data(episode: Path, run_dir: Path | None = None) -> tuple[dict[str, A
         "duration_s": round(float(duration), 4),
         "dataset": str(dataset) if dataset else None,
         "cell": _cell_data(cell) if cell else None,
-        "classes": {c: rgb_hex(class_rgb(c, overrides)) for c in classes},
+        "classes": {c: rgb_hex(colour(c)) for c in classes},
         "highlight": HIGHLIGHT_HEX,
         "station_colours": list(STATION_HEX),
         "flag_bits": list(FLAG_BITS),

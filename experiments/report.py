@@ -766,8 +766,11 @@ def _image_outlines(dataset: Path, stem: str) -> tuple[list[_Outline], str]:
 
 
 def fig_footprints(data: RunData) -> Figure:
-    """Source polygons (black dashed) over the generated footprints for up to 4 images."""
+    """Source polygons (black dashed) over the generated footprints for up to 4 images, each
+    footprint in its class's colour (the dataset's class table)."""
     from matplotlib.patches import Polygon
+
+    from interfaces.class_colours import dataset_colour
 
     if not data.datasets:
         raise Unavailable("no dataset")
@@ -787,11 +790,12 @@ def fig_footprints(data: RunData) -> Figure:
     fig = _figure(9.0, 8.0)
     axes = fig.subplots(2, 2, squeeze=False).ravel()
     colours: dict[str, Any] = {}
+    colour_of = dataset_colour(dataset)
     used = ""
     for ax, stem in zip(axes, stems, strict=False):
         outlines, used = _image_outlines(dataset, stem)
         for o in outlines:
-            colour = colours.setdefault(o.class_name, mpl.colormaps["tab10"](len(colours) % 10))
+            colour = colours.setdefault(o.class_name, colour_of(o.class_name))
             ring = [(y, x) for x, y in o.footprint_m]
             ax.add_patch(Polygon(ring, closed=True, color=colour, alpha=0.45))
             if o.source_m:

@@ -14,10 +14,12 @@ or a display that cannot be opened is a one-line error before the run folder is 
 
 The scenario (with the command-line overrides applied) is validated before anything starts and
 written to the run folder as ``scenario.yaml``; every process of the run reads that file. The
-scenario's cell (its ``cell`` key, or ``--cell``: a shipped name or a path) is resolved and
-written next to it as ``cell.yaml``, the controller's parameter file (the scenario's
-``controller``) as ``controller.yaml``, and the written scenario names both copies and the
-dataset's absolute path (unless it is the built-in one): ``cdw-twin run RUN/scenario.yaml``
+scenario's cell (its ``cell`` key, or ``--cell``: a shipped name or a path) is resolved (its bin
+slots given the dataset's classes, :func:`twin.scenario.episode_cell`, and the dataset's class
+table as its ``materials:``) and written next to it as ``cell.yaml``, the controller's parameter
+file (the scenario's ``controller``, checked for every station of that resolved cell) as
+``controller.yaml``, and the written scenario names both copies and the dataset's absolute path
+(unless it is the built-in one): ``cdw-twin run RUN/scenario.yaml``
 reruns it as it ran, from any folder, whatever the shipped files become. Each episode gets its
 own ROS domain (claimed with a lock, LOCALHOST discovery) and runs one twin node and one
 controller process per station of the cell (``--station NAME``, each under the station's ROS
@@ -320,33 +322,31 @@ def failed_row(episode: EpisodeSpec, mode: str, reason: str) -> dict[str, Any]:
     }
 
 
-def controller_params(value: str, scenario_dir: Path | None) -> Path:
-    """The controller parameter file a scenario's ``controller`` names, loaded once to check it.
+def controller_params(value: str, scenario_dir: Path | None, cell: Cell) -> Path:
+    """The controller parameter file a scenario's ``controller`` names, checked against the
+    scenario's own (resolved) cell: loaded once for every station of ``cell``
+    (:func:`control.config.station_configs`), so a key naming a class, station, robot or tool
+    the cell lacks is refused before anything starts.
 
     A bare name is a file shipped in ``control/config/``; anything else is a path, relative to
-    the scenario's folder. Errors name the ``controller`` key and what is wrong.
+    the scenario's folder (:func:`control.config.params_path`). Errors name the
+    ``controller`` key and what is wrong.
     """
-    from control.cmd_controller import DEFAULT_PARAMS
-    from control.config import load_config
+    from control.config import params_path, station_configs
     from control.errors import ControlConfigError
 
-    if "/" not in value and not value.endswith((".yaml", ".yml")):
-        path = DEFAULT_PARAMS.parent / f"{value}.yaml"
-        if not path.is_file():
-            known = ", ".join(sorted(p.stem for p in DEFAULT_PARAMS.parent.glob("*.yaml")))
-            msg = f"controller = {cut(value)}: no parameter file of that name (shipped: {known})"
-            raise CdwTwinError(msg)
-    else:
-        path = Path(value).expanduser()
-        if not path.is_absolute() and scenario_dir is not None:
-            path = scenario_dir / path
+    try:
+        path = params_path(value, scenario_dir)
+    except ControlConfigError as exc:
+        msg = f"controller = {cut(value)}: {exc}"
+        raise CdwTwinError(msg) from None
     try:  # bounded, UTF-8 and without NUL before the controller's own loader reads it
         read_text_capped(path, what="controller parameter file", error=CdwTwinError)
     except CdwTwinError as exc:
         msg = f"controller = {cut(value)}: {exc}"
         raise CdwTwinError(msg) from None
     try:
-        load_config(path)
+        station_configs(path, cell)
     except ControlConfigError as exc:
         msg = cut_message(f"controller = {cut(value)}: {exc}")
         raise CdwTwinError(msg) from None
@@ -413,17 +413,17 @@ def twin_command(options: RunOptions, episode: EpisodeSpec) -> list[str]:
     """The twin node's command line for one episode; with the in-process transport, the
     episode process's (:mod:`experiments.inproc`), which runs every station's controller
     too."""
-    inproc: list[str] = []
+    extra: list[str] = []
+    if options.controller_params is not None:  # the controllers', and the twin's spawn judge
+        extra += ["--params-file", str(options.controller_params)]
     if options.transport == "inproc":
-        if options.controller_params is not None:
-            inproc += ["--params-file", str(options.controller_params)]
         for station in options.stations:
             name = stats_name(controller_stem(station, options.stations), 0)
-            inproc += ["--controller-stats", f"{station}={episode.folder / name}"]
+            extra += ["--controller-stats", f"{station}={episode.folder / name}"]
     return [
         *_cli(),
         "twin-node" if options.transport == "ros" else "episode",
-        *inproc,
+        *extra,
         "--scenario",
         str(options.scenario_path),
         "--dataset",
@@ -1055,7 +1055,7 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
         )
         raise CdwTwinError(msg)
     scenario_dir = args.scenario.parent if args.scenario is not None else None
-    params = controller_params(scenario.controller, scenario_dir)
+    params = controller_params(scenario.controller, scenario_dir, cell)
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out: Path = args.out or Path("runs") / f"{scenario.name}-{stamp}"
     own_dataset = args.dataset is not None or scenario.dataset != "builtin"

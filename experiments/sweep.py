@@ -648,13 +648,16 @@ def _check_cells(grid: Grid, grid_path: Path) -> list[_Checked]:
     checked = []
     for cell in expand(grid, grid_path.parent):
         where = str(cell.scenario_path)
-        params = controller_params(cell.scenario.controller, cell.scenario_path.parent)
         station_cell = scenario_cell(cell.scenario, cell.scenario_path.parent, where)
         if cell.stations is not None:
             station_cell = first_stations(station_cell, cell.stations, str(grid_path))
         own = _own_dataset(grid, grid_path, cell)
         dataset = own or builtin_dataset()
-        check_scenario(cell.scenario, dataset, where=where, cell=station_cell)
+        selection = check_scenario(cell.scenario, dataset, where=where, cell=station_cell)
+        station_cell = selection.cell or station_cell
+        params = controller_params(
+            cell.scenario.controller, cell.scenario_path.parent, station_cell
+        )
         checked.append(
             _Checked(
                 cell=cell,

@@ -16,7 +16,14 @@ its bins; its per-robot topics live under its ROS ``namespace`` (``""`` keeps th
 a one-station cell). ``robot`` and ``tool`` are either a name from the catalogue
 (``interfaces/catalog.yaml``: robots ``panda``, ``xarm6``; tools ``panda_hand``,
 ``xarm_gripper``) or a full mapping. A bin sorts one class; the classes a cell sorts are those
-of its bins.
+of its bins. A bin that names no class is a slot (:mod:`interfaces.bins`): :func:`resolve_cell`
+gives it one of the dataset's classes when an episode starts (the shipped cells' bins are all
+slots); read without a dataset, the slots take the classes of the cell's class table in order.
+
+The optional ``materials:`` section is the class table of the pieces the cell sorts
+(:mod:`interfaces.materials`: density, height range, friction, restitution, seal efficiency and
+colour per class, over the shipped table); without it the shipped table. A run's resolved cell
+carries its dataset's, every bin with its class.
 
 The belt drive is a co-simulation FMU: ``builtin`` is ours (``fmus/belt_drive``, FMI 3), any
 other value a path (relative to the cell file) to a third-party FMU whose variables
@@ -41,9 +48,11 @@ from pathlib import Path
 
 import yaml
 
+from interfaces.bins import MAX_COORDINATE_M, BinsMap, BinSpec, assign_bins
 from interfaces.dataclass_io import from_data, to_data
 from interfaces.errors import ConfigError, cut, cut_message, require
 from interfaces.fileio import write_atomic
+from interfaces.materials import ClassTable, shipped_table, table_from_data
 from interfaces.robots import RobotSpec, robot_from_data
 from interfaces.tools import ToolSpec, tool_from_data
 from interfaces.yamlio import load_yaml_file
@@ -136,9 +145,6 @@ MAX_BELT_WIDTH_M = 5.0
 
 MAX_BELT_LENGTH_M = 1000.0
 """Longest belt a cell may have."""
-
-MAX_COORDINATE_M = 10_000.0
-"""Largest absolute world coordinate of anything in a cell."""
 
 MAX_FRICTION = 10.0
 """Largest friction coefficient (real surfaces stay below 2)."""
@@ -296,77 +302,6 @@ class CameraSpec:
 
 # -- stations and bins ----------------------------------------------------------------------
 @dataclass(frozen=True, kw_only=True)
-class BinSpec:
-    """An open-top bin on the floor; objects dropped into it are sorted as ``class_name``.
-
-    ``drop_z_m`` is the TCP height a controller releases at above the bin's centre.
-    """
-
-    class_name: str
-    centre_x_m: float
-    centre_y_m: float
-    size_m: float = 0.24
-    top_z_m: float = -0.10
-    floor_z_m: float = -0.40
-    wall_m: float = 0.01
-    drop_z_m: float = 0.15
-
-    def __post_init__(self) -> None:
-        require(
-            0 < len(self.class_name) <= 64 and self.class_name.isprintable(),
-            "bins.class_name",
-            self.class_name,
-            "1 to 64 printable characters",
-        )
-        key = f"bins[{self.class_name}]"
-        require(self.wall_m > 0, f"{key}.wall_m", self.wall_m, "must be positive")
-        require(
-            self.size_m > 2 * self.wall_m,
-            f"{key}.size_m",
-            self.size_m,
-            "must exceed twice the wall thickness",
-        )
-        require(self.size_m <= 10.0, f"{key}.size_m", self.size_m, "must be at most 10 m")
-        require(
-            self.top_z_m > self.floor_z_m, f"{key}.top_z_m", self.top_z_m, "must be above floor"
-        )
-        require(
-            self.drop_z_m > self.top_z_m,
-            f"{key}.drop_z_m",
-            self.drop_z_m,
-            "must be above the bin's top (top_z_m): the object is released over the bin",
-        )
-        for name in ("centre_x_m", "centre_y_m", "top_z_m", "floor_z_m", "drop_z_m"):
-            value: float = getattr(self, name)
-            require(
-                abs(value) <= MAX_COORDINATE_M,
-                f"{key}.{name}",
-                value,
-                f"must be within +-{MAX_COORDINATE_M:g} m",
-            )
-
-    @property
-    def half_m(self) -> float:
-        """Half the bin's outer side."""
-        return 0.5 * self.size_m
-
-    @property
-    def inner_half_m(self) -> float:
-        """Half the side of the bin's inner area (inside the walls)."""
-        return 0.5 * self.size_m - self.wall_m
-
-    def contains_xy(self, x_m: float, y_m: float) -> bool:
-        """Whether a point lies over the bin's inner area."""
-        half = self.inner_half_m
-        return abs(x_m - self.centre_x_m) <= half and abs(y_m - self.centre_y_m) <= half
-
-    @property
-    def drop_point_m(self) -> tuple[float, float, float]:
-        """Where a controller releases an object over this bin (world frame)."""
-        return (self.centre_x_m, self.centre_y_m, self.drop_z_m)
-
-
-@dataclass(frozen=True, kw_only=True)
 class StationSpec:
     """One robot with its tool, pick window and bins; its topics under ``namespace``."""
 
@@ -378,6 +313,9 @@ class StationSpec:
     base_yaw_rad: float = 0.0
     pick_window_x_m: tuple[float, float] = (-0.35, 0.35)
     bins: tuple[BinSpec, ...] = ()
+    bin_layout: tuple[BinSpec, ...] = field(default=(), compare=False, repr=False)
+    """The bins as the cell file lists them, slots included (:func:`resolve_cell` assigns
+    them again from here); empty when ``bins`` are the file's own. Never written out."""
 
     def __post_init__(self) -> None:
         require(
@@ -408,7 +346,7 @@ class StationSpec:
             self.base_yaw_rad,
             "must be finite, within +-4 pi",
         )
-        classes = [b.class_name for b in self.bins]
+        classes = [b.class_name for b in self.bins if not b.slot]
         require(
             len(set(classes)) == len(classes),
             "station.bins",
@@ -417,7 +355,9 @@ class StationSpec:
         )
 
     def bin_for(self, class_name: str) -> BinSpec | None:
-        """The station's bin that sorts ``class_name``, if any."""
+        """The station's bin that sorts ``class_name``, if any (a slot sorts nothing)."""
+        if not class_name:
+            return None
         return next((b for b in self.bins if b.class_name == class_name), None)
 
     def in_window(self, x_m: float) -> bool:
@@ -442,7 +382,13 @@ class StationSpec:
 # -- the cell -------------------------------------------------------------------------------
 @dataclass(frozen=True, kw_only=True)
 class Cell:
-    """Everything physical about the cell; ``source`` is the file it was read from."""
+    """Everything physical about the cell; ``source`` is the file it was read from.
+
+    ``materials`` is the class table of the pieces it sorts (:mod:`interfaces.materials`: the
+    density, heights, friction, restitution, seal efficiency and colour of every class): a
+    run's resolved cell carries its dataset's (:func:`resolve_cell`), a cell file without a
+    ``materials:`` section the shipped one.
+    """
 
     name: str = "cell"
     belt: BeltSpec = field(default_factory=BeltSpec)
@@ -450,6 +396,7 @@ class Cell:
     drive: DriveSpec = field(default_factory=DriveSpec)
     physics: PhysicsSpec = field(default_factory=PhysicsSpec)
     stations: tuple[StationSpec, ...] = ()
+    materials: ClassTable = field(default_factory=shipped_table)
     source: str = ""
 
     def __post_init__(self) -> None:
@@ -464,10 +411,10 @@ class Cell:
             "station namespaces must differ (two stations cannot share their topics)",
         )
         for i, station in enumerate(self.stations):
-            for b in station.bins:
+            for j, b in enumerate(station.bins):
                 require(
                     not self.belt.on_belt_xy(b.centre_x_m, b.centre_y_m),
-                    f"stations[{i}].bins[{b.class_name}]",
+                    bin_key(i, j, b),
                     (b.centre_x_m, b.centre_y_m),
                     "stands on the belt",
                 )
@@ -479,7 +426,8 @@ class Cell:
         seen: dict[str, None] = {}
         for station in self.stations:
             for b in station.bins:
-                seen.setdefault(b.class_name)
+                if not b.slot:
+                    seen.setdefault(b.class_name)
         return tuple(seen)
 
     @property
@@ -511,9 +459,13 @@ class Cell:
         return max(s.pick_window_x_m[1] for s in self.stations)
 
     def to_yaml(self) -> str:
-        """The resolved cell as YAML (every robot and tool written out in full)."""
+        """The resolved cell as YAML (every robot and tool written out in full, every bin with
+        its class, the class table as ``materials:``)."""
         data = to_data(self)
         data.pop("source", None)
+        for station in data["stations"]:
+            station.pop("bin_layout", None)
+        data["materials"] = self.materials.to_data()
         return yaml.safe_dump(data, sort_keys=False)
 
     def save(self, path: Path) -> None:
@@ -522,6 +474,11 @@ class Cell:
 
 
 # -- layout ---------------------------------------------------------------------------------
+def bin_key(station: int, index: int, bin_spec: BinSpec) -> str:
+    """How an error names a bin: ``stations[i].bins[<class>]``, a slot by its index."""
+    return f"stations[{station}].bins[{bin_spec.class_name or index}]"
+
+
 MIN_BASE_SEPARATION_M = 0.3
 """Closest two stations' robot bases may stand (their footprints would overlap)."""
 
@@ -584,8 +541,8 @@ def check_layout(cell: Cell) -> None:
             )
     placed: list[tuple[str, BinSpec]] = []
     for i, station in enumerate(cell.stations):
-        for b in station.bins:
-            key = f"stations[{i}].bins[{b.class_name}]"
+        for j, b in enumerate(station.bins):
+            key = bin_key(i, j, b)
             require(
                 not _bin_over_belt(belt, b),
                 key,
@@ -619,6 +576,9 @@ def _station_from_data(raw: object, where: str) -> StationSpec:
         if key not in data:
             msg = f"{where}: missing {key!r}"
             raise CellError(msg)
+    if "bin_layout" in data:
+        msg = f"{where}: unknown key 'bin_layout' (a station lists its bins under bins)"
+        raise CellError(msg)
     robot = robot_from_data(data.pop("robot"), f"{where}.robot")
     tool = tool_from_data(data.pop("tool"), f"{where}.tool")
     return from_data(StationSpec, {**data, "robot": robot, "tool": tool}, where)
@@ -627,7 +587,10 @@ def _station_from_data(raw: object, where: str) -> StationSpec:
 def cell_from_data(data: object, where: str, *, base_dir: Path | None = None) -> Cell:
     """Build a cell from plain data (a parsed YAML file); errors name ``where`` and the key.
 
-    A relative ``drive.fmu`` path is resolved against ``base_dir``.
+    A relative ``drive.fmu`` path is resolved against ``base_dir``. The ``materials:``
+    section, when there is one, is a class table over the shipped one
+    (:func:`interfaces.materials.table_from_data`); the station's slots take its classes in
+    its order (:func:`resolve_cell`) until a run resolves them against its dataset.
     """
     if not isinstance(data, dict):
         msg = f"{where}: the top level must be a mapping"
@@ -641,6 +604,8 @@ def cell_from_data(data: object, where: str, *, base_dir: Path | None = None) ->
         msg = f"{where}: stations: {len(raw_stations)} stations, more than {MAX_STATIONS}"
         raise CellError(msg)
     try:
+        if "materials" in raw:
+            raw["materials"] = table_from_data(raw["materials"], "materials", shipped_table())
         stations = tuple(
             _station_from_data(s, f"stations[{i}]") for i, s in enumerate(raw_stations)
         )
@@ -655,7 +620,55 @@ def cell_from_data(data: object, where: str, *, base_dir: Path | None = None) ->
     fmu = cell.drive.fmu
     if not cell.drive.builtin and base_dir is not None and not Path(fmu).is_absolute():
         cell = replace(cell, drive=replace(cell.drive, fmu=str((base_dir / fmu).resolve())))
-    return cell
+    return resolve_cell(cell, cell.materials, strict=False)
+
+
+def resolve_cell(
+    cell: Cell,
+    table: ClassTable,
+    *,
+    classes: tuple[str, ...] | None = None,
+    bins: BinsMap | None = None,
+    where: str = "",
+    strict: bool = True,
+) -> Cell:
+    """``cell`` with every station's bin slots given a class (:func:`interfaces.bins.
+    assign_bins`) and ``table`` as its class table: the one function that resolves a cell
+    for an episode.
+
+    The slots take ``classes`` (default: ``table``'s, in its order; an episode passes the
+    classes of its dataset the scenario lets in), or the slot the scenario's ``bins`` map
+    names; each station starts again from the bins its file lists (``bin_layout``), so a
+    cell resolved once (with the shipped table, when it was loaded) can be resolved for any
+    dataset. A cell whose bins all name their class is only given ``table``. Raises
+    :class:`CellError` naming ``where`` (the scenario), the cell file, the station and what
+    does not fit; not ``strict`` (when a cell file is read, before any dataset), a station with
+    fewer free slots than classes sorts the first ones.
+    """
+    names = table.names if classes is None else classes
+    slot_map = bins if bins is not None else BinsMap()
+    prefix = f"{where}: " if where else ""
+    stations = []
+    for i, station in enumerate(cell.stations):
+        layout = station.bin_layout or station.bins
+        try:
+            assigned = assign_bins(
+                layout,
+                names,
+                slot_map.at(station.name),
+                where=f"stations[{i}] ({station.name})",
+                strict=strict,
+            )
+        except ConfigError as exc:
+            msg = cut_message(f"{prefix}the cell {cell.source or cell.name}: {exc}")
+            raise CellError(msg) from None
+        has_slots = any(b.slot for b in layout)
+        stations.append(replace(station, bins=assigned, bin_layout=layout if has_slots else ()))
+    try:
+        return replace(cell, stations=tuple(stations), materials=table)
+    except ConfigError as exc:
+        msg = cut_message(f"{prefix}the cell {cell.source or cell.name}: {exc}")
+        raise CellError(msg) from None
 
 
 def load_cell(path: Path | str | None = None) -> Cell:

@@ -1,44 +1,72 @@
-"""The display colour of every waste class: one table for meshes, scene markers, players, pictures.
+"""The display colour of every waste class: one source for meshes, scene markers, players, pictures.
 
-A dataset names its own classes (COCO, labelme and YOLO files bring theirs), so a colour is a
-function of the class name: the four CDW classes have fixed colours (the ones meshgen writes
-into a dataset's ``materials.mtl`` by default), any other name gets a stable colour of its
-own derived from the name, the same on every machine and in every run. A dataset whose
-``materials.mtl`` gives a class another colour (meshgen ``--classes FILE.yaml`` with ``rgb``)
-keeps it: :func:`dataset_class_rgb` reads that file.
+Colours are facts of the class table (:mod:`interfaces.materials`): the shipped table gives
+the four CDW classes theirs (the ones meshgen writes into a dataset's ``materials.mtl`` by
+default), a dataset's own table (meshgen ``--classes FILE.yaml`` with ``rgb``) may give any
+class another, and a class no table colours gets a stable colour of its own derived from its
+name (:func:`interfaces.materials.name_rgb`), the same on every machine and in every run.
 """
 
 from __future__ import annotations
 
-import colorsys
-import zlib
+from collections.abc import Callable
 from pathlib import Path
 
-RGB = tuple[float, float, float]
-"""Red, green, blue in [0, 1]."""
+from interfaces.materials import (
+    MTL_FILE,
+    RGB,
+    ClassTable,
+    MaterialsError,
+    dataset_table,
+    mtl_classes,
+    shipped_table,
+)
 
-CLASS_RGB: dict[str, RGB] = {
-    "concrete": (0.62, 0.62, 0.60),
-    "brick": (0.70, 0.30, 0.20),
-    "wood": (0.76, 0.60, 0.42),
-    "rubber": (0.10, 0.10, 0.10),
-}
-"""The CDW classes' colours: grey concrete, brick red, light-brown wood, near-black rubber."""
+__all__ = [
+    "CLASS_RGB",
+    "RGB",
+    "class_colour",
+    "class_rgb",
+    "dataset_class_rgb",
+    "dataset_colour",
+    "rgb_hex",
+]
 
-MATERIALS_FILE = "materials.mtl"
-"""The file in a meshgen output folder that holds each class's colour (``newmtl`` + ``Kd``)."""
+CLASS_RGB: dict[str, RGB] = {m.name: m.colour for m in shipped_table().classes}
+"""The shipped classes' colours (``interfaces/materials.yaml``): grey concrete, brick red,
+light-brown wood, near-black rubber."""
 
 
 def class_rgb(class_name: str, overrides: dict[str, RGB] | None = None) -> RGB:
-    """The colour of ``class_name``: ``overrides`` first, then :data:`CLASS_RGB`, else a hue
-    taken from the CRC-32 of the name (saturated, mid-bright, so it stands out on the belt)."""
+    """The colour of ``class_name``: ``overrides`` first (a dataset's table,
+    :func:`dataset_class_rgb`), then the shipped table's (its default: the colour of the
+    name)."""
     if overrides and class_name in overrides:
         return overrides[class_name]
-    if class_name in CLASS_RGB:
-        return CLASS_RGB[class_name]
-    hue = (zlib.crc32(class_name.encode("utf-8")) % 360) / 360.0
-    red, green, blue = colorsys.hsv_to_rgb(hue, 0.65, 0.85)
-    return (round(red, 3), round(green, 3), round(blue, 3))
+    return shipped_table().material(class_name).colour
+
+
+def class_colour(table: ClassTable) -> Callable[[str], RGB]:
+    """Each class's colour in ``table`` (an episode's: its cell's ``materials``), a class it
+    does not name the colour of its default or of its name."""
+
+    def colour(class_name: str) -> RGB:
+        return table.material(class_name).colour
+
+    return colour
+
+
+def dataset_colour(dataset_dir: Path | None) -> Callable[[str], RGB]:
+    """Each class's colour in a dataset's class table (``classes.yaml``, or an older output's
+    ``summary.json`` and ``materials.mtl``: :func:`interfaces.materials.dataset_table`), the
+    shipped table's when there is no dataset or it cannot be read."""
+    table = shipped_table()
+    if dataset_dir is not None:
+        try:
+            table = dataset_table(Path(dataset_dir))
+        except (MaterialsError, OSError):
+            table = shipped_table()
+    return class_colour(table)
 
 
 def rgb_hex(rgb: RGB) -> str:
@@ -47,24 +75,11 @@ def rgb_hex(rgb: RGB) -> str:
 
 
 def dataset_class_rgb(dataset_dir: Path) -> dict[str, RGB]:
-    """Each class's colour as the dataset's ``materials.mtl`` gives it (``{}`` without one).
-
-    Lines other than ``newmtl NAME`` and ``Kd R G B`` are ignored, as are ``Kd`` lines that do
-    not hold three numbers: the colour is a display hint, never a reason to refuse a dataset.
-    """
-    path = Path(dataset_dir) / MATERIALS_FILE
-    if not path.is_file():
-        return {}
-    colours: dict[str, RGB] = {}
-    name: str | None = None
-    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
-        fields = line.split()
-        if len(fields) == 2 and fields[0] == "newmtl":
-            name = fields[1]
-        elif len(fields) == 4 and fields[0] == "Kd" and name is not None:
-            try:
-                red, green, blue = (float(v) for v in fields[1:])
-            except ValueError:
-                continue
-            colours[name] = (red, green, blue)
-    return colours
+    """Each class's colour as the dataset's class table gives it (``classes.yaml``, or an older
+    output's ``materials.mtl``: ``newmtl NAME`` and ``Kd R G B``); ``{}`` when the folder has
+    neither: the colour is a display hint, never a reason to refuse a dataset."""
+    try:
+        table = dataset_table(Path(dataset_dir))
+    except (MaterialsError, OSError):
+        return dict(mtl_classes(Path(dataset_dir) / MTL_FILE)[1])
+    return {m.name: m.colour for m in table.classes}

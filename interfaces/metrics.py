@@ -21,7 +21,9 @@ counts (with a Wilson interval), never the mean of the ratios.
 The reference's equations: (1) success rate = picked / processed, (2) miss rate = missed /
 processed, (3) throughput = picked per minute. Every ratio is 0 when its denominator is 0.
 
-Line scores: ``recovery_rate`` per class and for the line, ``recovered`` / ``entered``:
+Line scores: ``recovery_takeable``, the recovery over the pieces some station of the cell could
+take (by the controllers' static rules, judged as each piece spawned: the ``spawned`` event's
+``takeable``), beside ``recovery_rate`` per class and for the line, ``recovered`` / ``entered``:
 objects placed in their class's bin / objects that entered, over the *complete cohort*
 (:func:`complete_cohort`): in spawn order, every object spawned before the first one still
 undecided when the episode ends, so every one of them has a fate (or lies in a bin, knocked
@@ -162,6 +164,22 @@ METRICS: tuple[Metric, ...] = (
         scopes=EVENT_SCOPES,
     ),
     Metric(
+        name="entered_takeable",
+        unit="objects",
+        formula="objects of the complete cohort (`entered`) that some station of the cell could "
+        "take, by its controller's static rules, when they spawned (the `spawned` event's "
+        "`takeable`; an object whose `spawned` event does not say counts as takeable)",
+        kind="count",
+        scopes=EVENT_SCOPES,
+    ),
+    Metric(
+        name="recovered_takeable",
+        unit="objects",
+        formula="objects of `entered_takeable` that came to rest in their class's bin",
+        kind="count",
+        scopes=EVENT_SCOPES,
+    ),
+    Metric(
         name="binned",
         unit="objects",
         formula="objects of any class that came to rest in the scope's bins: every bin (line), "
@@ -256,6 +274,14 @@ METRICS: tuple[Metric, ...] = (
         formula="recovered / entered",
         kind="rate",
         ratio_of=("recovered", "entered"),
+        scopes=EVENT_SCOPES,
+    ),
+    Metric(
+        name="recovery_takeable",
+        unit="1",
+        formula="recovered_takeable / entered_takeable",
+        kind="rate",
+        ratio_of=("recovered_takeable", "entered_takeable"),
         scopes=EVENT_SCOPES,
     ),
     Metric(
@@ -359,8 +385,9 @@ class Counts:
     """What the events of one episode (of one station, or of one class) add up to.
 
     ``entered`` and ``recovered`` count the complete cohort (:func:`complete_cohort`), their
-    ``_by_class`` mappings the same per object class; ``spawned`` and ``placed_correct`` count
-    every object.
+    ``_by_class`` mappings the same per object class; ``entered_takeable`` and
+    ``recovered_takeable`` those of them some station could take (:func:`untakeable`);
+    ``spawned`` and ``placed_correct`` count every object.
     """
 
     spawned: int = 0
@@ -373,6 +400,8 @@ class Counts:
     placed_correct: int = 0
     sorted: int = 0
     recovered: int = 0
+    entered_takeable: int = 0
+    recovered_takeable: int = 0
     binned: int = 0
     dropped: int = 0
     unintended_contacts: int = 0
@@ -382,6 +411,12 @@ class Counts:
     entered_by_class: Mapping[str, int] = field(default_factory=dict)
     recovered_by_class: Mapping[str, int] = field(default_factory=dict)
     dropped_by_reason: Mapping[str, int] = field(default_factory=dict)
+
+
+def untakeable(event: Event) -> bool:
+    """Whether a ``spawned`` event says no station of the cell could take its object (its
+    ``takeable`` is false: :mod:`twin.spawn_fit`); an event that does not say is takeable."""
+    return event.type is EventType.SPAWNED and event.data.get("takeable") is False
 
 
 def station_of(event: Event) -> str | None:
@@ -516,11 +551,18 @@ def count_events(
     taken over every class even with ``class_name``): its objects, and those of them that came
     to rest in their class's bin. An object picked but still carried, or still falling into a
     bin, when the episode ends is decided (picked): it counts in ``entered``, not in
-    ``recovered``.
+    ``recovered``. ``entered_takeable`` and ``recovered_takeable`` count those of them whose
+    ``spawned`` event does not say that no station could take them (:func:`untakeable`; at
+    every scope, a station's too, though its events do not include the ``spawned`` ones).
     """
     tally = _Tally()
     stream = tally if class_name is None else _Tally()
-    for event in _selected(events, station, None):
+    refused: set[int] = set()
+    for event in events:
+        if untakeable(event):
+            refused.add(event.object_id)
+        if station is not None and station_of(event) != station:
+            continue
         if event.type is EventType.PLACED_IN_BIN and (
             class_name is None or event.data.get("bin") == class_name
         ):
@@ -533,6 +575,8 @@ def count_events(
     cohort = _cohort_of(stream)
     entered = {oid: name for oid, name in tally.spawned.items() if oid in cohort}
     recovered = [name for oid, name in tally.placed_correct.items() if oid in entered]
+    takeable = {oid for oid in entered if oid not in refused}
+    recovered_takeable = [oid for oid in tally.placed_correct if oid in takeable]
     outcomes = list(tally.fate.values())
     return Counts(
         spawned=len(tally.spawned),
@@ -545,6 +589,8 @@ def count_events(
         placed_correct=len(tally.placed_correct),
         sorted=len(tally.sorted),
         recovered=len(recovered),
+        entered_takeable=len(takeable),
+        recovered_takeable=len(recovered_takeable),
         binned=len(tally.binned),
         dropped=len(tally.drops),
         unintended_contacts=tally.unintended,
@@ -592,6 +638,8 @@ def _count_values(counts: Counts) -> dict[str, float]:
         "placed_correct": counts.placed_correct,
         "sorted": counts.sorted,
         "recovered": counts.recovered,
+        "entered_takeable": counts.entered_takeable,
+        "recovered_takeable": counts.recovered_takeable,
         "binned": counts.binned,
     }
 
@@ -613,12 +661,15 @@ def event_scores(counts: Counts) -> dict[str, Any]:
         "placed_correct": counts.placed_correct,
         "sorted": counts.sorted,
         "recovered": counts.recovered,
+        "entered_takeable": counts.entered_takeable,
+        "recovered_takeable": counts.recovered_takeable,
         "binned": counts.binned,
         "dropped": counts.dropped,
         "pick_success_rate": rate("pick_success_rate", values),
         "miss_rate": rate("miss_rate", values),
         "pick_throughput_per_min": ratio(counts.picked, minutes),
         "recovery_rate": rate("recovery_rate", values),
+        "recovery_takeable": rate("recovery_takeable", values),
         "correct_bin_ratio": rate("correct_bin_ratio", values),
         "purity": rate("purity", values),
         "time_per_object_s": ratio(counts.duration_s, counts.picked),

@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from interfaces.catalog import entry, is_part_name, missing_fields
 from interfaces.dataclass_io import from_data
 from interfaces.errors import ConfigError, cut, require
+
+if TYPE_CHECKING:
+    from interfaces.materials import ClassTable
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -143,10 +146,11 @@ class SuctionCupSpec:
     Holding force (the theoretical holding force of a suction cup, F = dp A, Schmalz, "Holding
     force", and "Theoretical holding force of a suction cup", schmalz.com): ``F = vacuum_kPa *
     1000 * pi (cup_diameter_m / 2)^2 * eta``, ``eta`` the seal efficiency of the object's class
-    (``seal_efficiency``, else ``default_seal_efficiency``): the fraction of the vacuum a cup
-    keeps on that surface. Porous, rough and heterogeneous surfaces leak (Schmalz asks for a
-    safety factor of at least 2 on them, against 1.5 on smooth, dense ones), so concrete and
-    brick get a low efficiency, rubber a high one. Every physics step of the carry, ``F`` is
+    (:meth:`efficiency`): the fraction of the vacuum a cup keeps on that surface, a fact of the
+    class table (:mod:`interfaces.materials`: porous, rough and heterogeneous surfaces leak,
+    so concrete and brick keep less than rubber) unless this tool overrides it per class
+    (``seal_efficiency``) or for every class it does not name (``default_seal_efficiency``;
+    None: the table's). Every physics step of the carry, ``F`` is
     checked against ``mass (g + |a|)`` with ``a`` the TCP's measured acceleration: exceeded,
     the object drops (``pick_dropped``, reason ``suction_overload``). Vacuum off vents the cup
     in ``vent_s``; the object is released.
@@ -166,7 +170,7 @@ class SuctionCupSpec:
     body_radius_m: float = 0.025
     vacuum_kPa: float = 60.0
     seal_efficiency: dict[str, float] = field(default_factory=dict)
-    default_seal_efficiency: float = 0.5
+    default_seal_efficiency: float | None = None
     build_up_s: float = 0.15
     vent_s: float = 0.05
     max_tilt_rad: float = 0.35
@@ -193,24 +197,36 @@ class SuctionCupSpec:
             self.tcp_half_extents_m,
             "must be positive",
         )
-        for name, eta in {
-            **self.seal_efficiency,
-            "(default)": self.default_seal_efficiency,
-        }.items():
+        for name, eta in self.seal_efficiency.items():
             require(0 < eta <= 1, f"tool.seal_efficiency.{name}", eta, "must be in (0, 1]")
+        if self.default_seal_efficiency is not None:
+            require(
+                0 < self.default_seal_efficiency <= 1,
+                "tool.default_seal_efficiency",
+                self.default_seal_efficiency,
+                "must be in (0, 1] (or null: the class table's)",
+            )
 
     @property
     def cup_area_m2(self) -> float:
         """Area of the cup's lip disc."""
         return math.pi * (0.5 * self.cup_diameter_m) ** 2
 
-    def efficiency(self, class_name: str) -> float:
-        """The seal efficiency on objects of ``class_name``."""
-        return self.seal_efficiency.get(class_name, self.default_seal_efficiency)
+    def efficiency(self, class_name: str, materials: ClassTable) -> float:
+        """The seal efficiency on objects of ``class_name``: this tool's ``seal_efficiency``
+        for it, else its ``default_seal_efficiency``, else the class table's
+        (``materials``, :meth:`interfaces.materials.ClassTable.material`)."""
+        if class_name in self.seal_efficiency:
+            return self.seal_efficiency[class_name]
+        if self.default_seal_efficiency is not None:
+            return self.default_seal_efficiency
+        return materials.material(class_name).seal_efficiency
 
-    def holding_force(self, class_name: str) -> float:
-        """The force (N) the sealed cup holds an object of ``class_name`` with."""
-        return self.vacuum_kPa * 1000.0 * self.cup_area_m2 * self.efficiency(class_name)
+    def holding_force(self, class_name: str, materials: ClassTable) -> float:
+        """The force (N) the sealed cup holds an object of ``class_name`` with (its seal
+        efficiency from :meth:`efficiency`)."""
+        eta = self.efficiency(class_name, materials)
+        return self.vacuum_kPa * 1000.0 * self.cup_area_m2 * eta
 
     @property
     def vacuum_joint(self) -> str:

@@ -22,7 +22,7 @@ SKIP_REASONS: dict[str, str] = {
     "not_a_number": "a value is not a finite number",
     "bad_class_id": "the class field is not a non-negative integer",
     "unknown_class_id": "the class id is not in data.yaml / the COCO categories",
-    "unknown_class": "the class name is not in the class table (no density known)",
+    "unknown_class": "the shape has no class label",
     "too_few_points": "fewer than 3 points",
     "not_a_polygon": "the shape is not a polygon",
     "out_of_range": "coordinates lie far outside the image",
@@ -39,6 +39,7 @@ WARNING_REASONS: dict[str, str] = {
     "height_image_unreadable": "the height image cannot be read: the image's heights are sampled",
     "height_image_size_mismatch": "the height image's size is not the annotation's: sampled",
     "height_not_above_belt": "no level above the belt inside the piece: its height is sampled",
+    "default_material": "the class table does not name the class: its pieces take the default",
 }
 """Every warning reason: something was made differently than asked, but the meshes were written."""
 

@@ -25,7 +25,7 @@ from meshgen.config import MeshgenConfig
 from meshgen.export import SCENE_COLUMNS, csv_text, write_text
 from meshgen.footprint import pixels_to_belt, touches_border
 from meshgen.loaders import discover, load_source
-from meshgen.pipeline import object_height_m, object_id
+from meshgen.pipeline import class_entry, object_height_m, object_id
 
 
 def run_baseline(dataset: Path, out: Path, config: MeshgenConfig) -> tuple[int, int, float]:
@@ -35,7 +35,7 @@ def run_baseline(dataset: Path, out: Path, config: MeshgenConfig) -> tuple[int, 
 
     start = time.perf_counter()
     listing = discover(dataset, config.fmt, config.image_size_px)
-    table = {spec.name: (i, spec) for i, spec in enumerate(config.classes)}
+    table = {spec.name: (i, spec) for i, spec in enumerate(config.classes.classes)}
     images = objects = 0
     skips: list[Skip] = []
     for source in listing.sources:
@@ -49,10 +49,8 @@ def run_baseline(dataset: Path, out: Path, config: MeshgenConfig) -> tuple[int, 
         m_per_px = config.belt_width_m / ann.width_px
         rows: list[tuple[object, ...]] = []
         for poly in ann.polygons:
-            entry = table.get(poly.class_name)
-            if entry is None or touches_border(
-                poly.points_px, ann.width_px, ann.height_px, config.border_margin_px
-            ):
+            entry = table.get(poly.class_name) or class_entry(config, poly.class_name)
+            if touches_border(poly.points_px, ann.width_px, ann.height_px, config.border_margin_px):
                 continue
             ring_m = pixels_to_belt(poly.points_px, ann.width_px, ann.height_px, m_per_px)
             shape = shapely.Polygon(ring_m)

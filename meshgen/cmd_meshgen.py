@@ -55,7 +55,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--border-margin-px", type=float, default=1.0)
     parser.add_argument("--min-area-mm2", type=float, default=25.0)
     parser.add_argument("--up", choices=("z", "y"), default="z", help="up axis of the meshes")
-    parser.add_argument("--classes", type=Path, default=None, help="class table YAML")
+    parser.add_argument(
+        "--classes",
+        type=Path,
+        default=None,
+        help="the dataset's class table YAML, over the shipped one (interfaces/materials.yaml)",
+    )
     parser.add_argument(
         "--no-textures",
         dest="textures",
@@ -83,10 +88,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def config_from_args(args: argparse.Namespace) -> MeshgenConfig:
     """Build a :class:`meshgen.config.MeshgenConfig` from parsed options."""
-    from meshgen.classes import DEFAULT_CLASSES, load_class_table
+    from interfaces.materials import shipped_table
+    from meshgen.classes import load_table_file
     from meshgen.config import MeshgenConfig, parse_image_size
 
-    table = load_class_table(args.classes) if args.classes else DEFAULT_CLASSES
+    table = load_table_file(args.classes) if args.classes else shipped_table()
     return MeshgenConfig(
         fmt=args.fmt,
         belt_width_m=args.belt_width,
@@ -96,7 +102,7 @@ def config_from_args(args: argparse.Namespace) -> MeshgenConfig:
         border_margin_px=args.border_margin_px,
         min_area_mm2=args.min_area_mm2,
         up=args.up,
-        classes=tuple(table.values()),
+        classes=table,
         textures=args.textures,
         texture_max_px=args.texture_max_px,
         heights=args.heights if args.heights in ("", "auto") else str(Path(args.heights).resolve()),

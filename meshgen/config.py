@@ -6,7 +6,7 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from meshgen.classes import DEFAULT_CLASSES, ClassSpec
+from interfaces.materials import ClassTable, shipped_table
 from meshgen.errors import MeshgenError
 from meshgen.heights import HEIGHT_PERCENTILE, HEIGHT_SCALE_M
 from meshgen.textures import TEXTURE_MAX_PX
@@ -20,8 +20,10 @@ BELT_WIDTH_RANGE_M = (1e-3, 100.0)
 class MeshgenConfig:
     """Every knob of a run; the defaults are the CLI defaults.
 
-    ``classes`` is the class table in order; a class's ``class_id`` in the outputs is its
-    position here (concrete 0, brick 1, wood 2, rubber 3 by default), whatever the input format.
+    ``classes`` is the class table (:mod:`interfaces.materials`; the shipped one by default);
+    a class's ``class_id`` in the outputs is its position in it (concrete 0, brick 1, wood 2,
+    rubber 3 by default), whatever the input format, and -1 for a class it does not name (meshed
+    with its ``default`` entry).
     ``textures`` writes each image's texture and the meshes' texture coordinates
     (:mod:`meshgen.textures`), a texture's long side at most ``texture_max_px``. ``heights``
     takes heights from height images (:mod:`meshgen.heights`): ``""`` off, ``auto``
@@ -37,7 +39,7 @@ class MeshgenConfig:
     border_margin_px: float = 1.0
     min_area_mm2: float = 25.0
     up: str = "z"
-    classes: tuple[ClassSpec, ...] = field(default=tuple(DEFAULT_CLASSES.values()))
+    classes: ClassTable = field(default_factory=shipped_table)
     textures: bool = True
     texture_max_px: int = TEXTURE_MAX_PX
     heights: str = ""
@@ -67,7 +69,6 @@ class MeshgenConfig:
             ),
             (self.up in {"z", "y"}, f"--up must be z or y, got {self.up!r}"),
             (self.seed >= 0, f"--seed must be >= 0, got {self.seed}"),
-            (bool(self.classes), "the class table is empty"),
             (
                 16 <= self.texture_max_px <= 16384,
                 f"--texture-max-px must be from 16 to 16384, got {self.texture_max_px}",
@@ -92,9 +93,9 @@ class MeshgenConfig:
     def to_json(self) -> dict[str, Any]:
         """The configuration as plain JSON data (for summary.json)."""
         data = asdict(self)
-        data["classes"] = {
-            c.name: {k: v for k, v in asdict(c).items() if k != "name"} for c in self.classes
-        }
+        table = self.classes.to_data()
+        data["classes"] = table["classes"]
+        data["default_class"] = table["default"]
         return data
 
 

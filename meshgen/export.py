@@ -18,10 +18,10 @@ from typing import Any
 from meshgen.classes import ClassSpec
 from meshgen.errors import DatasetError
 
-OUTPUT_VERSION = 2
+OUTPUT_VERSION = 3
 """Version of what a meshgen output folder holds; caches of meshed data key on it. 2: each
 image's ``texture.jpg``, texture coordinates in the meshes, scene.csv columns ``texture_path``
-and ``height_source``."""
+and ``height_source``; 3: ``classes.yaml``, the class table the output was meshed with."""
 
 SCENE_COLUMNS: tuple[str, ...] = (
     "object_id",
@@ -212,7 +212,7 @@ def mtl_text(classes: tuple[ClassSpec, ...]) -> str:
     """MTL text with one diffuse material per class, named after the class."""
     blocks = ["# cdw-twin meshgen class materials"]
     for spec in classes:
-        r, g, b = spec.rgb
+        r, g, b = spec.colour
         blocks.append(
             f"newmtl {spec.name}\nKa 0.000000 0.000000 0.000000\n"
             f"Kd {r:.6f} {g:.6f} {b:.6f}\nKs 0.000000 0.000000 0.000000\nd 1.0\nillum 1"

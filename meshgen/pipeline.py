@@ -6,6 +6,9 @@ Output layout (the twin reads it)::
     OUT/index.csv                      one row per image (see ``export.INDEX_COLUMNS``)
     OUT/summary.json                   counts, skips by reason, timings, config
     OUT/materials.mtl                  one material per class
+    OUT/classes.yaml                   the class table it was meshed with: the classes it has
+                                       pieces of, in the table's order, and the default
+                                       (:func:`interfaces.materials.dataset_table` reads it)
     OUT/<stem>/scene.csv               one row per object (see ``export.SCENE_COLUMNS``)
     OUT/<stem>/scene.json              full per-object metadata
     OUT/<stem>/<object_id>.obj         the prism mesh, centre of mass at the origin, with texture
@@ -41,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from interfaces.materials import DATASET_TABLE, MTL_FILE, ClassTable
 from meshgen.annotations import (
     SKIP_REASONS,
     WARNING_REASONS,
@@ -125,6 +129,15 @@ class DatasetSummary:
     notices: tuple[Notice, ...] = ()
     textures: tuple[tuple[str, int], ...] = ()
     height_sources: tuple[tuple[str, int], ...] = ()
+    classes: tuple[tuple[str, int], ...] = ()
+    """The classes meshed (class, pieces): those the table names in its order, then those it
+    does not (meshed with its default) in the order first met."""
+
+    @property
+    def table(self) -> ClassTable:
+        """The class table the output was meshed with, as ``classes.yaml`` records it: the
+        classes meshed (:attr:`classes`) with their entries, and the default."""
+        return self.config.classes.restricted(name for name, _ in self.classes)
 
     @property
     def skipped(self) -> dict[str, int]:
@@ -168,6 +181,7 @@ class DatasetSummary:
             "warning_reasons": {r: WARNING_REASONS[r] for r in self.warned},
             "textures": dict(self.textures),
             "height_sources": dict(self.height_sources),
+            "classes": dict(self.classes),
             "elapsed_s": round(self.elapsed_s, 6),
             "ms_per_image": round(self.ms_per_image, 4),
             "ms_per_object": round(self.ms_per_object, 4),
@@ -207,6 +221,22 @@ def object_heights_m(seed: int, objects: list[tuple[str, int, ClassSpec]]) -> li
         spec.height_min_m + (spec.height_max_m - spec.height_min_m) * u
         for (_, _, spec), u in zip(objects, first_doubles(keys), strict=True)
     ]
+
+
+UNNAMED_CLASS_ID = -1
+"""The ``class_id`` of a piece whose class the class table does not name (meshed with the
+table's ``default`` entry)."""
+
+
+def class_entry(config: MeshgenConfig, class_name: str) -> tuple[int, ClassSpec]:
+    """The ``class_id`` and table entry of ``class_name``: its position in ``config.classes``,
+    or :data:`UNNAMED_CLASS_ID` and the table's default under its name
+    (:meth:`interfaces.materials.ClassTable.material`)."""
+    table = config.classes
+    for index, spec in enumerate(table.classes):
+        if spec.name == class_name:
+            return index, spec
+    return UNNAMED_CLASS_ID, table.material(class_name)
 
 
 def _skip(ann: ImageAnnotation, poly: RawPolygon, reason: str, detail: str) -> Skip:
@@ -273,18 +303,14 @@ def _select(
     Returns per image its early skips (with the polygon position), the kept polygons as
     ``(image, position, polygon, class_id, spec)`` and their ``(n, 2)`` belt-frame rings.
     """
-    table = {spec.name: (i, spec) for i, spec in enumerate(config.classes)}
+    table = {spec.name: (i, spec) for i, spec in enumerate(config.classes.classes)}
     margin = config.border_margin_px
     skips: list[list[tuple[int, Skip]]] = [[] for _ in anns]
     todo: list[tuple[int, int, RawPolygon, int, ClassSpec]] = []
     for img, ann in enumerate(anns):
         for pos, poly in enumerate(ann.polygons):
-            entry = table.get(poly.class_name)
-            if entry is None:
-                detail = f"class {poly.class_name!r} is not in the class table ({', '.join(table)})"
-                skips[img].append((pos, _skip(ann, poly, "unknown_class", detail)))
-                continue
-            todo.append((img, pos, poly, entry[0], entry[1]))
+            class_id, spec = table.get(poly.class_name) or class_entry(config, poly.class_name)
+            todo.append((img, pos, poly, class_id, spec))
     if not todo:
         return skips, [], []
     sizes = np.fromiter((len(t[2].points_px) for t in todo), dtype=np.int64, count=len(todo))
@@ -368,7 +394,7 @@ def _texture(ann: ImageAnnotation, config: MeshgenConfig) -> Texture:
     """The texture of one image (:func:`meshgen.textures.image_texture`)."""
     return image_texture(
         ann,
-        {spec.name: spec.rgb for spec in config.classes},
+        {p.class_name: config.classes.material(p.class_name).colour for p in ann.polygons},
         seed=config.seed,
         belt_width_m=config.belt_width_m,
         max_px=config.texture_max_px,
@@ -617,6 +643,7 @@ def _summarise(run: _Run, complete: bool) -> tuple[DatasetSummary, list[tuple[ob
     notices: list[Notice] = []
     textures: Counter[str] = Counter()
     height_sources: Counter[str] = Counter()
+    classes: Counter[str] = Counter()
     rows: list[tuple[object, ...]] = []
     objects = 0
     for result, file_skips in run.results:
@@ -629,6 +656,7 @@ def _summarise(run: _Run, complete: bool) -> tuple[DatasetSummary, list[tuple[ob
         if result.texture:
             textures[result.texture] += 1
         height_sources.update(r.height_source for r in result.records)
+        classes.update(r.class_name for r in result.records)
         rows.append(
             (
                 result.stem,
@@ -640,6 +668,10 @@ def _summarise(run: _Run, complete: bool) -> tuple[DatasetSummary, list[tuple[ob
                 f"{result.stem}/scene.csv",
             )
         )
+    table = run.config.classes
+    ordered = [n for n in table.names if n in classes]
+    unnamed = [n for n in classes if not table.names_class(n)]
+    notices.extend(_unnamed_notice(table.material(n), classes[n]) for n in unnamed)
     summary = DatasetSummary(
         out=run.out,
         fmt=run.listing.fmt,
@@ -653,8 +685,21 @@ def _summarise(run: _Run, complete: bool) -> tuple[DatasetSummary, list[tuple[ob
         notices=tuple(notices),
         textures=tuple(sorted(textures.items())),
         height_sources=tuple(sorted(height_sources.items())),
+        classes=tuple((n, classes[n]) for n in (*ordered, *unnamed)),
     )
     return summary, rows
+
+
+def _unnamed_notice(material: ClassSpec, pieces: int) -> Notice:
+    """The warning that a class the table does not name was meshed with its default."""
+    detail = (
+        f"not in the class table: its {pieces} piece(s) meshed with the table's default "
+        f"({material.density_kg_m3:g} kg/m^3, heights {material.height_min_m:g} to "
+        f"{material.height_max_m:g} m); name it in --classes FILE.yaml to give its own"
+    )
+    return Notice(
+        file=f"class {material.name!r}", where="", reason="default_material", detail=detail
+    )
 
 
 def _mesh_sources(run: _Run, progress: Callable[[int, int], None] | None) -> None:
@@ -731,9 +776,11 @@ def mesh_dataset(
         run.listing = discover(run.dataset, config.fmt, config.image_size_px)
         run.height_images = height_index(config.heights, run.dataset)
         staging_dir(out)
-        write_text(run.staging / "materials.mtl", mtl_text(config.classes))
         _mesh_sources(run, progress)
         summary, rows = _summarise(run, complete=True)
+        coloured = config.classes.including(name for name, _ in summary.classes)
+        write_text(run.staging / MTL_FILE, mtl_text(coloured.classes))
+        write_text(run.staging / DATASET_TABLE, summary.table.to_yaml())
         write_text(run.staging / "index.csv", csv_text(INDEX_COLUMNS, rows))
         write_json(run.staging / "summary.json", summary.to_json())
         with deferred_interrupts():

@@ -6,8 +6,11 @@ Example (two shells, same ``ROS_DOMAIN_ID``)::
     cdw-twin controller
 
 The cell is the scenario's ``cell`` (default: the reference cell) unless ``--cell`` names
-another (a shipped cell's name, such as ``two_pandas``, or a path); a cell of several stations
-takes one controller per station, each on its station's namespace.
+another (a shipped cell's name, such as ``two_pandas``, or a path), its bin slots given the
+dataset's classes (:func:`twin.scenario.episode_cell`); a cell of several stations takes one
+controller per station, each on its station's namespace. Every ``spawned`` event says whether
+some station could take the piece (``takeable``, :mod:`twin.spawn_fit`), by the rules of the
+controllers' parameter file (``--params-file``; default: the scenario's ``controller``).
 
 The episode log goes to ``--out`` (see :mod:`twin.episode_log`): the folder and its
 ``status.json`` exist from the start, ``events.jsonl`` is appended as events happen (flushed at
@@ -65,6 +68,7 @@ if TYPE_CHECKING:
     from twin.ros_node import Tap, TwinEndpoint
     from twin.scenario import Scenario
     from twin.sim import Twin
+    from twin.spawn_fit import PieceJudge
 
 
 class EpisodeStopped(Exception):  # noqa: N818 (a request, not an error)
@@ -124,6 +128,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="MCAP",
         help="record every message the node sends or receives to this MCAP file",
+    )
+    parser.add_argument(
+        "--params-file",
+        type=Path,
+        default=None,
+        help="the controllers' parameter file, whose rules judge whether some station could "
+        "take each spawned piece (default: the scenario's controller)",
     )
     add_view_options(parser)
 
@@ -228,14 +239,14 @@ def check_display(environ: dict[str, str] | None = None) -> str:
 
 def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path, Cell]:
     """The scenario with command-line overrides, the dataset folder and the cell, checked
-    together (:func:`twin.scenario_check.check_scenario`).
+    together (:func:`twin.scenario_check.check_scenario`); the cell's bins resolved for the
+    dataset (:func:`twin.scenario.episode_cell`).
 
     The scenario's ``cell`` and ``dataset`` are relative to its file; ``args.cell`` (when set)
     names the cell instead, relative to the working directory.
     """
     from interfaces.cell import load_cell
-    from twin.builtin import builtin_dataset
-    from twin.scenario import Scenario, scenario_cell
+    from twin.scenario import Scenario, scenario_cell, scenario_dataset
     from twin.scenario_check import check_scenario
 
     scenario = Scenario.load(args.scenario) if args.scenario else Scenario()
@@ -254,23 +265,55 @@ def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path, Cell]:
         duration_s=scenario.duration_s if args.duration is None else args.duration,
         seed=scenario.seed if args.seed is None else args.seed,
     )
-    if args.dataset is not None:
-        dataset = args.dataset
-    elif scenario.dataset != "builtin":
-        dataset = Path(scenario.dataset)
-        if not dataset.is_absolute() and args.scenario is not None:
-            dataset = (args.scenario.parent / dataset).resolve()
-    else:
-        dataset = builtin_dataset()
+    base = args.scenario.parent if args.scenario is not None else None
+    dataset = args.dataset if args.dataset is not None else scenario_dataset(scenario, base)
     where = str(args.scenario or "default scenario")
     cell_arg = getattr(args, "cell", None)
-    if cell_arg is not None:
-        cell = load_cell(cell_arg)
-    else:
+    cell = load_cell(cell_arg) if cell_arg is not None else scenario_cell(scenario, base, where)
+    selection = check_scenario(scenario, dataset, where=where, cell=cell)
+    return scenario, dataset, selection.cell or cell
+
+
+def spawn_judge(args: argparse.Namespace, scenario: Scenario, cell: Cell) -> PieceJudge:
+    """Whether some station of ``cell`` could take a piece, by its controllers' own rules
+    (:func:`control.fit.line_refusal`), each station's configuration loaded once from the
+    controllers' parameter file: ``--params-file``, else the file the scenario's
+    ``controller`` names (relative to the scenario file; :func:`control.config.params_path`).
+    The twin marks every spawned piece with it (:mod:`twin.spawn_fit`)."""
+    from control.config import params_path, station_configs
+    from control.fit import Piece, line_refusal
+
+    path: Path | None = getattr(args, "params_file", None)
+    if path is None:
         base = args.scenario.parent if args.scenario is not None else None
-        cell = scenario_cell(scenario, base, where)
-    check_scenario(scenario, dataset, where=where, cell=cell)
-    return scenario, dataset, cell
+        try:
+            path = params_path(scenario.controller, base)
+        except CdwTwinError as exc:
+            where = args.scenario or "default scenario"
+            msg = f"{where}: controller = {scenario.controller!r}: {exc}"
+            raise CdwTwinError(msg) from None
+    configs = station_configs(path, cell)
+
+    def judge(
+        *,
+        class_name: str,
+        length_m: float,
+        width_m: float,
+        height_m: float,
+        face_radius_m: float,
+        face_tilt_rad: float,
+    ) -> str | None:
+        piece = Piece(
+            class_name=class_name,
+            length_m=length_m,
+            width_m=width_m,
+            height_m=height_m,
+            face_radius_m=face_radius_m,
+            face_tilt_rad=face_tilt_rad,
+        )
+        return line_refusal(piece, configs)
+
+    return judge
 
 
 def _final_state(twin: Twin) -> dict[str, object]:
@@ -408,6 +451,7 @@ def _run_episode(
     if gui:
         check_display()
     scenario, dataset, cell = build_scenario(args)
+    judge = spawn_judge(args, scenario, cell)
     perception = PerceptionConfig.zero_noise() if args.perception == "zero" else None
     view = _open_live_view(args, cell)
     local_ros_defaults()
@@ -432,6 +476,7 @@ def _run_episode(
                     event_sink=None if log is None else log.append,
                 )
             )
+            twin.spawn_judge = judge
             return _serve(args, twin, stop, log, view, peers)
     except BaseException as exc:
         if out is not None:

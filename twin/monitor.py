@@ -34,13 +34,14 @@ Fates and events (every event about a robot or a window names its ``station``):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
 
 import pybullet as pb
 
-from interfaces.cell import BinSpec, Cell
+from interfaces.bins import BinSpec
+from interfaces.cell import Cell
 from interfaces.events import Event, EventType
 from twin.objects import read_obj_triangles
 from twin.station import Station
@@ -234,8 +235,17 @@ class Monitor:
         """A station's TCP pose after the last step (no new forward kinematics)."""
         return self._watches[station].tcp_pose
 
-    def add(self, placement: Placement, spawned: SpawnedBody, step: int, time_s: float) -> Event:
-        """Register a freshly spawned object; returns its ``spawned`` event."""
+    def add(
+        self,
+        placement: Placement,
+        spawned: SpawnedBody,
+        step: int,
+        time_s: float,
+        *,
+        extra: Mapping[str, object] | None = None,
+    ) -> Event:
+        """Register a freshly spawned object; returns its ``spawned`` event (``extra`` added
+        to its data: :class:`twin.spawn_fit.SpawnFit`'s judgement)."""
         qx, qy, qz, qw = spawned.inertial_quat_xyzw
         record = _Record(
             id=len(self._records) + 1,
@@ -263,6 +273,7 @@ class Monitor:
                 "source_id": placement.spec.object_id,
                 "position_m": list(placement.position_m),
                 "mass_kg": record.mass_kg,
+                **(extra or {}),
             },
         )
         self._pending.append(event)

@@ -18,7 +18,6 @@ it, so a huge mesh is refused with its file's name instead of stalling the twin.
 from __future__ import annotations
 
 import csv
-import json
 import math
 import re
 from collections.abc import Iterable
@@ -28,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from interfaces.materials import MaterialsError, dataset_table
 from meshgen.errors import ObjFileError
 from meshgen.objfile import ObjMesh, read_obj
 from twin.errors import SceneError
@@ -270,26 +270,17 @@ def _parse_object(
 
 
 def dataset_class_table(dataset_dir: Path) -> tuple[str, ...]:
-    """The class table meshgen used for ``dataset_dir`` (``summary.json``, ``config.classes``).
+    """The classes of the class table meshgen recorded for ``dataset_dir``, in its order
+    (:func:`interfaces.materials.dataset_table`: its ``classes.yaml``, or an older output's
+    ``summary.json``).
 
-    Every object of the output has one of these classes (meshgen skips any other). Raises
-    :class:`SceneError` naming the file when it is missing or has no class table.
+    Every object of the output has one of these classes. Raises :class:`SceneError` naming
+    the file when neither can be read.
     """
-    path = dataset_dir / "summary.json"
     try:
-        summary = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        msg = f"{path}: no such file (every meshgen output has one)"
-        raise SceneError(msg) from None
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        msg = f"{path}: cannot read: {exc}"
-        raise SceneError(msg) from None
-    config = summary.get("config") if isinstance(summary, dict) else None
-    table = config.get("classes") if isinstance(config, dict) else None
-    if not isinstance(table, dict) or not table:
-        msg = f"{path}: no class table (config.classes)"
-        raise SceneError(msg)
-    return tuple(str(name) for name in table)
+        return dataset_table(dataset_dir).names
+    except MaterialsError as exc:
+        raise SceneError(str(exc)) from None
 
 
 def load_dataset(

@@ -81,7 +81,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from interfaces import cdr
 from interfaces import contract as c
-from interfaces.class_colours import class_rgb, dataset_class_rgb
+from interfaces.class_colours import class_colour
 from interfaces.contract import Topic
 from interfaces.detections import Detection as PerceivedDetection
 from interfaces.detections import DetectionFrame
@@ -341,8 +341,7 @@ class TwinEndpoint:
         )
         self._scene_static_sent = False
         self._targets_every = max(1, round(1.0 / (SCENE_TARGETS_HZ * twin.dt_s)))
-        colours = dataset_class_rgb(twin.dataset_dir)
-        self._colour = partial(class_rgb, overrides=colours)
+        self._colour = class_colour(twin.cell.materials)
         self._objects = sc.ObjectMarkers(mesh=twin.object_mesh, colour=self._colour)
         self._marker_msgs: dict[tuple[str, int], tuple[sc.SceneMarker, Marker]] = {}
         self.links = [self._station_link(station) for station in twin.stations]

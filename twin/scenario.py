@@ -4,10 +4,14 @@ Three levels, as in the reference: the *object* level (which images and objects,
 re-sampled within class ranges, orientation jitter), the *system* level (belt speed, stochastic
 perturbation, order and spacing of the stream) and *physics* (friction and restitution ranges per
 class); besides them the camera model (``perception``, a :class:`twin.perception.PerceptionConfig`)
-and injected ``faults`` (detection dropout and belt stall windows, controller restarts), and the
+and injected ``faults`` (detection dropout and belt stall windows, controller restarts), the
 ``controller``'s parameter file (the name of one shipped in ``control/config/``, such as
-``default`` or ``throughput``, or a path relative to the scenario file). All
-randomness of an episode comes from one ``numpy.random.SeedSequence(seed)``; see
+``default`` or ``throughput``, or a path relative to the scenario file) and the ``bins`` map
+(which slot of a station's bins each class goes to, :class:`interfaces.bins.BinsMap`). Class
+facts (height ranges, friction, restitution) are the dataset's class table's
+(:mod:`interfaces.materials`, carried by the episode's resolved cell); the scenario's
+``objects.height_ranges_m``, ``physics.friction`` and ``physics.restitution`` override them per
+class. All randomness of an episode comes from one ``numpy.random.SeedSequence(seed)``; see
 :func:`seed_tree`.
 
 Example ``experiments/scenarios/default.yaml``::
@@ -33,10 +37,12 @@ from typing import Literal, NamedTuple
 import numpy as np
 import yaml
 
-from interfaces.cell import Cell, load_cell, resolve_cell_path
+from interfaces.bins import BinsMap, check_map
+from interfaces.cell import Cell, load_cell, resolve_cell, resolve_cell_path
 from interfaces.dataclass_io import from_data, to_data
 from interfaces.errors import cut, cut_message
 from interfaces.fileio import read_text_capped, write_atomic
+from interfaces.materials import ClassTable
 from interfaces.yamlio import load_yaml_strict
 from twin.errors import ConfigError
 from twin.perception import PerceptionConfig
@@ -58,7 +64,8 @@ class ObjectLevel:
     """Which objects enter the belt and how they vary from their source annotation.
 
     ``classes``: only objects of these classes enter; empty (the default) lets every class of
-    the dataset in.
+    the dataset in. ``resample_heights`` draws every piece's height anew from its class's range:
+    ``height_ranges_m``'s, else the class table's (``height_min_m``, ``height_max_m``).
     """
 
     images: tuple[str, ...] = ()
@@ -169,25 +176,14 @@ class SystemLevel:
             )
 
 
-def _default_friction() -> dict[str, tuple[float, float]]:
-    return {"concrete": (0.6, 0.8), "brick": (0.6, 0.8), "wood": (0.4, 0.6), "rubber": (0.8, 1.0)}
-
-
-def _default_restitution() -> dict[str, tuple[float, float]]:
-    return {
-        "concrete": (0.05, 0.15),
-        "brick": (0.05, 0.15),
-        "wood": (0.1, 0.25),
-        "rubber": (0.3, 0.5),
-    }
-
-
 @dataclass(frozen=True)
 class PhysicsLevel:
-    """Per-class contact properties, each drawn uniformly from its range per object."""
+    """Per-class contact properties, each drawn uniformly from its range per object: the
+    ranges given here, else the class table's (``friction``, ``restitution`` of
+    :class:`interfaces.materials.Material`)."""
 
-    friction: dict[str, tuple[float, float]] = field(default_factory=_default_friction)
-    restitution: dict[str, tuple[float, float]] = field(default_factory=_default_restitution)
+    friction: dict[str, tuple[float, float]] = field(default_factory=dict)
+    restitution: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         for name, rng in self.friction.items():
@@ -262,7 +258,10 @@ class Scenario:
 
     ``cell`` names the cell file (:func:`scenario_cell`): a shipped cell's name or a path.
     ``controller`` names the controller's ROS 2 parameter file (checked by ``cdw-twin run``
-    before anything starts): a file name without ``.yaml`` in ``control/config/``, or a path.
+    against the scenario's cell before anything starts): a file name without ``.yaml`` in
+    ``control/config/``, or a path. ``bins`` puts classes into the slot of a station's bins it
+    names (:class:`interfaces.bins.BinsMap`; the rest take the free slots in the class
+    table's order, :func:`episode_cell`).
     """
 
     name: str = "default"
@@ -271,6 +270,7 @@ class Scenario:
     duration_s: float = 60.0
     cell: str = "default"
     controller: str = "default"
+    bins: BinsMap = field(default_factory=BinsMap)
     objects: ObjectLevel = field(default_factory=ObjectLevel)
     system: SystemLevel = field(default_factory=SystemLevel)
     physics: PhysicsLevel = field(default_factory=PhysicsLevel)
@@ -355,6 +355,32 @@ def scenario_cell(scenario: Scenario, base_dir: Path | None = None, where: str =
     except ConfigError as exc:
         msg = cut_message(f"{prefix}cell = {cut(scenario.cell)}: {exc}")
         raise ConfigError(msg) from None
+
+
+def episode_cell(scenario: Scenario, cell: Cell, table: ClassTable, where: str = "") -> Cell:
+    """The cell an episode of ``scenario`` runs on: ``cell`` with its bin slots given the
+    dataset's classes the scenario lets in (``objects.classes``; every class of ``table``, the
+    dataset's class table, when empty), in the table's order or as the scenario's ``bins`` map
+    says, and ``table`` as its class table (:func:`interfaces.cell.resolve_cell`). Every place
+    that starts an episode resolves its cell here; errors name ``where`` (the scenario)."""
+    wanted = scenario.objects.classes
+    classes = tuple(c for c in table.names if not wanted or c in wanted)
+    check_map(scenario.bins, table.names, [s.name for s in cell.stations], where or "scenario")
+    return resolve_cell(cell, table, classes=classes, bins=scenario.bins, where=where)
+
+
+def scenario_dataset(scenario: Scenario, base_dir: Path | None = None) -> Path:
+    """The meshgen output folder ``scenario.dataset`` names: the built-in sample (meshed once,
+    :func:`twin.builtin.builtin_dataset`) for ``builtin``, else a path, relative to
+    ``base_dir`` (the scenario file's folder) when given."""
+    if scenario.dataset == "builtin":
+        from twin.builtin import builtin_dataset
+
+        return builtin_dataset()
+    dataset = Path(scenario.dataset)
+    if not dataset.is_absolute() and base_dir is not None:
+        dataset = (base_dir / dataset).resolve()
+    return dataset
 
 
 def _is_cell_path(value: str) -> bool:

@@ -8,17 +8,21 @@ episode that runs without objects. Checked:
 - ``dataset``: an existing meshgen output folder (``index.csv`` and the ``.cdw-meshgen`` marker,
   or, for outputs written before the marker existed, an ``index.csv`` with meshgen's header);
 - ``objects.classes``, ``objects.height_ranges_m``, ``physics.friction`` and
-  ``physics.restitution``: every class they name is a class the dataset has. Values left at
-  their defaults are exempt: the default tables name the built-in sample's four classes, which
-  a dataset need not all have;
+  ``physics.restitution``: every class they name is a class the dataset has. A friction or
+  restitution range equal to the shipped class table's for that class is exempt (a scenario a
+  run wrote out lists the shipped classes' ranges, and a dataset need not have them all);
+- ``bins``: every class the map names is a class of the dataset, every station a station of
+  the cell;
 - ``objects.images``: every name is an image of the dataset that has objects;
 - the object filters (``objects.images``, ``classes``, ``max_width_m``, ``min_height_m``, in the
   order :class:`twin.stream.Stream` applies them) leave at least one object; the error names the
   filter that emptied the selection. An object whose height is re-sampled counts as kept when its
   class's range reaches ``min_height_m``. ``max_objects`` (at least 1) only caps the stream;
-- the cell (the scenario's ``cell``, or the one passed): every class that can enter the belt
-  (the classes of the objects the filters keep) has a bin at some station (the error names
-  the class and the cell file); a scenario that enables the belt perturbation needs a drive
+- the cell (the scenario's ``cell``, or the one passed), its bin slots given the dataset's
+  classes (:func:`twin.scenario.episode_cell`; a station with fewer free slots than classes is
+  refused naming the station and the counts): every class that can enter the belt (the
+  classes of the objects the filters keep) has a bin at some station (the error names the
+  class and the cell file); a scenario that enables the belt perturbation needs a drive
   with a perturbation mapping; a third-party drive's FMU file is an FMU (a zip archive with
   an FMI 2.0 or 3.0 co-simulation model description) that has every variable the drive's
   ``mapping``, ``parameters`` and perturbation mapping name (:func:`twin.belt_drive.plan_fmu`:
@@ -34,7 +38,8 @@ episode that runs without objects. Checked:
   ``[0, duration_s]``.
 
 The dataset is read with :func:`twin.objects.load_dataset` (every ``scene.csv`` once; meshes are
-only checked to exist, never loaded), with the class table meshgen recorded in ``summary.json``.
+only checked to exist, never loaded), with the class table meshgen recorded in ``classes.yaml``
+(:func:`interfaces.materials.dataset_table`).
 
 Example::
 
@@ -45,17 +50,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from interfaces.cell import Cell
 from interfaces.errors import cut
+from interfaces.materials import ClassTable, MaterialsError, dataset_table, shipped_table
 from interfaces.urdf import station_reach
 from meshgen.outdir import MARKER_NAME, is_meshgen_output
 from twin.belt_drive import plan_fmu
 from twin.errors import ConfigError, FmuError, SceneError
 from twin.objects import ImageLayout, ObjectSpec, load_dataset
-from twin.scenario import PhysicsLevel, Scenario, scenario_cell
+from twin.scenario import Scenario, episode_cell, scenario_cell
 
 _SHOWN = 8
 """How many names an error message lists before it abbreviates."""
@@ -75,6 +81,9 @@ class Selection:
     images: tuple[str, ...]
     objects: int
     entering: tuple[str, ...] = ()
+    cell: Cell | None = field(default=None, compare=False, repr=False)
+    """The cell the episode runs on, its bins resolved for the dataset
+    (:func:`twin.scenario.episode_cell`)."""
 
 
 def check_scenario(
@@ -88,9 +97,12 @@ def check_scenario(
     """Check ``scenario`` against the meshgen output ``dataset_dir`` and ``cell``.
 
     ``where`` names the scenario (its file) in the messages; ``cell`` defaults to the one the
-    scenario names (relative to ``base_dir``, the scenario file's folder). Raises
-    :class:`ConfigError` (one line: ``where``, the key, the value and what is wrong) at the
-    first problem; returns what the object filters keep.
+    scenario names (relative to ``base_dir``, the scenario file's folder). The cell's bins are
+    resolved for the dataset (:func:`twin.scenario.episode_cell`: its slots take the dataset's
+    classes) before every class that can enter is checked to have one; the returned
+    selection's ``cell`` is the resolved cell. Raises :class:`ConfigError` (one line:
+    ``where``, the key, the value and what is wrong) at the first problem; returns what the
+    object filters keep.
     """
     cell = cell if cell is not None else scenario_cell(scenario, base_dir, where)
     _check_times(scenario, where)
@@ -98,12 +110,23 @@ def check_scenario(
     _check_drive(scenario, cell, where)
     _check_stations(cell, where)
     layouts = _read_dataset(dataset_dir, where)
+    table = _read_table(dataset_dir, where)
     classes = tuple(sorted({spec.class_name for lay in layouts for spec in lay.objects}))
     _check_class_names(scenario, classes, where)
     _check_images(scenario, layouts, where)
-    selection = _select(scenario, layouts, classes, where)
+    selection = _select(scenario, layouts, classes, table, where)
+    cell = episode_cell(scenario, cell, table, where)
     _check_bins(selection, cell, where)
-    return selection
+    return replace(selection, cell=cell)
+
+
+def _read_table(dataset_dir: Path, where: str) -> ClassTable:
+    """The dataset's class table (:func:`interfaces.materials.dataset_table`)."""
+    try:
+        return dataset_table(dataset_dir)
+    except MaterialsError as exc:
+        msg = f"{where}: dataset = '{dataset_dir}': {exc}"
+        raise ConfigError(msg) from None
 
 
 def _fail(where: str, key: str, value: object, what: str) -> ConfigError:
@@ -261,20 +284,28 @@ def _check_class_names(scenario: Scenario, classes: tuple[str, ...], where: str)
     for name in objects.height_ranges_m:
         if name not in known:
             raise _fail(where, "objects.height_ranges_m", name, f"key {lacks}")
-    defaults = PhysicsLevel()
-    for key, table, default in (
-        ("physics.friction", scenario.physics.friction, defaults.friction),
-        ("physics.restitution", scenario.physics.restitution, defaults.restitution),
+    shipped = shipped_table()
+    for key, table, field_name in (
+        ("physics.friction", scenario.physics.friction, "friction"),
+        ("physics.restitution", scenario.physics.restitution, "restitution"),
     ):
-        for name in _changed_keys(table, default):
+        for name in _changed_keys(table, shipped, field_name):
             if name not in known:
                 raise _fail(where, key, name, f"key {lacks}")
 
 
 def _changed_keys(
-    table: Mapping[str, tuple[float, float]], default: Mapping[str, tuple[float, float]]
+    table: Mapping[str, tuple[float, float]], shipped: ClassTable, field_name: str
 ) -> list[str]:
-    return [name for name, rng in table.items() if default.get(name) != tuple(rng)]
+    """The classes of ``table`` whose range is not the shipped class table's own (a scenario
+    written out by a run, or before the class table existed, lists those for the shipped
+    classes, which a dataset need not all have)."""
+    return [
+        name
+        for name, rng in table.items()
+        if not shipped.names_class(name)
+        or getattr(shipped.material(name), field_name) != tuple(rng)
+    ]
 
 
 def _check_images(scenario: Scenario, layouts: tuple[ImageLayout, ...], where: str) -> None:
@@ -288,16 +319,23 @@ def _check_images(scenario: Scenario, layouts: tuple[ImageLayout, ...], where: s
         raise _fail(where, "objects.images", list(scenario.objects.images), what)
 
 
-def _tallest_m(scenario: Scenario, spec: ObjectSpec) -> float:
-    """The tallest the object can enter: the top of its class's range when re-sampled."""
+def _tallest_m(scenario: Scenario, spec: ObjectSpec, table: ClassTable) -> float:
+    """The tallest the object can enter: the top of its class's range when re-sampled (the
+    scenario's, else the class table's)."""
     objects = scenario.objects
-    if objects.resample_heights and spec.class_name in objects.height_ranges_m:
-        return objects.height_ranges_m[spec.class_name][1]
+    if objects.resample_heights:
+        if spec.class_name in objects.height_ranges_m:
+            return objects.height_ranges_m[spec.class_name][1]
+        return table.material(spec.class_name).height_max_m
     return spec.height_m
 
 
 def _select(
-    scenario: Scenario, layouts: tuple[ImageLayout, ...], classes: tuple[str, ...], where: str
+    scenario: Scenario,
+    layouts: tuple[ImageLayout, ...],
+    classes: tuple[str, ...],
+    table: ClassTable,
+    where: str,
 ) -> Selection:
     objects = scenario.objects
     wanted = set(objects.images)
@@ -331,9 +369,9 @@ def _select(
     if objects.min_height_m is not None:
         floor_m = objects.min_height_m
         before = kept
-        kept = [(i, s) for i, s in before if _tallest_m(scenario, s) >= floor_m]
+        kept = [(i, s) for i, s in before if _tallest_m(scenario, s, table) >= floor_m]
         if not kept:
-            tallest = max(_tallest_m(scenario, s) for _, s in before)
+            tallest = max(_tallest_m(scenario, s, table) for _, s in before)
             what = (
                 f"leaves no object: the tallest of the {len(before)} objects the filters "
                 f"before it keep is {tallest:.3g} m tall"

@@ -29,8 +29,9 @@ from enum import IntEnum
 
 import numpy as np
 
+from interfaces.bins import BinSpec
 from interfaces.cdr import CdrWriter
-from interfaces.cell import BinSpec, Cell
+from interfaces.cell import Cell
 from interfaces.class_colours import RGB
 
 Vec3 = tuple[float, float, float]

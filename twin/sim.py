@@ -47,6 +47,7 @@ import pybullet as pb
 from interfaces.cell import Cell, DriveSpec
 from interfaces.detections import DetectionFrame
 from interfaces.events import Event, EventType
+from interfaces.materials import dataset_table as dataset_materials
 from interfaces.metrics import Counts, count_events, event_scores, exit_station
 from twin.belt_drive import BeltDrive, BeltState
 from twin.builtin import cache_root
@@ -54,7 +55,8 @@ from twin.errors import ConfigError
 from twin.monitor import GroundTruth, Monitor
 from twin.objects import ImageLayout, ObjectSpec, load_dataset, read_obj_triangles
 from twin.perception import Perception, PerceptionConfig
-from twin.scenario import PerturbationLevel, Scenario, scenario_cell, seed_tree
+from twin.scenario import PerturbationLevel, Scenario, episode_cell, scenario_cell, seed_tree
+from twin.spawn_fit import PieceJudge, SpawnFit
 from twin.station import ArmCommand, Station
 from twin.stream import ImageBatch, Stream
 from twin.suction_point import SuctionPoints
@@ -181,10 +183,16 @@ class Twin:
     """The conveyor twin. One PyBullet client and one FMU instance per ``Twin``.
 
     ``cell`` defaults to the scenario's (a relative path taken from the working directory;
-    :func:`twin.cmd_node.build_scenario` resolves it against the scenario file). ``classes``
-    are the classes that can enter the belt (:func:`entering_classes`): the camera's labels.
+    :func:`twin.cmd_node.build_scenario` resolves it against the scenario file), its bins
+    resolved against the dataset's class table (:func:`twin.scenario.episode_cell`); a cell
+    passed in is taken as it is (resolved by the caller). ``classes`` are the classes that can
+    enter the belt (:func:`entering_classes`): the camera's labels.
     ``event_sink`` (also settable as the attribute of that name) receives every event as it
     is appended to :attr:`events`; it sees the events of every episode (every :meth:`reset`).
+    The attribute ``spawn_judge`` (a :class:`twin.spawn_fit.PieceJudge`: the stations'
+    controllers' own static rules, :func:`control.fit.line_refusal`; set it before
+    :meth:`reset`) marks every ``spawned`` event with whether some station could take the piece
+    (``takeable``, and its ``refusal`` when not); without one (None) the events carry no mark.
     """
 
     def __init__(
@@ -200,7 +208,10 @@ class Twin:
         event_sink: EventSink | None = None,
     ) -> None:
         self.scenario = scenario
-        self.cell = cell if cell is not None else scenario_cell(scenario)
+        self.layouts: tuple[ImageLayout, ...] = load_dataset(dataset_dir)
+        if cell is None:
+            cell = episode_cell(scenario, scenario_cell(scenario), dataset_materials(dataset_dir))
+        self.cell = cell
         self.dt_s = self.cell.physics.dt_s
         step_s = self.cell.drive.step_s
         self._fmu_every = (
@@ -212,7 +223,6 @@ class Twin:
         self.perception: Perception | None = None
         self._released: list[DetectionFrame] = []
         self.dataset_dir = dataset_dir
-        self.layouts: tuple[ImageLayout, ...] = load_dataset(dataset_dir)
         self.classes = entering_classes(self.layouts, scenario, self.cell)
         drive_parameters(self.cell.drive, scenario.system.perturbation, 0)  # refused early
         self._cache_dir, self._cache = collision_cache_dir()
@@ -230,6 +240,8 @@ class Twin:
         self._shapes: dict[int, tuple[ObjectSpec, float]] = {}  # object id -> spec, height
         self._triangles: dict[tuple[Path, float], np.ndarray] = {}
         self.event_sink = event_sink
+        self.spawn_judge: PieceJudge | None = None
+        self._spawn_fit: SpawnFit | None = None
         self._wall_start = 0.0
         self._realtime_factor = 1.0
 
@@ -276,11 +288,18 @@ class Twin:
         self._world = World(c, self.cell, self._cache_dir)
         self._world.prepare([spec for layout in self.layouts for spec in layout.objects])
         self.stations = tuple(
-            Station.load(c, i, spec, dt_s=self.dt_s, gravity_mps2=physics.gravity_mps2)
+            Station.load(
+                c,
+                i,
+                spec,
+                dt_s=self.dt_s,
+                gravity_mps2=physics.gravity_mps2,
+                materials=self.cell.materials,
+            )
             for i, spec in enumerate(self.cell.stations)
         )
         self._monitor = Monitor(c, self.cell, self._world, self.stations)
-        stream = Stream(self.layouts, self.scenario, self.cell.belt, seeds)
+        stream = Stream(self.layouts, self.scenario, self.cell.belt, seeds, self.cell.materials)
         self._batches = iter(stream)
         self._next_batch = next(self._batches, None)
         self._open_drive(seeds.fmu_seed)
@@ -300,6 +319,8 @@ class Twin:
             suction_points=SuctionPoints(lambda object_id: self.object_mesh(object_id)[0]),
         )
         self._released = []
+        judge = self.spawn_judge
+        self._spawn_fit = None if judge is None else SpawnFit(judge, self._mesh_of)
         self._spawn_due()
         self._wall_start = time.perf_counter()
         return self.observe(), {"seed": self.scenario.seed}
@@ -479,7 +500,10 @@ class Twin:
                     friction=placement.friction,
                     restitution=placement.restitution,
                 )
-                event = monitor.add(placement, spawned, self.step_count, self.time_s)
+                fit = None
+                if self._spawn_fit is not None:
+                    fit = self._spawn_fit(placement.spec, spawned.height_m, placement.yaw_rad)
+                event = monitor.add(placement, spawned, self.step_count, self.time_s, extra=fit)
                 self._shapes[event.object_id] = (placement.spec, spawned.height_m)
             self._next_batch = next(self._batches, None)
 
@@ -528,13 +552,17 @@ class Twin:
             msg = f"object id {object_id}: no object of this episode has it"
             raise ConfigError(msg)
         spec, height_m = shape
+        return self._mesh_of(spec, height_m), spec.class_name
+
+    def _mesh_of(self, spec: ObjectSpec, height_m: float) -> np.ndarray:
+        """The triangles ``(t, 3, 3)`` of ``spec``'s mesh stretched to ``height_m`` (cached)."""
         key = (spec.mesh_path, height_m)
         triangles = self._triangles.get(key)
         if triangles is None:
             triangles = read_obj_triangles(spec.mesh_path).astype(float)
             triangles[..., 2] *= height_m / spec.height_m
             self._triangles[key] = triangles
-        return triangles, spec.class_name
+        return triangles
 
     def landing_in_bins(self) -> list[int]:
         """Ids of released objects over a bin, still above its top (see :class:`Monitor`)."""

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from interfaces.cell import StationSpec
+from interfaces.materials import ClassTable
 from interfaces.urdf import station_urdf
 from twin.errors import ConfigError, SceneError
 from twin.robot import Robot
@@ -53,10 +54,12 @@ class Station:
         *,
         dt_s: float = 1.0 / 240.0,
         gravity_mps2: float = 9.81,
+        materials: ClassTable | None = None,
     ) -> Station:
         """Load the station's robot and build its tool; the arm at home, the tool open.
         ``dt_s`` is the physics step (the arm's joint limiter runs at that rate),
-        ``gravity_mps2`` loads what the tool carries."""
+        ``gravity_mps2`` loads what the tool carries, ``materials`` is the cell's class table
+        (None: the shipped one)."""
         try:
             urdf = station_urdf(spec.robot, spec.tool)
         except ConfigError as exc:
@@ -69,7 +72,7 @@ class Station:
             urdf=urdf,
             dt_s=dt_s,
         )
-        tool = make_tool(spec.tool, robot, gravity_mps2=gravity_mps2)
+        tool = make_tool(spec.tool, robot, gravity_mps2=gravity_mps2, materials=materials)
         station = cls(index=index, spec=spec, robot=robot, tool=tool)
         station.reset()
         return station

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from interfaces.cell import BeltSpec
+from interfaces.materials import ClassTable, shipped_table
 from twin.objects import ImageLayout, ObjectSpec
 from twin.scenario import Scenario, SeedTree
 
@@ -65,14 +66,13 @@ def _overlap(a: np.ndarray, b: np.ndarray) -> bool:
     return True
 
 
-def _class_range(
-    ranges: dict[str, tuple[float, float]], name: str, default: tuple[float, float]
-) -> tuple[float, float]:
-    return ranges.get(name, default)
-
-
 class Stream:
-    """Yields image batches in order; infinite when ``system.repeat_images`` is set."""
+    """Yields image batches in order; infinite when ``system.repeat_images`` is set.
+
+    ``materials`` is the dataset's class table (the episode's cell carries it): the height,
+    friction and restitution ranges of every class the scenario does not give its own
+    (``objects.height_ranges_m``, ``physics``).
+    """
 
     def __init__(
         self,
@@ -80,6 +80,7 @@ class Stream:
         scenario: Scenario,
         belt: BeltSpec,
         seeds: SeedTree,
+        materials: ClassTable | None = None,
     ) -> None:
         wanted = set(scenario.objects.images)
         chosen = [lay for lay in layouts if not wanted or lay.image in wanted]
@@ -87,6 +88,7 @@ class Stream:
         self._scenario = scenario
         self._belt = belt
         self._seeds = seeds
+        self._materials = materials if materials is not None else shipped_table()
         self._spawned_objects = 0
 
     def __iter__(self) -> Iterator[ImageBatch]:
@@ -145,9 +147,12 @@ class Stream:
                 and min(spec.width_m, spec.length_m) > objects_cfg.max_width_m
             ):
                 continue
+            material = self._materials.material(spec.class_name)
             height = spec.height_m
-            if objects_cfg.resample_heights and spec.class_name in objects_cfg.height_ranges_m:
-                lo, hi = objects_cfg.height_ranges_m[spec.class_name]
+            if objects_cfg.resample_heights:
+                lo, hi = objects_cfg.height_ranges_m.get(
+                    spec.class_name, (material.height_min_m, material.height_max_m)
+                )
                 height = float(rng.uniform(lo, hi))
             if objects_cfg.min_height_m is not None and height < objects_cfg.min_height_m:
                 continue
@@ -158,8 +163,8 @@ class Stream:
                         -objects_cfg.orientation_jitter_rad, objects_cfg.orientation_jitter_rad
                     )
                 )
-            f_lo, f_hi = _class_range(physics.friction, spec.class_name, (0.6, 0.6))
-            r_lo, r_hi = _class_range(physics.restitution, spec.class_name, (0.1, 0.1))
+            f_lo, f_hi = physics.friction.get(spec.class_name, material.friction)
+            r_lo, r_hi = physics.restitution.get(spec.class_name, material.restitution)
             friction = float(phys_rng.uniform(f_lo, f_hi))
             restitution = float(phys_rng.uniform(r_lo, r_hi))
             x = x0 + spec.centroid_x_m

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import pybullet as pb
 
-from interfaces.cell import BinSpec, Cell
+from interfaces.bins import BinSpec
+from interfaces.cell import Cell
 from twin.collision import merged_collision_file
 from twin.errors import SceneError
 from twin.objects import ObjectSpec, inertia_of

@@ -21,6 +21,7 @@ from interfaces.tools import ParallelJawSpec, SuctionCupSpec, ToolSpec
 if TYPE_CHECKING:
     from control.config import PickConfig
     from control.tracking import Track
+    from interfaces.materials import ClassTable
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -192,15 +193,16 @@ def suction_point_depth_m(track: Track) -> float:
     return max(below_m, 0.0) if math.isfinite(below_m) else 0.0
 
 
-def make_tool(spec: ToolSpec) -> ControllerTool:
-    """The controller's side of the tool ``spec`` describes (by its ``kind``)."""
+def make_tool(spec: ToolSpec, materials: ClassTable) -> ControllerTool:
+    """The controller's side of the tool ``spec`` describes (by its ``kind``); ``materials``
+    is the cell's class table (a suction cup's seal efficiency per class)."""
     from control.tools.parallel_jaw import ParallelJaw
     from control.tools.suction_cup import SuctionCup
 
     if spec.kind == "parallel_jaw" and isinstance(spec, ParallelJawSpec):
         return ParallelJaw(spec)
     if spec.kind == "suction_cup" and isinstance(spec, SuctionCupSpec):
-        return SuctionCup(spec)
+        return SuctionCup(spec, materials)
     msg = f"tool.kind = {spec.kind!r}: the controller has no model of this tool kind"
     raise ControlConfigError(msg)
 

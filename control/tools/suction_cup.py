@@ -35,6 +35,7 @@ from interfaces.tools import SuctionCupSpec
 if TYPE_CHECKING:
     from control.config import PickConfig
     from control.tracking import Track
+    from interfaces.materials import ClassTable
 
 VACUUM_ON = 1.0
 """The command that turns the vacuum on."""
@@ -52,9 +53,12 @@ normal is an estimate, and the lip pressing on a propped piece tilts it further.
 
 @dataclass(frozen=True)
 class SuctionCup:
-    """Controller side of a :class:`~interfaces.tools.SuctionCupSpec`."""
+    """Controller side of a :class:`~interfaces.tools.SuctionCupSpec`; ``materials`` is the
+    cell's class table, whose seal efficiencies the holding force takes
+    (:meth:`~interfaces.tools.SuctionCupSpec.efficiency`)."""
 
     spec: SuctionCupSpec
+    materials: ClassTable
 
     grasp_yaw_period_rad: ClassVar[float] = 0.0
     """A round cup: the grasp does not depend on the object's yaw."""
@@ -77,9 +81,16 @@ class SuctionCup:
     @property
     def seal_threshold(self) -> float:
         """The vacuum fraction below which the cup holds nothing: half the seal efficiency of
-        the leakiest surface the spec names."""
-        spec = self.spec
-        return 0.5 * min(spec.default_seal_efficiency, *spec.seal_efficiency.values())
+        the leakiest surface it may meet (every class of the cell's table, any other class,
+        every class the tool names)."""
+        spec, table = self.spec, self.materials
+        default = (
+            spec.default_seal_efficiency
+            if spec.default_seal_efficiency is not None
+            else table.default.seal_efficiency
+        )
+        named = [spec.efficiency(name, table) for name in table.names]
+        return 0.5 * min(default, *named, *spec.seal_efficiency.values())
 
     def measured(self, positions: Mapping[str, float]) -> float:
         """The vacuum fraction reached (0 to 1); NaN when not reported or not finite."""
@@ -164,7 +175,7 @@ class SuctionCup:
         seal efficiency, as the twin checks it) carries ``mass_kg`` at gravity plus
         ``acceleration_mps2``."""
         load = mass_kg * (STANDARD_GRAVITY_MPS2 + acceleration_mps2)
-        return self.spec.holding_force(class_name) >= load
+        return self.spec.holding_force(class_name, self.materials) >= load
 
     def grasp_height_m(self, height_m: float, pick: PickConfig) -> float:
         """``pick.top_press_m`` below the top (not below the underside)."""

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 import re
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -184,3 +186,26 @@ def test_the_controller_command_refuses_a_bad_cell_station_or_file_in_one_line(
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1
     assert re.search(message, lines[0]), lines
+
+
+def test_the_controller_resolves_its_cells_slots_as_the_twin_does(
+    tmp_path: Path, mesh_polygons: Callable[..., Path]
+) -> None:
+    """``cdw-twin controller --dataset M`` (and ``--scenario``): the cell's slots take the
+    dataset's classes in its table's order, or as the scenario's ``bins:`` map says, as the
+    twin node's do; without either, the cell file's own (the shipped classes)."""
+    from twin_helpers import box_px
+
+    from control.cmd_controller import controller_cell
+
+    meshes = mesh_polygons({"a": [(2, box_px(300, 300, 100, 60)), (1, box_px(700, 700, 90, 60))]})
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(f"dataset: {meshes}\nbins: {{slots: {{wood: 3}}}}\n", encoding="utf-8")
+
+    def bins(**given: object) -> list[tuple[str, float]]:
+        args = argparse.Namespace(**{"cell": None, "scenario": None, "dataset": None, **given})
+        return [(b.class_name, b.centre_x_m) for b in controller_cell(args).stations[0].bins]
+
+    assert [name for name, _ in bins()] == ["concrete", "brick", "wood", "rubber"]
+    assert bins(dataset=meshes) == [("brick", -0.60), ("wood", -0.33)]  # the table's order
+    assert bins(scenario=scenario) == [("brick", -0.60), ("wood", 0.60)]

@@ -305,6 +305,50 @@ def test_an_object_nearer_the_base_than_the_least_reach_is_out_of_reach() -> Non
     assert target.track_id == 2
 
 
+def test_the_density_of_the_too_heavy_check_is_the_cells_class_tables() -> None:
+    """``scheduler.check_mass`` estimates a piece's mass with its class's density in the cell's
+    class table (what a run's resolved cell carries: the dataset's). ``tiles`` is a class only
+    the table gives a density (no parameter file names it): a cup leaves a tiles piece too heavy
+    by that density and takes one 10 % lighter; without ``check_mass`` it checks no mass; an
+    explicit ``class_density_kg_m3`` overrides the table's."""
+    from interfaces.cell import resolve_cell
+    from interfaces.materials import table_from_data
+
+    table = table_from_data(
+        {"classes": {"tiles": {"density_kg_m3": 3000.0, "seal_efficiency": 0.5}}},
+        "test table",
+        load_cell("suction").materials,
+    )
+    cell = resolve_cell(load_cell("suction"), table)
+    assert cell.classes == ("tiles",)
+    base = ControllerConfig(cell=cell)
+    checked = replace(
+        base,
+        scheduler=replace(
+            base.scheduler, check_mass=True, fill_fraction=1.0, carry_acceleration_mps2=10.0
+        ),
+    )
+    cup = base.station.tool
+    assert isinstance(cup, SuctionCupSpec)
+    most_kg = cup.holding_force("tiles", table) / (9.81 + 10.0)
+    assert most_kg == pytest.approx(60e3 * math.pi * 0.02**2 * 0.5 / 19.81)  # the table's eta
+    box_m3 = 0.12 * 0.08
+    heavy = _track(1, -0.1, width=0.08, height=1.1 * most_kg / 3000.0 / box_m3, class_name="tiles")
+    light = _track(2, -0.1, width=0.08, height=0.9 * most_kg / 3000.0 / box_m3, class_name="tiles")
+    assert estimated_mass_kg(heavy, checked) == pytest.approx(1.1 * most_kg)
+    assert estimated_mass_kg(heavy, base) is None
+    result = schedule([heavy], now_s=0.0, tcp_position_m=TCP, config=checked)
+    assert _reasons(result.untargeted) == {1: "too_heavy"}
+    target = schedule([light], now_s=0.0, tcp_position_m=TCP, config=checked).target
+    assert target is not None
+    assert target.track_id == 2
+    assert schedule([heavy], now_s=0.0, tcp_position_m=TCP, config=base).target is not None
+    lighter = replace(
+        checked, scheduler=replace(checked.scheduler, class_density_kg_m3={"tiles": 1000.0})
+    )
+    assert estimated_mass_kg(heavy, lighter) == pytest.approx(1.1 * most_kg / 3.0)
+
+
 def test_a_cup_leaves_an_object_it_could_not_carry() -> None:
     """With the classes' densities, a cup leaves (``too_heavy``) an object whose estimated mass
     (seen box x fill x density) its holding force on that class could not carry at gravity
@@ -320,7 +364,7 @@ def test_a_cup_leaves_an_object_it_could_not_carry() -> None:
         carry_acceleration_mps2=10.0,
     )
     config = replace(base, scheduler=dense)
-    most_kg = cup.holding_force("brick") / (9.81 + 10.0)
+    most_kg = cup.holding_force("brick", base.cell.materials) / (9.81 + 10.0)
     box_m3 = 0.12 * 0.08  # the tracks' footprint: 12 x 8 cm
     light_h, heavy_h = 0.9 * most_kg / 1900.0 / box_m3, 1.1 * most_kg / 1900.0 / box_m3
     light = _track(1, -0.1, width=0.08, height=light_h)

@@ -13,9 +13,11 @@ from control.scheduler import approach_z_m, blocked_by, grasp_height_m, schedule
 from control.tools import Footprint, make_tool
 from control.tracking import Track
 from interfaces.cell import default_cell
+from interfaces.materials import shipped_table
 from interfaces.tools import ParallelJawSpec, tool_from_data
 
 XARM = tool_from_data("xarm_gripper", "tool")
+SHIPPED = shipped_table()
 """A parallel gripper other than the Panda hand: 85 mm opening, the spec's default pads."""
 
 
@@ -46,7 +48,7 @@ def _track(track_id: int, y: float, *, width: float = 0.05, height: float = 0.04
 
 
 def test_the_measured_opening_is_twice_the_mean_of_the_finger_joints() -> None:
-    tool = make_tool(XARM)
+    tool = make_tool(XARM, SHIPPED)
     assert tool.joint_names == XARM.joints
     a, b = XARM.joints
     assert tool.measured({a: 0.02, b: 0.03}) == pytest.approx(0.05)
@@ -56,7 +58,7 @@ def test_the_measured_opening_is_twice_the_mean_of_the_finger_joints() -> None:
 
 
 def test_the_grasp_command_is_the_width_less_the_squeeze_within_the_opening() -> None:
-    tool = make_tool(XARM)
+    tool = make_tool(XARM, SHIPPED)
     assert tool.open_command == XARM.max_opening_m == 0.085
     assert tool.grasp_command(0.05, 0.01) == pytest.approx(0.04)
     assert tool.grasp_command(0.2, 0.01) == 0.085  # no wider than the opening
@@ -67,7 +69,7 @@ def test_the_grasp_command_is_the_width_less_the_squeeze_within_the_opening() ->
 
 
 def test_fingers_closed_to_the_command_hold_nothing() -> None:
-    tool = make_tool(XARM)
+    tool = make_tool(XARM, SHIPPED)
     assert tool.holds_nothing(0.0405, 0.04, 0.001)  # closed to the command: nothing between
     assert not tool.holds_nothing(0.0415, 0.04, 0.001)  # held apart by an object
     assert not tool.holds_nothing(math.nan, 0.04, 0.001)  # not measured: no verdict
@@ -75,7 +77,7 @@ def test_fingers_closed_to_the_command_hold_nothing() -> None:
 
 def test_what_fits_depends_on_the_spec() -> None:
     flat_pads = replace(XARM, pad_height_m=0.03)
-    tool = make_tool(flat_pads)
+    tool = make_tool(flat_pads, SHIPPED)
     limit = XARM.max_opening_m - 0.015
     fits = {"length_m": 0.12, "height_m": 0.04, "width_margin_m": 0.015}
     assert tool.misfit(width_m=limit - 1e-4, **fits) is None
@@ -90,7 +92,7 @@ def test_what_fits_depends_on_the_spec() -> None:
 
 def test_the_blocking_footprints_come_from_the_spec() -> None:
     spec = replace(XARM, finger_width_m=0.03, finger_depth_m=0.02, hand_width_m=0.3)
-    fingers, hand = make_tool(spec).footprints(0.01)
+    fingers, hand = make_tool(spec, SHIPPED).footprints(0.01)
     assert fingers == Footprint(
         half_along_m=0.015 + 0.01, half_across_m=0.0425 + 0.02 + 0.01, clear_above_tcp_m=None
     )
@@ -121,14 +123,14 @@ def test_the_scheduler_plans_with_the_stations_tool() -> None:
 def test_a_tool_kind_the_controller_does_not_know_is_refused() -> None:
     unknown = replace(XARM, kind="suction_cup")  # type: ignore[arg-type]
     with pytest.raises(ControlConfigError, match=r"tool\.kind = 'suction_cup'"):
-        make_tool(unknown)
+        make_tool(unknown, SHIPPED)
 
 
 def test_a_cup_fits_by_the_disc_the_camera_reports_on_the_top_and_grasps_at_its_centre() -> None:
     """A concave piece: its narrow side (6 cm) holds a 40 mm lip with the 15 mm margin, but
     the largest disc on its top is 3.5 cm across: too small. The cup aims at that disc's
     centre; without a reported disc it judges by the narrow side and aims at the centre."""
-    cup = make_tool(tool_from_data("suction_cup", "tool"))
+    cup = make_tool(tool_from_data("suction_cup", "tool"), SHIPPED)
     size = {"length_m": 0.2, "width_m": 0.06, "height_m": 0.03, "width_margin_m": 0.015}
     assert cup.misfit(**size) is None
     assert cup.misfit(**size, face_radius_m=0.0175) == "too_small"
@@ -138,7 +140,7 @@ def test_a_cup_fits_by_the_disc_the_camera_reports_on_the_top_and_grasps_at_its_
     track = replace(_track(1, 0.5), suction_offset_m=(-0.03, 0.01), suction_radius_m=0.03)
     assert cup.grasp_offset_m(track) == (-0.03, 0.01)
     assert cup.grasp_offset_m(_track(1, 0.5)) == (0.0, 0.0)
-    jaws = make_tool(XARM)
+    jaws = make_tool(XARM, SHIPPED)
     assert jaws.misfit(**size, face_radius_m=0.001) == jaws.misfit(**size)
 
 
@@ -147,7 +149,7 @@ def test_jaws_close_about_the_centre_unless_it_may_lie_off_the_piece() -> None:
     the camera reports on the top (the material is there); a bent piece's centre lies in its
     crook, further from the disc's centre than its radius, and the jaws close about the disc's
     centre instead (the piece is there). No disc reported: the centre."""
-    jaws = make_tool(XARM)
+    jaws = make_tool(XARM, SHIPPED)
     level = _track(1, 0.5)
     inside = replace(level, suction_offset_m=(-0.02, 0.01), suction_radius_m=0.03)
     bent = replace(level, suction_offset_m=(-0.05, 0.02), suction_radius_m=0.025)
@@ -181,12 +183,12 @@ def test_a_cup_leaves_a_face_tilted_beyond_its_lip_and_jaws_do_not_mind() -> Non
     ``max_tilt_rad`` (0.35 rad for the catalogue's cup); the cup leaves faces within 3 degrees
     of that (``too_tilted``), takes a level or an unknown one, and jaws take any."""
     spec = tool_from_data("suction_cup", "tool")
-    cup = make_tool(spec)
+    cup = make_tool(spec, SHIPPED)
     size = {"length_m": 0.2, "width_m": 0.08, "height_m": 0.03, "width_margin_m": 0.015}
     limit = spec.max_tilt_rad - math.radians(3.0)
     assert cup.misfit(**size, face_radius_m=0.035, face_tilt_rad=0.0) is None
     assert cup.misfit(**size, face_radius_m=0.035, face_tilt_rad=limit - 1e-3) is None
     assert cup.misfit(**size, face_radius_m=0.035, face_tilt_rad=limit + 1e-3) == "too_tilted"
     assert cup.misfit(**size, face_radius_m=0.035, face_tilt_rad=math.nan) is None
-    jaws = make_tool(XARM)
+    jaws = make_tool(XARM, SHIPPED)
     assert jaws.misfit(**size, face_tilt_rad=1.0) == jaws.misfit(**size)

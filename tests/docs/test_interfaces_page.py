@@ -540,7 +540,21 @@ def _emitted_keys() -> dict[str, set[str]]:
             found.setdefault(EventType[kinds[0]].value, set()).update(
                 k for k in keys if k is not None
             )
+    found["spawned"] |= _spawn_fit_keys()
     return found
+
+
+def _spawn_fit_keys() -> set[str]:
+    """The keys :class:`twin.spawn_fit.SpawnFit` adds to a ``spawned`` event's data (the
+    dicts it returns, from the source)."""
+    tree = ast.parse((ROOT / "twin" / "spawn_fit.py").read_text(encoding="utf-8"))
+    return {
+        str(key.value)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Return) and isinstance(node.value, ast.Dict)
+        for key in node.value.keys
+        if isinstance(key, ast.Constant)
+    }
 
 
 def test_the_page_lists_exactly_the_event_types(interfaces_page: Page) -> None:

@@ -32,7 +32,7 @@ from experiments.fit_rules import (
 )
 from interfaces.catalog import catalog_names
 from interfaces.cell import load_cell, resolve_cell_path
-from meshgen.classes import DEFAULT_CLASSES
+from interfaces.materials import shipped_table
 from meshgen.config import MeshgenConfig
 from meshgen.pipeline import mesh_dataset
 from twin.cli import main
@@ -102,9 +102,13 @@ def boxes(tmp_path_factory: pytest.TempPathFactory) -> Path:
         u1, v1 = u0 + width_m * PX_PER_M, v0 + length_m * PX_PER_M
         labels[name] = [(class_id, [(u0, v0), (u1, v0), (u1, v1), (u0, v1)])]
     heights = {"concrete": 0.08, "brick": 0.05, "wood": 0.04, "rubber": 0.01}
-    classes = tuple(
-        replace(spec, height_min_m=heights[name], height_max_m=heights[name])
-        for name, spec in DEFAULT_CLASSES.items()
+    shipped = shipped_table()
+    classes = replace(
+        shipped,
+        classes=tuple(
+            replace(spec, height_min_m=heights[spec.name], height_max_m=heights[spec.name])
+            for spec in shipped.classes
+        ),
     )
     out = root / "meshes"
     config = MeshgenConfig(image_size_px=(1000, 1000), classes=classes, textures=False)
@@ -122,7 +126,7 @@ def test_hand_made_boxes_are_refused_for_exactly_their_reasons(boxes: Path) -> N
     for name, piece in pieces.items():
         assert piece.face_radius_m == pytest.approx(piece.narrow_m / 2, abs=1e-3), name
         assert piece.face_tilt_rad == pytest.approx(0.0, abs=1e-9)
-    setups = {s.name: s for s in catalogue_setups(("concrete", "brick", "wood", "rubber"))}
+    setups = {s.name: s for s in catalogue_setups(shipped_table())}
     assert list(setups) == list(catalog_names()["tools"])
     assert setups["panda_hand"].robot == "panda"
     assert setups["wide_gripper"].robot == "ur10"
@@ -177,7 +181,7 @@ def test_size_bins() -> None:
 
 
 def test_suggest_mix_covers_greedily_then_shares_stations_by_load() -> None:
-    setups = catalogue_setups(("concrete", "brick", "wood", "rubber"))[:3]
+    setups = catalogue_setups(shipped_table())[:3]
     a, b, c = (s.name for s in setups)
     taken = {
         a: [True] * 6 + [False] * 4,  # 0-5
@@ -219,7 +223,7 @@ def test_cli_json_has_the_documented_keys(
     assert main(["fit", str(builtin_sample), "--cell", "default", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert list(report) == ["dataset", "pieces", "classes", "size_bins", "tools", "cell", "mix"]
-    assert list(report["classes"]) == ["brick", "concrete", "rubber", "wood"]
+    assert list(report["classes"]) == ["concrete", "brick", "wood", "rubber"]  # table order
     assert list(report["size_bins"]) == ["narrow_side_cm", "height_cm"]
     assert sum(report["size_bins"]["height_cm"].values()) == report["pieces"]
     shares = ["share", "takes", "by_class", "by_narrow_side_cm", "by_height_cm"]
@@ -275,4 +279,5 @@ def test_station_setup_is_the_controllers_configuration() -> None:
     setup: StationSetup = cell_setups(load_cell("line"), default_params(Path("line.yaml")))[3]
     assert (setup.name, setup.tool, setup.robot) == ("s4", "suction_cup_25", "ur10")
     assert setup.config.station.name == "s4"
-    assert setup.config.scheduler.class_density_kg_m3["concrete"] == 2400.0
+    assert setup.config.scheduler.check_mass  # line.yaml: the cell's class table's densities
+    assert setup.config.cell.materials.material("concrete").density_kg_m3 == 2400.0

@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from interfaces.errors import CdwTwinError
 from twin.scenario import Scenario
 
 SCENARIO = "name: e2e\nduration_s: 3.0\nsystem: {prefill_m: 1.0}\n"
@@ -110,7 +111,7 @@ def _check_the_copies_a_rerun_needs(out: Path, dataset: Path) -> None:
     assert load_cell(out / "cell.yaml").stations == default_cell().stations
     assert written.controller == "controller.yaml"
     assert written.dataset == str(dataset.resolve())
-    copy = controller_params(written.controller, out)
+    copy = controller_params(written.controller, out, load_cell(out / "cell.yaml"))
     assert copy == (out / "controller.yaml").resolve()
     assert copy.read_bytes() == DEFAULT_PARAMS.read_bytes()
 
@@ -185,14 +186,42 @@ def test_a_bad_controller_parameter_file_is_rejected_before_anything_starts(
 def test_shipped_controller_parameter_files_resolve_and_load(tmp_path: Path) -> None:
     from control.config import load_config
     from experiments.run import controller_params
+    from interfaces.cell import default_cell
 
-    throughput = controller_params("throughput", None)
+    cell = default_cell()
+    throughput = controller_params("throughput", None, cell)
     assert throughput.name == "throughput.yaml"
     assert load_config(throughput).pick.approach_space == "joint"
-    assert load_config(controller_params("default", None)).pick.approach_space == "cartesian"
+    assert load_config(controller_params("default", None, cell)).pick.approach_space == "cartesian"
     own = tmp_path / "mine.yaml"
     own.write_text("controller:\n  ros__parameters:\n    pick: {dwell_s: 0.5}\n", encoding="utf-8")
-    assert controller_params("mine.yaml", tmp_path) == own.resolve()
+    assert controller_params("mine.yaml", tmp_path, cell) == own.resolve()
+
+
+def test_the_parameter_file_is_checked_against_the_scenarios_own_cell(tmp_path: Path) -> None:
+    """A file that names the line's stations and a class of the dataset is right for the line
+    resolved for that dataset, and refused, naming the key, for a cell it does not fit: the
+    reference cell (no station s6), or the line resolved for a dataset without wood."""
+    from experiments.run import controller_params
+    from interfaces.cell import default_cell, load_cell, resolve_cell
+    from interfaces.materials import table_from_data
+
+    own = tmp_path / "line_mine.yaml"
+    own.write_text(
+        "controller:\n  ros__parameters:\n"
+        "    allocation: {strategy: class_priority, preferred_classes: {s6: [wood]}}\n"
+        "    scheduler: {class_priorities: {wood: 2.0}}\n",
+        encoding="utf-8",
+    )
+    line = load_cell("line")
+    assert controller_params("line_mine.yaml", tmp_path, line) == own.resolve()
+    with pytest.raises(CdwTwinError, match=r"preferred_classes\.s6 .*not a station of the cell"):
+        controller_params("line_mine.yaml", tmp_path, default_cell())
+    tiles = table_from_data({"classes": {"bricks": {}, "tiles": {}}}, "t", line.materials)
+    with pytest.raises(CdwTwinError, match=r"class_priorities\.wood = 2\.0: not a class of"):
+        controller_params("line_mine.yaml", tmp_path, resolve_cell(line, tiles))
+    # the shipped line file checks against any dataset's line: it names no class
+    assert controller_params("line", None, resolve_cell(line, tiles)).name == "line.yaml"
 
 
 def test_interrupt_keeps_the_finished_episodes_and_says_incomplete(

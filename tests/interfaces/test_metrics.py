@@ -287,6 +287,68 @@ def test_an_undecided_object_cuts_the_cohort_before_itself_and_every_later_one()
         assert scores["recovery_by_class"] == {"brick": pytest.approx(1 / 2), "wood": 0.0}
 
 
+def test_recovery_over_the_takeable_pieces_at_every_scope() -> None:
+    """Seven pieces through a line of two stations, ``up`` then ``down``. Pieces 3 and 5 no
+    station could take (their ``spawned`` events say ``takeable: false``); piece 6 has no mark
+    (an older log: takeable); piece 7 is still on the belt at the end (out of the cohort). Up
+    sorts 1; down sorts 2 and 6 and lets 4 pass; 5 fell into the right bin unpicked (knocked
+    in: recovered, not takeable). The line's cohort 1-6 recovers 4 (1, 2, 5, 6); its takeable
+    pieces 1, 2, 4, 6 recover 3: 0.75. Each station counts the pieces that entered its window,
+    judged for the line."""
+    up, down = {"station": "up"}, {"station": "down"}
+
+    def spawn(oid: int, cls: str, **mark: object) -> Event:
+        return _at(float(oid), E.SPAWNED, oid, cls, **mark)
+
+    def enter(time_s: float, oid: int, cls: str, station: dict[str, object]) -> Event:
+        return _at(time_s, E.ENTERED_WORKSPACE, oid, cls, x_m=0.0, **station)
+
+    events = [
+        spawn(1, "brick", takeable=True),
+        spawn(2, "wood", takeable=True),
+        spawn(3, "brick", takeable=False, refusal="too_wide"),
+        spawn(4, "brick", takeable=True),
+        spawn(5, "wood", takeable=False, refusal="too_flat+too_small"),
+        spawn(6, "wood"),
+        spawn(7, "brick", takeable=True),
+        *(enter(10.0 + oid, oid, c, up) for oid, c in ((1, "brick"), (2, "wood"), (3, "brick"))),
+        *_placed(20.0, 1, "brick", **up),
+        _at(21.0, E.MISSED, 2, "wood", **up),
+        _at(22.0, E.MISSED, 3, "brick", **up),
+        enter(30.0, 2, "wood", down),
+        enter(31.0, 3, "brick", down),
+        enter(32.0, 4, "brick", down),
+        enter(33.0, 6, "wood", down),
+        *_placed(40.0, 2, "wood", **down),
+        _at(41.0, E.MISSED, 3, "brick", **down),
+        _at(42.0, E.MISSED, 4, "brick", **down),
+        *_placed(43.0, 6, "wood", **down),
+        _at(44.0, E.PLACED_IN_BIN, 5, "wood", bin="wood", correct=True, **down),
+    ]
+    line = event_scores(count_events(events, 60.0, line_exit="down"))
+    assert (line["entered"], line["recovered"]) == (6, 4)  # 1-6; 7 undecided
+    assert (line["entered_takeable"], line["recovered_takeable"]) == (4, 3)  # 1, 2, 4, 6
+    assert line["recovery_rate"] == pytest.approx(4 / 6)
+    assert line["recovery_takeable"] == pytest.approx(3 / 4)
+    first = event_scores(count_events(events, 60.0, station="up"))
+    assert (first["entered"], first["entered_takeable"], first["recovered_takeable"]) == (3, 2, 1)
+    assert first["recovery_takeable"] == pytest.approx(1 / 2)
+    last = event_scores(count_events(events, 60.0, station="down"))
+    assert (last["entered"], last["entered_takeable"], last["recovered_takeable"]) == (4, 3, 2)
+    by_class = class_scores(events, 60.0, line_exit="down")
+    assert (by_class["brick"]["entered_takeable"], by_class["brick"]["recovered_takeable"]) == (
+        2,
+        1,
+    )
+    assert by_class["wood"]["recovery_takeable"] == pytest.approx(1.0)  # 2 and 6; 5 refused
+    assert by_class["wood"]["recovery_rate"] == pytest.approx(1.0)  # 5 knocked in
+    unmarked = [e for e in events if e.type is not E.SPAWNED] + [
+        _at(e.time_s, E.SPAWNED, e.object_id, e.class_name) for e in events if e.type is E.SPAWNED
+    ]
+    old = event_scores(count_events(unmarked, 60.0, line_exit="down"))
+    assert old["recovery_takeable"] == old["recovery_rate"]  # a log without marks
+
+
 def test_an_object_knocked_into_a_bin_unpicked_does_not_cut_the_cohort() -> None:
     """The first object, pushed off the belt into a bin by an arm (``placed_in_bin`` with no
     ``pick_success``), has no fate but is out of the stream: the cohort runs on past it (it

@@ -37,7 +37,6 @@ BAD_LINES = {
     "not_a_number": "0 0.4 0.4 0.6 zero 0.6 0.6",
     "bad_class_id": "x 0.4 0.4 0.6 0.4 0.6 0.6",
     "unknown_class_id": "9 0.4 0.4 0.6 0.4 0.6 0.6",
-    "unknown_class": "4 0.4 0.4 0.6 0.4 0.6 0.6",
     "too_few_points": "0 0.4 0.4 0.6 0.4",
     "out_of_range": "0 0.4 0.4 3.6 0.4 0.6 0.6",
     "border_truncated": "0 0.0 0.4 0.6 0.4 0.6 0.6",
@@ -62,6 +61,35 @@ def test_each_bad_line_is_skipped_and_good_lines_kept(tmp_path: Path) -> None:
     ids = (tmp_path / "out" / "img" / "scene.csv").read_text()
     assert "img_000" in ids
     assert f"img_{len(BAD_LINES) + 1:03d}" in ids
+
+
+def test_a_class_the_table_does_not_name_is_meshed_with_its_default_and_warned(
+    tmp_path: Path,
+) -> None:
+    """``plaster`` (class 4 of data.yaml) is in no class table: its piece takes the shipped
+    default's density and height range, is listed after the table's classes in the output's
+    ``classes.yaml``, and a ``default_material`` warning names the class once."""
+    from interfaces.materials import dataset_table, shipped_table
+
+    text = f"{GOOD}\n4 0.30 0.30 0.50 0.30 0.50 0.50 0.30 0.50\n"
+    data = _yolo(tmp_path / "data", {"img": text}, images=("img",))
+    summary = mesh_dataset(data, tmp_path / "out", MeshgenConfig())
+    assert summary.objects == 2
+    assert summary.skipped == {}
+    (notice,) = summary.notices
+    assert (notice.reason, notice.file) == ("default_material", "class 'plaster'")
+    default = shipped_table().default
+    with (tmp_path / "out" / "img" / "scene.csv").open(encoding="utf-8") as handle:
+        rows = {r["class_name"]: r for r in csv.DictReader(handle)}
+    plaster = rows["plaster"]
+    assert plaster["class_id"] == "-1"
+    assert default.height_min_m <= float(plaster["height_m"]) <= default.height_max_m
+    assert float(plaster["mass_kg"]) == pytest.approx(
+        default.density_kg_m3 * float(plaster["volume_m3"]), rel=1e-6
+    )
+    table = dataset_table(tmp_path / "out")
+    assert table.names == ("concrete", "plaster")
+    assert table.material("plaster").density_kg_m3 == default.density_kg_m3
 
 
 def test_bad_files_are_reported_and_others_go_on(tmp_path: Path) -> None:
@@ -96,18 +124,15 @@ def test_labelme_bad_shapes(tmp_path: Path) -> None:
     del doc["imageWidth"]
     (data / "c.json").write_text(json.dumps(doc))
     summary = mesh_dataset(data, tmp_path / "out", MeshgenConfig(fmt="labelme"))
-    assert summary.objects == 1
+    assert summary.objects == 2  # the brick and the plaster (the table's default)
     assert summary.skipped == {
         "missing_image_size": 1,
         "not_a_number": 1,
         "not_a_polygon": 1,
         "odd_coordinates": 1,
-        "unknown_class": 1,
         "unreadable_file": 1,
     }
-    unknown = next(s for s in summary.skips if s.reason == "unknown_class")
-    assert "plaster" in unknown.detail
-    assert unknown.where == "shape 4"
+    assert summary.warned["default_material"] == 1
 
 
 def test_exit_status(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

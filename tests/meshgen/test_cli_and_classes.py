@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from interfaces.materials import dataset_table
 from meshgen.classes import DEFAULT_CLASSES, load_class_table
 from meshgen.config import MeshgenConfig
 from meshgen.errors import ClassTableError, MeshgenError
@@ -48,12 +49,25 @@ def test_class_table_override(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     )
     summary = json.loads(capsys.readouterr().out)
     assert code == 0
-    assert summary["skipped"]["unknown_class"] >= 1
+    overridden = 0
     for scene in (tmp_path / "o").glob("*/scene.json"):
         for obj in json.loads(scene.read_text())["objects"]:
-            assert obj["class_name"] in {"concrete", "brick"}
-            assert obj["height_m"] == pytest.approx(0.05)
-            assert obj["mass_kg"] == pytest.approx(1000 * 0.05 * obj["area_m2"])
+            shipped = DEFAULT_CLASSES[obj["class_name"]]
+            if obj["class_name"] in {"concrete", "brick"}:  # the table's own entries
+                overridden += 1
+                assert obj["height_m"] == pytest.approx(0.05)
+                assert obj["mass_kg"] == pytest.approx(1000 * 0.05 * obj["area_m2"])
+            else:  # wood and rubber: the shipped table's, under the given one
+                assert shipped.height_min_m <= obj["height_m"] <= shipped.height_max_m
+                assert obj["mass_kg"] == pytest.approx(
+                    shipped.density_kg_m3 * obj["height_m"] * obj["area_m2"]
+                )
+    assert overridden >= 1
+    recorded = dataset_table(tmp_path / "o")  # classes.yaml: the classes meshed, in order
+    assert recorded.names[:2] == ("concrete", "brick")
+    assert recorded.material("concrete").density_kg_m3 == 1000
+    assert recorded.material("wood") == DEFAULT_CLASSES["wood"]
+    assert set(recorded.names) == set(summary["classes"])
 
 
 @pytest.mark.parametrize(

@@ -58,7 +58,7 @@ def test_refuses_to_replace_foreign_folder(sample_dir: Path, tmp_path: Path) -> 
 
 
 def test_heights_follow_numpy_default_rng() -> None:
-    spec = MeshgenConfig().classes[0]
+    spec = MeshgenConfig().classes.classes[0]
     for seed, stem, index in [(0, "a", 0), (5, "Bauto_222372.000000", 17), (2**31, "x" * 40, 999)]:
         for k in range(index, index + 20):
             rng = np.random.default_rng([seed, zlib.crc32(stem.encode()), k])

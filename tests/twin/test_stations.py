@@ -17,7 +17,8 @@ import pybullet as pb
 import pytest
 from twin_helpers import box_px, tcp_ik
 
-from interfaces.cell import BinSpec, load_cell
+from interfaces.bins import BinSpec
+from interfaces.cell import load_cell
 from interfaces.events import EventType
 from twin.scenario import Scenario, SystemLevel
 from twin.sim import ArmCommand, Twin

@@ -14,7 +14,7 @@ first appears (per mesh file and sampled height: the mesh is stretched along z b
 coordinates (meshgen's OBJ ``vt``, :attr:`meshgen.objfile.ObjMesh.uv`) and a photo
 (``texture_path`` of its ``scene.csv`` row, :attr:`twin.objects.ObjectSpec.texture_path`) shows
 its photo (one texture per photo, shared by its pieces); any other is drawn in its class's
-colour (:func:`interfaces.class_colours.class_rgb`, the dataset's ``materials.mtl`` first) with
+colour (the class table's, the episode cell's ``materials``: :mod:`interfaces.materials`) with
 a procedural grain. Per frame only poses change: one PyBullet query per object, one
 ``getLinkStates`` per robot, then one draw call per instance.
 
@@ -38,7 +38,7 @@ import numpy as np
 import pybullet as pb
 
 from interfaces.camera import RgbdCameraSpec, RgbdFrame
-from interfaces.class_colours import RGB, class_rgb, dataset_class_rgb
+from interfaces.class_colours import RGB, class_colour
 from twin.camera.choose import Renderer, choose_renderer
 from twin.camera.depth_noise import noisy_depth
 from twin.camera.errors import RenderError
@@ -109,7 +109,7 @@ class CameraRig:
         self.renderer: Renderer = choose_renderer(renderer)
         self._gl: GlRenderer | None = GlRenderer() if self.renderer == "gl" else None
         self._tiny: TinyRenderer | None = None
-        self._colours = dataset_class_rgb(twin.dataset_dir)
+        self._colours = class_colour(twin.cell.materials)
         self._episode: object = None
         self._objects = TwinObjects(twin)
         self._static: list[Instance] = []
@@ -244,7 +244,7 @@ class CameraRig:
             self._paint_static()
 
     def _class_rgb(self, class_name: str) -> RGB:
-        return class_rgb(class_name, self._colours)
+        return self._colours(class_name)
 
     # -- OpenGL -----------------------------------------------------------------------------
     def _upload_static(self, gl: GlRenderer) -> list[Instance]:

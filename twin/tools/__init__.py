@@ -29,6 +29,7 @@ import pybullet as pb
 from interfaces.tools import ParallelJawSpec, SuctionCupSpec, ToolSpec
 
 if TYPE_CHECKING:
+    from interfaces.materials import ClassTable
     from twin.robot import Robot
 
 Pose = tuple[tuple[float, float, float], tuple[float, float, float, float]]
@@ -219,9 +220,16 @@ def offset_pose(pose: Pose, offset_m: tuple[float, float, float] | None) -> Pose
     return (moved[0], moved[1], moved[2]), orn
 
 
-def make_tool(spec: ToolSpec, robot: Robot, *, gravity_mps2: float = 9.81) -> Tool:
+def make_tool(
+    spec: ToolSpec,
+    robot: Robot,
+    *,
+    gravity_mps2: float = 9.81,
+    materials: ClassTable | None = None,
+) -> Tool:
     """The twin's tool of ``spec``'s kind, built on ``robot``'s body; ``gravity_mps2`` loads
-    a held object in the carry checks."""
+    a held object in the carry checks; ``materials`` is the cell's class table (a suction
+    cup's seal efficiency per class; None: the shipped table)."""
     if isinstance(spec, ParallelJawSpec):
         from twin.tools.parallel_jaw import ParallelJaw
 
@@ -229,7 +237,7 @@ def make_tool(spec: ToolSpec, robot: Robot, *, gravity_mps2: float = 9.81) -> To
     if isinstance(spec, SuctionCupSpec):
         from twin.tools.suction_cup import SuctionCup
 
-        return SuctionCup(spec, robot, gravity_mps2=gravity_mps2)
+        return SuctionCup(spec, robot, gravity_mps2=gravity_mps2, materials=materials)
     msg = f"tool {spec.name!r}: no twin model for tool kind {spec.kind!r}"
     raise NotImplementedError(msg)
 

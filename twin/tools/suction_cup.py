@@ -21,7 +21,8 @@ is full the object is held (the grasp rule; no contacts or dwell). Open (vacuum 
 cup holds no vacuum. Vacuum off vents it linearly to 0 over ``vent_s``.
 
 Carry (every physics step the object is held): the holding force is the vacuum fraction times
-``SuctionCupSpec.holding_force(class)`` (vacuum x lip area x the class's seal efficiency); it is
+``SuctionCupSpec.holding_force(class)`` (vacuum x lip area x the class's seal efficiency, from the
+cell's class table); it is
 checked against ``mass (g + |a|)``, ``a`` the TCP's measured acceleration
 (:class:`twin.tools.TcpAccelerometer`). Exceeded with the vacuum on, the object drops
 (``suction_overload``); with the vacuum off (venting), it is let go (``released``). Should the
@@ -43,6 +44,7 @@ import pybullet as pb
 from shapely.geometry import Point, Polygon
 from shapely.ops import unary_union
 
+from interfaces.materials import ClassTable, shipped_table
 from interfaces.tools import SuctionCupSpec
 from twin.robot import Robot
 from twin.tools import (
@@ -155,8 +157,16 @@ def seals_on(
 class SuctionCup:
     """A suction cup on ``robot``'s flange (see the module docstring)."""
 
-    def __init__(self, spec: SuctionCupSpec, robot: Robot, *, gravity_mps2: float = 9.81) -> None:
+    def __init__(
+        self,
+        spec: SuctionCupSpec,
+        robot: Robot,
+        *,
+        gravity_mps2: float = 9.81,
+        materials: ClassTable | None = None,
+    ) -> None:
         self.spec = spec
+        self.materials = materials if materials is not None else shipped_table()
         self.body = robot.body
         self.client = robot.client
         self.tcp_link = robot.link_index(spec.tcp_link, "TCP link")
@@ -273,7 +283,7 @@ class SuctionCup:
         if held is None:
             return RELEASED
         load = held.mass_kg * (self._gravity_mps2 + self._accelerometer.magnitude(time_s))
-        force = self._level * self.spec.holding_force(held.class_name)
+        force = self._level * self.spec.holding_force(held.class_name, self.materials)
         if self._lip_in_object is not None and (
             math.dist(self._lip_on(held), self._lip_in_object) > self.spec.contact_tolerance_m
         ):
