@@ -33,7 +33,7 @@ from control.errors import ControlConfigError
 from control.tools import ControllerTool, GraspTiming, make_tool
 from interfaces.cell import BeltSpec, Cell, StationSpec, default_cell
 from interfaces.dataclass_io import from_data
-from interfaces.errors import ConfigError, cut_message
+from interfaces.errors import ConfigError, cut, cut_message
 from interfaces.robots import RobotSpec
 from interfaces.yamlio import load_yaml_file
 
@@ -781,6 +781,10 @@ def config_from_mapping(
         raise ControlConfigError(msg) from None
 
 
+EXTENDS_DEPTH = 4
+"""How many parameter files an ``extends:`` chain may stack."""
+
+
 def load_config(
     path: str | os.PathLike[str],
     *,
@@ -790,9 +794,19 @@ def load_config(
 ) -> ControllerConfig:
     """Load the tuning from a ROS-parameters YAML file, for ``station`` of ``cell``.
 
-    Raises ``ControlConfigError`` naming the file and the key (or YAML line) that was wrong.
+    A file may start from another: a top-level ``extends: NAME_OR_PATH`` (a file of
+    ``control/config/`` by name, or a path relative to this file) is read first, and this
+    file's keys replace its keys, section by section and in ``robots.*`` / ``tools.*`` entry by
+    entry (:func:`merged_params`). Raises ``ControlConfigError`` naming the file and the key
+    (or YAML line) that was wrong.
     """
     path = Path(path)
+    params = _read_params(path, node_name, EXTENDS_DEPTH)
+    return config_from_mapping(params, source=str(path), cell=cell, station=station)
+
+
+def _read_params(path: Path, node_name: str, depth: int) -> Mapping[str, object]:
+    """The ``ros__parameters`` mapping of ``path``, on top of the file it ``extends``."""
     try:
         document = load_yaml_file(path, what="controller config")
     except ConfigError as exc:
@@ -808,11 +822,38 @@ def load_config(
     if params is None:
         params = {}
     if not isinstance(params, Mapping):
-        msg = f"{path}: {node_name}.ros__parameters must be a mapping, got {params!r}"
+        msg = f"{path}: {node_name}.ros__parameters must be a mapping, got {cut(params)}"
         raise ControlConfigError(msg)
-    return config_from_mapping(
-        cast(Mapping[str, object], params), source=str(path), cell=cell, station=station
-    )
+    unknown = set(document) - {node_name, "extends"}
+    if unknown:
+        msg = f"{path}: unknown top-level key(s) {sorted(unknown)} (expected {node_name}, extends)"
+        raise ControlConfigError(msg)
+    extends = document.get("extends")
+    if extends is None:
+        return cast(Mapping[str, object], params)
+    if not isinstance(extends, str) or not extends:
+        msg = f"{path}: extends = {cut(extends)}: expected a file name or path"
+        raise ControlConfigError(msg)
+    if depth <= 0:
+        msg = f"{path}: extends = {extends!r}: more than {EXTENDS_DEPTH} files stacked (a cycle?)"
+        raise ControlConfigError(msg)
+    under = _read_params(params_path(extends, path.parent), node_name, depth - 1)
+    return merged_params(under, cast(Mapping[str, object], params))
+
+
+def merged_params(base: Mapping[str, object], over: Mapping[str, object]) -> dict[str, object]:
+    """``over`` on top of ``base``: mappings merge key by key (sections, ``robots``/``tools``
+    entries and their sections), any other value of ``over`` replaces ``base``'s."""
+    merged = dict(base)
+    for key, value in over.items():
+        below = merged.get(key)
+        if isinstance(value, Mapping) and isinstance(below, Mapping):
+            merged[key] = merged_params(
+                cast(Mapping[str, object], below), cast(Mapping[str, object], value)
+            )
+        else:
+            merged[key] = value
+    return merged
 
 
 def params_path(value: str, base_dir: Path | None = None) -> Path:

@@ -26,13 +26,43 @@ def _write(tmp_path: Path, body: str) -> Path:
     return path
 
 
-def test_default_yaml_matches_dataclass_defaults() -> None:
+def test_default_yaml_spells_out_the_dataclass_defaults_for_any_robot_but_the_panda(
+    tmp_path: Path,
+) -> None:
+    """default.yaml's sections are the built-in defaults (an xArm station gets exactly them);
+    its ``robots.panda`` entry is the reference Panda's tuning on top."""
+    text = (Path(__file__).parents[2] / "interfaces" / "cells" / "default.yaml").read_text()
+    xarm = tmp_path / "xarm.yaml"
+    xarm.write_text(
+        text.replace("robot: panda", "robot: xarm6").replace(
+            "tool: panda_hand", "tool: xarm_gripper"
+        ),
+        encoding="utf-8",
+    )
+    cell = load_cell(xarm)
+    assert load_config(DEFAULT_YAML, cell=cell) == ControllerConfig(cell=cell)
     config = load_config(DEFAULT_YAML)
-    assert config == ControllerConfig()
     assert config.tool.open_command == 0.08
     assert config.bins["rubber"] == (0.60, 0.07, 0.15)
     assert config.classes == ("concrete", "brick", "wood", "rubber")
     assert config.steps_per_update == 2
+    assert config.pick.approach_space == "joint"  # the Panda's own tuning
+    assert config.ready_tcp_position_m == (-0.25, 0.5, 0.15)
+
+
+def test_a_file_extends_another_key_by_key(tmp_path: Path) -> None:
+    base = _write(tmp_path, "    pick:\n      dwell_s: 0.4\n      release_s: 0.1\n")
+    top = tmp_path / "top.yaml"
+    top.write_text(
+        f"extends: {base}\ncontroller:\n  ros__parameters:\n    pick:\n      release_s: 0.2\n",
+        encoding="utf-8",
+    )
+    config = load_config(top)
+    assert (config.pick.dwell_s, config.pick.release_s) == (0.4, 0.2)
+    loop = tmp_path / "loop.yaml"
+    loop.write_text("extends: loop.yaml\ncontroller:\n  ros__parameters: {}\n", encoding="utf-8")
+    with pytest.raises(ControlConfigError, match="stacked"):
+        load_config(loop)
 
 
 def test_the_default_station_is_the_reference_cells_exactly() -> None:
