@@ -42,6 +42,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("bench", "twin"), "twin.bench_twin", "benchmark the twin's real-time factor"),
     (("bench", "render"), "twin.camera.bench", "benchmark the camera's renderers per frame"),
     (("bench", "control"), "control.bench", "benchmark the controller on an ideal arm"),
+    (("bench", "bound"), "control.bound", "the shortest pursuit the arm's joint limits allow"),
     (("bench", "rtt"), "twin.bench_rtt", "round-trip latency to the twin node over ROS 2"),
     (("twin-node",), "twin.cmd_node", "run the twin as a ROS 2 node"),
     (("controller",), "control.cmd_controller", "run the controller as a ROS 2 node"),

@@ -2,14 +2,15 @@
 
 python fake_cell.py OUT.json N_TICKS SPEED X0 Y0 HEIGHT [NAMESPACES] [OBJECTS]
 
-Ideal arms, one per station namespace (NAMESPACES: comma-separated, "" the empty one): every
-joint command becomes the measured joint state of the next step; the fingers report open. It
-publishes each station's joint states, the belt state and detections (a brick at X0 + SPEED t,
-Y0, and, with OBJECTS = "bad", a NaN and an unknown-class detection and one out-of-order frame
-mixed in; OBJECTS = "two": a second brick 0.3 m upstream), relays the stations' claims like
-the twin (the board of every station's current claims on /line/claims in every tick in which
-it changed, released and picked entries once) and runs the lockstep handshake with every
-station's controller. It records what the controllers sent as JSON in OUT.json.
+Ideal arms, one per station namespace (NAMESPACES: comma-separated, "" the empty one): every joint
+command becomes the measured joint state of the next step; the fingers report open. It publishes
+each station's joint states, the belt state and detections (a brick at X0 + SPEED t, Y0, gone from
+the belt once a station reports it picked, and, with OBJECTS = "bad", a NaN and an unknown-class
+detection and one out-of-order frame mixed in; OBJECTS = "two": a second brick 0.3 m upstream),
+relays the stations' claims like the twin (the board of every station's current claims on
+/line/claims in every tick in which it changed, released and picked entries once) and runs the
+lockstep handshake with every station's controller. It records what the controllers sent as JSON in
+OUT.json.
 """
 
 from __future__ import annotations
@@ -155,6 +156,7 @@ class Board:
     def __init__(self) -> None:
         self.entries: dict[tuple[str, int], Any] = {}
         self.relayed: list[dict[str, Any]] = []
+        self.picked = False  # a station reported a pick: the first brick left the belt
 
     def publish(self, stations: list[Station], pub: Any, t_s: float) -> bool:
         """Take the claims that arrived; publish the board if it changed."""
@@ -165,6 +167,7 @@ class Board:
             return False
         for claim in arrived:
             self.entries[(claim.station, claim.track_id)] = claim
+            self.picked = self.picked or claim.state == "picked"
         board = ClaimArray(claims=[self.entries[k] for k in sorted(self.entries)])
         board.header.stamp = stamp(t_s)
         board.header.frame_id = "world"
@@ -230,7 +233,7 @@ class FakeCell:
         frame = DetectionArray()
         frame.header.stamp = stamp(capture)
         x = self.x0 + self.speed * capture
-        found = [self.det("brick", x, self.y0)]
+        found = [] if self.board.picked else [self.det("brick", x, self.y0)]
         if bad:
             found += [self.det("brick", float("nan"), 0.4), self.det("gypsum", x - 0.2, 0.6)]
         elif self.objects == "two":

@@ -298,8 +298,9 @@ stations:
     namespace: s2
     robot: panda
     tool: panda_hand
-    pick_window_x_m: [-0.35, 0.35]
-    bins: [{class_name: brick, centre_x_m: 0.33, centre_y_m: 0.07}]
+    base_position_m: [-0.1, 0.0, 0.0]
+    pick_window_x_m: [-0.7, 0.25]
+    bins: [{class_name: brick, centre_x_m: 0.23, centre_y_m: 0.07}]
 """
 
 

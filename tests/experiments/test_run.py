@@ -192,7 +192,7 @@ def test_shipped_controller_parameter_files_resolve_and_load(tmp_path: Path) -> 
     throughput = controller_params("throughput", None, cell)
     assert throughput.name == "throughput.yaml"
     assert load_config(throughput).pick.approach_space == "joint"
-    assert load_config(controller_params("default", None, cell)).pick.approach_space == "cartesian"
+    assert load_config(controller_params("default", None, cell)).pick.approach_space == "joint"
     own = tmp_path / "mine.yaml"
     own.write_text("controller:\n  ros__parameters:\n    pick: {dwell_s: 0.5}\n", encoding="utf-8")
     assert controller_params("mine.yaml", tmp_path, cell) == own.resolve()

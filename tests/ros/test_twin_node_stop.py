@@ -74,7 +74,7 @@ def _wait_for_sim_time(proc: subprocess.Popen[bytes], out: Path, sim_s: float) -
 
 def _reference_lines(dataset: Path, duration_s: float, steps: int) -> list[str]:
     """``events.jsonl`` lines of the first ``steps`` steps, stepped in this process."""
-    from twin.cmd_node import build_scenario
+    from twin.cmd_node import build_scenario, spawn_judge
     from twin.sim import Twin
 
     args = argparse.Namespace(
@@ -93,6 +93,7 @@ def _reference_lines(dataset: Path, duration_s: float, steps: int) -> list[str]:
     with Twin(
         scenario, dataset_dir=dataset, cell=cell, event_sink=lambda e: sink(e.to_json())
     ) as twin:
+        twin.spawn_judge = spawn_judge(args, scenario, cell)
         twin.reset()
         for _ in range(steps):
             twin.advance()

@@ -148,11 +148,13 @@ def test_every_tool_kind_picks_and_places_on_any_station(
         assert vented == ([0.0], [0.0])
     else:
         # the fingers close across the belt, on the object's 130 mm long side (``width_m`` is
-        # its narrow side), each reporting half the opening
+        # its narrow side), each reporting its own joint position (what /tf's finger links are)
         assert len(_of(events, EventType.FINGER_CONTACT)) >= 2
         assert obj.length_m == pytest.approx(0.13, abs=0.001)
         assert measured == pytest.approx(obj.length_m, abs=0.004)
-        assert holding == ([0.5 * measured] * 2, [0.0, 0.0])
+        assert holding[0] == pytest.approx(fingers, abs=1e-9)
+        assert holding[1] == [0.0, 0.0]
+        assert sum(holding[0]) == pytest.approx(measured, abs=1e-9)
         # the two prismatic fingers close independently: each stops where the object's side
         # is (a few mm off the TCP), together they span the measured opening
         assert sum(fingers) == pytest.approx(measured, abs=1e-3)

@@ -148,9 +148,18 @@ class ParallelJaw:
         return float(np.clip(np.mean(fracs), 0.0, 1.0) * self.spec.max_opening_m)
 
     def joint_report(self) -> tuple[list[float], list[float]]:
-        """Each finger joint: half the measured opening, velocity 0."""
-        n = len(self._fingers)
-        return [0.5 * self.measured()] * n, [0.0] * n
+        """Each finger joint's own share of the opening (half the opening when the fingers
+        are symmetric), velocity 0: the fingers' links in ``/tf`` are the forward kinematics
+        of what is reported, even when a grasp pushed them apart unevenly."""
+        if not self._fingers:
+            return [], []
+        states = pb.getJointStates(self.body, self._fingers, physicsClientId=self.client)
+        half = 0.5 * self.spec.max_opening_m
+        report = [
+            float(np.clip((s[0] - c) / (o - c), 0.0, 1.0) * half) if o != c else 0.0
+            for s, (o, c) in zip(states, self._span, strict=True)
+        ]
+        return report, [0.0] * len(report)
 
     def link_pose(self) -> Pose:
         """Pose of the TCP link's frame, world."""
