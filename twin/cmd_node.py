@@ -443,7 +443,7 @@ def _run_episode(
 ) -> bool:
     """The episode; True when a stop signal ended it before its duration."""
     from twin.episode_log import EpisodeWriteError, start_episode_folder, write_status
-    from twin.perception import PerceptionConfig
+    from twin.perception_config import PerceptionConfig
     from twin.ros_isolation import clean_stale_fastdds_shm, local_ros_defaults
     from twin.sim import Twin
 

@@ -3,7 +3,8 @@
 Three levels, as in the reference: the *object* level (which images and objects, heights
 re-sampled within class ranges, orientation jitter), the *system* level (belt speed, stochastic
 perturbation, order and spacing of the stream) and *physics* (friction and restitution ranges per
-class); besides them the camera model (``perception``, a :class:`twin.perception.PerceptionConfig`)
+class); besides them the perception (``perception``,
+:class:`twin.perception_config.PerceptionConfig`)
 and injected ``faults`` (detection dropout and belt stall windows, controller restarts), the
 ``controller``'s parameter file (the name of one shipped in ``control/config/``, such as
 ``default`` or ``throughput``, or a path relative to the scenario file) and the ``bins`` map
@@ -45,7 +46,7 @@ from interfaces.fileio import read_text_capped, write_atomic
 from interfaces.materials import ClassTable
 from interfaces.yamlio import load_yaml_strict
 from twin.errors import ConfigError
-from twin.perception import PerceptionConfig
+from twin.perception_config import PerceptionConfig
 
 
 def _check(condition: bool, key: str, value: object, what: str) -> None:

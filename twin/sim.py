@@ -54,7 +54,8 @@ from twin.builtin import cache_root
 from twin.errors import ConfigError
 from twin.monitor import GroundTruth, Monitor
 from twin.objects import ImageLayout, ObjectSpec, load_dataset, read_obj_triangles
-from twin.perception import Perception, PerceptionConfig
+from twin.perception import Perception
+from twin.perception_config import PerceptionConfig
 from twin.scenario import PerturbationLevel, Scenario, episode_cell, scenario_cell, seed_tree
 from twin.spawn_fit import PieceJudge, SpawnFit
 from twin.station import ArmCommand, Station

@@ -36,7 +36,7 @@ from tests.docs.conftest import (
     ticked,
     yaw_of_down,
 )
-from twin.perception import PerceptionConfig
+from twin.perception_config import PerceptionConfig
 from twin.robot import HOLD_S
 from twin.scenario import Scenario
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from twin.monitor import GroundTruth
-from twin.perception import Perception, PerceptionConfig, wrap_half_pi
+from twin.perception import Perception, wrap_half_pi
+from twin.perception_config import PerceptionConfig
 from twin.top_view import TopView
 
 CLASSES = ("concrete", "brick", "wood", "rubber")

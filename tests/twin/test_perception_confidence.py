@@ -7,7 +7,8 @@ import pytest
 
 from twin.errors import ConfigError
 from twin.monitor import GroundTruth
-from twin.perception import Perception, PerceptionConfig
+from twin.perception import Perception
+from twin.perception_config import PerceptionConfig
 from twin.top_view import TopView
 
 CLASSES = ("concrete", "brick", "wood", "rubber")

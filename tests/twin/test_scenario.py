@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from twin.errors import ConfigError
-from twin.perception import PerceptionConfig
+from twin.perception_config import PerceptionConfig
 from twin.scenario import (
     FaultLevel,
     ObjectLevel,
