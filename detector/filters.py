@@ -7,6 +7,8 @@ costs about a millisecond each.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import numpy.typing as npt
 
@@ -16,18 +18,64 @@ BoolImage = npt.NDArray[np.bool_]
 """A mask ``(H, W)``."""
 
 
-def _shift_views(a: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``a`` padded by edge replication along ``axis``, as its previous, own and next values."""
-    pad = [(0, 0)] * a.ndim
-    pad[axis] = (1, 1)
-    p = np.pad(a, pad, mode="edge")
+def _lead(a: np.ndarray, axis: int, index: slice | int) -> tuple[slice | int, ...]:
+    """The index tuple taking ``index`` along ``axis`` of ``a`` (everything along the rest)."""
+    take: list[slice | int] = [slice(None)] * a.ndim
+    take[axis] = index
+    return tuple(take)
+
+
+def _three(
+    a: np.ndarray, axis: int, combine: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """``combine(previous, own, next)`` of every pixel along ``axis``, edges replicated (the
+    pixel beyond an edge is the edge pixel), without padding a copy of the image: the inside
+    from three shifted views, each edge row or column from its own values."""
     n = a.shape[axis]
-    take = [slice(None)] * a.ndim
-    views = []
-    for start in (0, 1, 2):
-        take[axis] = slice(start, start + n)
-        views.append(p[tuple(take)])
-    return views[0], views[1], views[2]
+    if n < 3:
+        prev = a[_lead(a, axis, np.r_[0, 0 : n - 1])]
+        nxt = a[_lead(a, axis, np.r_[1:n, n - 1])]
+        return combine(prev, a, nxt)
+    out = np.empty_like(a, dtype=np.result_type(a))
+    out[_lead(a, axis, slice(1, n - 1))] = combine(
+        a[_lead(a, axis, slice(0, n - 2))],
+        a[_lead(a, axis, slice(1, n - 1))],
+        a[_lead(a, axis, slice(2, n))],
+    )
+    first, second = a[_lead(a, axis, slice(0, 1))], a[_lead(a, axis, slice(1, 2))]
+    last, before = a[_lead(a, axis, slice(n - 1, n))], a[_lead(a, axis, slice(n - 2, n - 1))]
+    out[_lead(a, axis, slice(0, 1))] = combine(first, first, second)
+    out[_lead(a, axis, slice(n - 1, n))] = combine(before, last, last)
+    return out
+
+
+def _median_of(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    out: np.ndarray = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
+    return out
+
+
+def _max_of(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    out: np.ndarray = np.maximum(np.maximum(a, b), c)
+    return out
+
+
+def _min_of(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    out: np.ndarray = np.minimum(np.minimum(a, b), c)
+    return out
+
+
+def _sum_of(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    out: np.ndarray = a + b + c
+    return out
+
+
+def box_mean3(image: FloatImage) -> FloatImage:
+    """Mean over each pixel's 3x3 box (edges replicated), ``(H, W) float32``: two separable
+    sums of three shifted views, cheaper than :func:`box_mean`'s cumulative sums for so small a
+    box (equal to it within float32 rounding)."""
+    out = _three(np.asarray(image, dtype=np.float32), 1, _sum_of)
+    result: FloatImage = _three(out, 0, _sum_of) * np.float32(1.0 / 9.0)
+    return result
 
 
 def median3(image: FloatImage) -> FloatImage:
@@ -38,10 +86,7 @@ def median3(image: FloatImage) -> FloatImage:
     """
     out = image
     for axis in (1, 0):
-        a, b, c = _shift_views(out, axis)
-        lo = np.minimum(a, b)
-        hi = np.maximum(a, b)
-        out = np.maximum(lo, np.minimum(hi, c))
+        out = _three(out, axis, _median_of)
     return out.astype(np.float32, copy=False)
 
 
@@ -49,8 +94,7 @@ def max3(image: np.ndarray) -> np.ndarray:
     """3x3 maximum (grey dilation), ``(H, W)``, edges replicated."""
     out = image
     for axis in (1, 0):
-        a, b, c = _shift_views(out, axis)
-        out = np.maximum(np.maximum(a, b), c)
+        out = _three(out, axis, _max_of)
     return out
 
 
@@ -58,8 +102,7 @@ def min3(image: np.ndarray) -> np.ndarray:
     """3x3 minimum (grey erosion), ``(H, W)``, edges replicated."""
     out = image
     for axis in (1, 0):
-        a, b, c = _shift_views(out, axis)
-        out = np.minimum(np.minimum(a, b), c)
+        out = _three(out, axis, _min_of)
     return out
 
 
@@ -129,6 +172,7 @@ __all__ = [
     "BoolImage",
     "FloatImage",
     "box_mean",
+    "box_mean3",
     "dilate",
     "erode",
     "fill_small_holes",

@@ -44,7 +44,7 @@ from detector import grouped
 from detector.belt_view import BeltView
 from detector.config import GeometryConfig
 from detector.filters import max3, min3
-from detector.rect import min_area_rectangle
+from detector.rect import min_area_rectangles
 from interfaces.detections import Detection
 
 _TOP_SAMPLES = 20000
@@ -307,6 +307,16 @@ def frame_detections(
     outlines, footprint = _outlines(crop, face, n, view, config)
     undersides = _undersides(crop, n, config)
     suction, radius, tilt = _suction_points(crop, face, footprint, n, view, config)
+    seen = [k for k in range(1, n + 1) if face_count[k] > 0]
+    rects = dict(
+        zip(
+            seen,
+            min_area_rectangles(
+                [outlines[k - 1] if len(outlines[k - 1]) else face_xy[owner == k] for k in seen]
+            ),
+            strict=True,
+        )
+    )
     out: list[Detection | None] = []
     for k in range(1, n + 1):
         if face_count[k] == 0:
@@ -314,8 +324,7 @@ def frame_detections(
             continue
         top_k = float(top[k]) if np.isfinite(top[k]) else float(smooth[fr, fc][owner == k].max())
         underside = min(max(float(undersides[k]), 0.0), top_k)
-        outline = outlines[k - 1]
-        rect = min_area_rectangle(outline if len(outline) else face_xy[owner == k])
+        rect = rects[k]
         out.append(
             Detection(
                 class_name=class_names[k - 1],

@@ -115,3 +115,42 @@ def test_scores_not_matching_the_class_names_are_an_error(tmp_path: Path) -> Non
     frame, _ = _frame()
     with pytest.raises(ModelFileError, match="do not match"):
         segmenter.segment(frame.rgb)
+
+
+def test_the_node_options_plug_in_an_onnx_model_or_a_users_segmenter(tmp_path: Path) -> None:
+    """``cdw-twin detector-node --onnx MODEL`` / ``--segmenter MODULE:CALLABLE`` build a detector
+    around the user's model (what the node then runs on every frame)."""
+    import argparse
+    import sys
+
+    from detector.cmd_node import configure, detector_of
+    from detector.errors import DetectorConfigError
+    from interfaces.camera import RgbdCameraSpec
+
+    parser = argparse.ArgumentParser()
+    configure(parser)
+    path = _tiny_model(tmp_path / "tiny.onnx")
+    (tmp_path / "tiny.json").write_text(json.dumps({"class_names": CLASSES}), encoding="utf-8")
+    args = parser.parse_args(["--onnx", str(path)])
+    detector = detector_of(args, 0.0)(RgbdCameraSpec())
+    frame, pieces = _frame()
+    names = sorted(i.class_name for i in detector.detect(frame).instances)
+    assert names == ["brick", "wood"]
+    (tmp_path / "my_models.py").write_text(
+        "from detector.onnx_segmenter import OnnxSegmenter\n"
+        f"def make():\n    return OnnxSegmenter({str(path)!r})\n"
+        "def wrong():\n    return 42\n",
+        encoding="utf-8",
+    )
+    sys.path.insert(0, str(tmp_path))
+    try:
+        args = parser.parse_args(["--segmenter", "my_models:make"])
+        detector = detector_of(args, 0.0)(RgbdCameraSpec())
+        assert len(detector.detect(frame).instances) == len(pieces)
+        with pytest.raises(DetectorConfigError, match="returned a int, not a Segmenter"):
+            detector_of(parser.parse_args(["--segmenter", "my_models:wrong"]), 0.0)
+        with pytest.raises(DetectorConfigError, match="expected MODULE:CALLABLE"):
+            detector_of(parser.parse_args(["--segmenter", "my_models"]), 0.0)
+    finally:
+        sys.path.remove(str(tmp_path))
+        sys.modules.pop("my_models", None)
