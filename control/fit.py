@@ -22,8 +22,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from control.config import ControllerConfig
-from control.scheduler import STATIC_REASONS, static_reason
+from control.scheduler import static_reason
 from control.tracking import Track
+from interfaces.untargeted import STATIC_REASONS
 
 REFUSALS: tuple[str, ...] = STATIC_REASONS
 """The static reasons a station refuses a piece, in the order the scheduler checks them."""

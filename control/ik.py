@@ -54,6 +54,21 @@ def _reach(model: pin.Model, tcp_frame_id: int) -> tuple[FloatArray, float]:
     return _frozen(origin), length_m + 1e-6
 
 
+def _wrist_reach(model: pin.Model, tcp_frame_id: int) -> tuple[FloatArray, float]:
+    """The origin ``(3,)`` of the joint that carries the TCP, in the TCP's frame, and an upper
+    bound (m) of its distance from the first joint's origin in any configuration (the sum of
+    the lengths of the offsets between the joints' origins up to it, as :func:`_reach`). A
+    tool pose fixes where that joint's origin is: farther than the bound from the first
+    joint's, no configuration reaches the pose (tighter than :func:`_reach`, which adds the
+    wrist and the tool at any angle)."""
+    frame = model.frames[tcp_frame_id]
+    length_m = sum(
+        float(np.linalg.norm(model.jointPlacements[j].translation))
+        for j in range(2, frame.parentJoint + 1)
+    )
+    return _frozen(frame.placement.inverse().translation), length_m
+
+
 def down_rotation(yaw_rad: float) -> FloatArray:
     """Rotation ``(3, 3) float`` of a tool pointing down (tool z = -world z), turned by yaw.
 
@@ -164,6 +179,10 @@ class Kinematics:
         self.reach_origin_m, self.reach_m = _reach(model, self._tcp_id)
         """The first joint's origin in the base frame ``(3,)`` and the farthest the TCP can be from
         it (m, an upper bound): a pose beyond is refused by :meth:`solve` without iterating."""
+        self._wrist_in_tcp_m, wrist_reach_m = _wrist_reach(model, self._tcp_id)
+        margin_m = self._ik.accept_tolerance * (1.0 + float(np.linalg.norm(self._wrist_in_tcp_m)))
+        self._wrist_reach_sq = (wrist_reach_m + margin_m + 1e-6) ** 2
+        self._damping = self._ik.damping * np.eye(6)
 
     @classmethod
     def of_station(cls, station: StationSpec, ik: IkConfig | None = None) -> Kinematics:
@@ -225,6 +244,14 @@ class Kinematics:
         pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
         return self.oMbase * self._data.oMf[self._tcp_id]
 
+    def beyond_reach(self, position_m: tuple[float, float, float]) -> bool:
+        """Whether the world point ``position_m`` lies farther from the first joint than
+        :attr:`reach_m`: :meth:`solve` then fails at once for a TCP there, whatever its
+        orientation (the same test, the same arithmetic), so a caller about to try several
+        yaws there can skip them all."""
+        reach = self._baseMo.act(np.asarray(position_m, dtype=np.float64)) - self.reach_origin_m
+        return float(reach @ reach) > self.reach_m * self.reach_m
+
     def solve(self, oMtool: pin.SE3, q_init: FloatArray) -> IkResult:  # noqa: N803
         """Damped least squares on the ``log6`` error from the warm start ``q_init``.
 
@@ -234,7 +261,9 @@ class Kinematics:
         error is below ``accept_tolerance`` (near joint limits the last digits converge slowly).
         A pose farther from the first joint than :attr:`reach_m` fails at once (no iterations):
         a station's scheduler asks about every object the camera sees, most of them metres
-        away along the line.
+        away along the line; so does one that puts the joint carrying the TCP beyond that
+        joint's own bound (:meth:`_beyond_wrist`: a UR10's TCP 1.3-1.9 m out, where the
+        iterations would fail after all of them).
         """
         cfg = self._ik
         model, data = self._model, self._data
@@ -248,9 +277,9 @@ class Kinematics:
                 error_norm=math.inf,
             )
         reach = baseMdes.translation - self.reach_origin_m
-        if float(reach @ reach) > self.reach_m * self.reach_m:
+        if float(reach @ reach) > self.reach_m * self.reach_m or self._beyond_wrist(baseMdes):
             return IkResult(q=_frozen(q), success=False, iterations=0, error_norm=math.inf)
-        damping = cfg.damping * np.eye(6)
+        damping = self._damping
         error_norm = math.inf
         for iteration in range(cfg.max_iterations + 1):
             pin.framesForwardKinematics(model, data, q)
@@ -265,17 +294,30 @@ class Kinematics:
                 break
             jac = pin.computeFrameJacobian(model, data, q, self._tcp_id, pin.LOCAL)
             jac = -pin.Jlog6(tcpMdes.inverse()) @ jac
-            dq = cfg.step * self._step_within_limits(jac, err, damping, q)
+            dq = self._step_within_limits(jac, err, damping, q)
+            if cfg.step != 1.0:
+                dq *= cfg.step
             largest = float(np.abs(dq).max())
             if largest > cfg.max_joint_step_rad:
                 dq *= cfg.max_joint_step_rad / largest
-            q = np.minimum(np.maximum(pin.integrate(model, q, dq), self.lower_rad), self.upper_rad)
+            # every joint is revolute with one variable (_reduced, _reach): integrating is q + dq
+            q = np.minimum(np.maximum(q + dq, self.lower_rad), self.upper_rad)
         return IkResult(
             q=_frozen(q),
             success=error_norm < cfg.accept_tolerance,
             iterations=cfg.max_iterations,
             error_norm=error_norm,
         )
+
+    def _beyond_wrist(self, baseMdes: pin.SE3) -> bool:  # noqa: N803
+        """Whether the pose ``baseMdes`` (the TCP's in the base frame) puts the origin of the
+        joint that carries the TCP farther from the first joint's than any configuration can
+        (:func:`_wrist_reach`), by more than an accepted solution's error could move it
+        (``accept_tolerance`` times one plus the wrist's distance from the TCP): such a pose
+        fails after every iteration, so it is refused without one. Exact: no pose the
+        iterations would accept is refused."""
+        wrist = baseMdes.act(self._wrist_in_tcp_m) - self.reach_origin_m
+        return float(wrist @ wrist) > self._wrist_reach_sq
 
     def _step_within_limits(
         self, jac: FloatArray, err: FloatArray, damping: FloatArray, q: FloatArray
@@ -285,18 +327,17 @@ class Kinematics:
         a clipped step of such a joint is lost, and the others, solved as if it moved, leave
         the error to shrink only slowly."""
         at_lower, at_upper = q <= self.lower_rad, q >= self.upper_rad
-        at_limit = bool(at_lower.any() or at_upper.any())  # else (the common case) one solve
+        dq = np.asarray(-jac.T @ np.linalg.solve(jac @ jac.T + damping, err))
+        if not (at_lower.any() or at_upper.any()):
+            return dq  # the common case: one solve
         free = np.ones(q.shape, dtype=bool)
-        masked = jac
-        for _ in range(q.size):
-            dq = np.asarray(-masked.T @ np.linalg.solve(masked @ masked.T + damping, err))
-            if not at_limit:
-                break
+        for _ in range(q.size - 1):
             blocked = free & ((at_lower & (dq < 0.0)) | (at_upper & (dq > 0.0)))
             if not blocked.any():
                 break
             free &= ~blocked
             masked = jac * free
+            dq = np.asarray(-masked.T @ np.linalg.solve(masked @ masked.T + damping, err))
         return dq
 
     def _jacobian_xyz_yaw(self, q: FloatArray) -> FloatArray:

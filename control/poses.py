@@ -122,6 +122,8 @@ def solve_meeting(  # noqa: PLR0913 (keyword-only: the state it plans from, and 
     z = approach_z_m(track, config, clear_rise_m)
     dt_s = JOINT_APPROACH_GUESS_S
     lead_s = meeting_lead_s(config)
+    if kinematics.beyond_reach((*grasp_xy_at(track, config, t_s + dt_s + lead_s), z)):
+        return None  # the first guess's pose fails every yaw before any iteration
     near = nearest_grasp_yaw(track.yaw_rad, tcp_yaw_rad, period_rad)
     yaws: tuple[float, ...] = (near, near + period_rad)
     if period_rad == 0.0:

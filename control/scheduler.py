@@ -24,33 +24,6 @@ from dataclasses import dataclass
 from control.config import ControllerConfig
 from control.tracking import Track
 
-STATIC_REASONS: tuple[str, ...] = (
-    "no_bin",
-    "too_wide",
-    "too_flat",
-    "too_small",
-    "too_tilted",
-    "too_heavy",
-)
-"""The reasons a station refuses a piece whatever the timing, clutter or other stations
-(:func:`static_reason`), in the order they are checked."""
-
-
-UNTARGETED_REASONS: tuple[str, ...] = (
-    "low_confidence",
-    *STATIC_REASONS,
-    "excluded",
-    "unsettled",
-    "claimed_by_other",
-    "left_for_downstream",
-    "too_late",
-    "upstream",
-    "out_of_reach",
-    "blocked",
-    "lower_priority",
-)
-"""Every reason an object can be left untargeted, in the order they are checked."""
-
 
 @dataclass(frozen=True, kw_only=True)
 class Untargeted:
@@ -454,6 +427,24 @@ def unsettled(
     return dv > config.scheduler.settle_tolerance_mps
 
 
+def _past_window(track: Track, now_s: float, config: ControllerConfig) -> bool:
+    """Whether :func:`_timing_reason` says ``too_late`` for ``track`` whatever the intercept
+    search finds: a track moving downstream (``vx > 0``) already past the window's exit, or
+    past it when held even with an approach of no time at all (the intercept comes no sooner,
+    and a later one only lies farther downstream; no meeting at all is ``too_late`` too). The
+    same arithmetic as :func:`_timing_reason` with an approach of 0 s, so the answer is exact;
+    checked before the search, which most of the tracks a station sees downstream of its
+    window (the line's neighbours' pieces) would otherwise cost."""
+    if not track.velocity_mps[0] > 0.0:
+        return False
+    x_max = config.pick_window_x_m[1]
+    if track.position_m[0] > x_max:
+        return True
+    intercept_s = 0.0 + descend_after_s(config)
+    x_held, _ = track.position_at(now_s + intercept_s + config.timing.held_after_s)
+    return x_held > x_max
+
+
 def _timing_reason(
     track: Track,
     now_s: float,
@@ -558,6 +549,8 @@ def schedule(
         if reason is None and allow is not None:
             reason = allow(track)
         approach_s = math.inf
+        if reason is None and _past_window(track, now_s, config):
+            reason = "too_late"
         if reason is None:  # the intercept search only for tracks that could be picked
             approach_s = (
                 approach_time_s(track, now_s, tcp_position_m, config, tcp_yaw_rad=tcp_yaw_rad)

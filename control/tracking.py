@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from control.config import TrackingConfig
+from control.config_sections import TrackingConfig
 
 REJECT_REASONS: tuple[str, ...] = (
     "non_finite",

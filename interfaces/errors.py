@@ -63,9 +63,17 @@ def cut_message(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
     return f"{text[:head]} [... {len(text) - head - tail} characters cut ...] {text[-tail:]}"
 
 
-def require(condition: bool, key: str, value: object, what: str) -> None:
-    """Raise :class:`ConfigError` ``"<key> = <value>: <what>"`` unless ``condition`` holds
-    (the value cut by :func:`cut`)."""
+def require(
+    condition: bool,
+    key: str,
+    value: object,
+    what: str,
+    *,
+    error: type[ConfigError] = ConfigError,
+) -> None:
+    """Raise ``error`` (a :class:`ConfigError`) ``"<key> = <value>: <what>"`` unless
+    ``condition`` holds (the value cut by :func:`cut`). The one check of a configuration value
+    every package uses (a package passes its own subclass: ``ControlConfigError``)."""
     if not condition:
         msg = f"{key} = {cut(value)}: {what}"
-        raise ConfigError(msg)
+        raise error(msg)

@@ -15,6 +15,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from interfaces.scene_csv import INDEX_COLUMNS, SCENE_COLUMNS
 from meshgen.classes import ClassSpec
 from meshgen.errors import DatasetError
 
@@ -22,45 +23,6 @@ OUTPUT_VERSION = 3
 """Version of what a meshgen output folder holds; caches of meshed data key on it. 2: each
 image's ``texture.jpg``, texture coordinates in the meshes, scene.csv columns ``texture_path``
 and ``height_source``; 3: ``classes.yaml``, the class table the output was meshed with."""
-
-SCENE_COLUMNS: tuple[str, ...] = (
-    "object_id",
-    "source_image",
-    "class_id",
-    "class_name",
-    "centroid_x_m",
-    "centroid_y_m",
-    "yaw_rad",
-    "length_m",
-    "width_m",
-    "area_m2",
-    "height_m",
-    "volume_m3",
-    "mass_kg",
-    "mesh_path",
-    "convex_path",
-    "n_convex_pieces",
-    "area_change_ratio",
-    "repairs",
-    "texture_path",
-    "height_source",
-)
-"""Columns of ``<image_stem>/scene.csv``, in order.
-
-``texture_path`` is the piece's texture relative to the scene folder (like ``mesh_path``;
-empty when meshgen wrote none, ``--no-textures``); ``height_source`` is ``image`` (from a
-height image, ``--heights``) or ``sampled`` (seeded, from the class table)."""
-
-INDEX_COLUMNS: tuple[str, ...] = (
-    "image",
-    "width_px",
-    "height_px",
-    "m_per_px",
-    "objects",
-    "skipped",
-    "scene_csv",
-)
-"""Columns of ``index.csv``, in order."""
 
 
 def csv_field(value: object) -> str:
@@ -218,3 +180,20 @@ def mtl_text(classes: tuple[ClassSpec, ...]) -> str:
             f"Kd {r:.6f} {g:.6f} {b:.6f}\nKs 0.000000 0.000000 0.000000\nd 1.0\nillum 1"
         )
     return "\n\n".join(blocks) + "\n"
+
+
+__all__ = [
+    "FILE_MODE",
+    "INDEX_COLUMNS",
+    "OUTPUT_VERSION",
+    "SCENE_COLUMNS",
+    "FileSink",
+    "ThreadedFileSink",
+    "csv_field",
+    "csv_text",
+    "mtl_text",
+    "write_json",
+    "write_text",
+]
+"""``SCENE_COLUMNS`` and ``INDEX_COLUMNS`` are :mod:`interfaces.scene_csv`'s (the twin reads them
+there), re-exported for meshgen's modules."""

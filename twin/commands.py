@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from interfaces.errors import cut
+
 
 @dataclass(frozen=True)
 class Rejected:
@@ -133,3 +135,47 @@ def command_age_s(stamp_s: float, now_s: float) -> float:
     if stamp_s <= 0.0:
         return 0.0
     return max(round(now_s - stamp_s, 9), 0.0)
+
+
+MAX_PHASE_CHARS = 64
+"""Longest ``PickTarget.phase`` the twin takes."""
+
+
+def validate_target(values: Sequence[float], phase: str) -> Rejected | None:
+    """A pick target's grasp point and velocity (``values``: x, y, z, vx, vy, vz) all finite
+    and its phase at most :data:`MAX_PHASE_CHARS` long; None when it is valid."""
+    if all(math.isfinite(x) for x in values) and len(phase) <= MAX_PHASE_CHARS:
+        return None
+    detail = f"grasp point and velocity {cut(tuple(values))}, phase {cut(phase, 70)}"
+    return Rejected("not_finite", detail)
+
+
+MAX_FAULT_EVENTS_PER_S = 20
+"""Refusals of one topic logged as ``fault`` events per second of sim time (the rest are
+counted only)."""
+
+
+class FaultBudget:
+    """How many refusals of each topic are logged as faults: the first ``per_s`` of each sim
+    second, so a client flooding the twin with bad messages cannot flood its event log."""
+
+    def __init__(self, per_s: int = MAX_FAULT_EVENTS_PER_S) -> None:
+        self.per_s = per_s
+        self._logged: dict[str, tuple[int, int]] = {}  # topic -> (sim second, logged)
+
+    def admit(self, topic: str, time_s: float) -> bool:
+        """Whether a refusal of ``topic`` at sim time ``time_s`` is logged (and count it)."""
+        second = int(time_s)
+        start, logged = self._logged.get(topic, (second, 0))
+        if start != second:
+            logged = 0
+        if logged >= self.per_s:
+            return False
+        self._logged[topic] = (second, logged + 1)
+        return True
+
+
+def cut_text(text: str, limit: int = 300) -> str:
+    """``text``, at most ``limit`` characters (a refusal's detail may quote a client's
+    string)."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 from functools import partial
 
 import pybullet as pb
@@ -43,11 +42,13 @@ import pybullet as pb
 from interfaces.bins import BinSpec
 from interfaces.cell import Cell
 from interfaces.events import Event, EventType
-from twin.objects import read_obj_triangles
+from twin.ground_truth import GroundTruth
+from twin.monitor_records import AtStation, Emitter, ObjectRecord, StationWatch, TcpZone
+from twin.object_truth import MeshCache, landing, mesh_pose, shape_key, truth_of
+from twin.placement import Placement
 from twin.station import Station
-from twin.stream import Placement
 from twin.tools import Candidate, HeldObject, Normal, Pose
-from twin.top_view import FloatArray, TopView, top_view
+from twin.top_view import FloatArray
 from twin.world import SpawnedBody, World
 
 _NEAR_TCP_M = 0.25
@@ -70,131 +71,6 @@ nothing about it can change. Objects touched by an arm are polled every step, an
 for (ground truth, the target metric) are always read fresh."""
 
 
-@dataclass(frozen=True)
-class GroundTruth:
-    """The true state of one object (world frame, SI units).
-
-    ``orientation_xyzw`` is the object (mesh) frame's; ``length_m``, ``width_m`` and ``height_m``
-    are the object's own extents (footprint and extrusion, whatever way it lies); ``top_view`` is
-    what a camera above sees: the heading and extents of the face turned up. ``in_workspace``:
-    in some station's pick window; ``held``: by some station's tool.
-    """
-
-    id: int
-    source_id: str
-    class_name: str
-    position_m: tuple[float, float, float]
-    orientation_xyzw: tuple[float, float, float, float]
-    linear_velocity_mps: tuple[float, float, float]
-    angular_velocity_radps: tuple[float, float, float]
-    top_view: TopView
-    length_m: float
-    width_m: float
-    area_m2: float
-    volume_m3: float
-    height_m: float
-    mass_kg: float
-    on_belt: bool
-    in_workspace: bool
-    held: bool
-    in_bin: bool
-
-
-@dataclass
-class _AtStation:
-    """One object's state with respect to one station."""
-
-    in_window: bool = False
-    missed: bool = False
-    overlap_since: float | None = None
-    fingers: frozenset[int] = frozenset()
-    arm_links: frozenset[int] = frozenset()
-
-
-@dataclass
-class _Record:
-    id: int
-    placement: Placement
-    body: int
-    mass_kg: float
-    height_m: float
-    inertial_inv: tuple[float, float, float, float]
-    at: list[_AtStation]
-    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
-    active: bool = True
-    on_belt: bool = False
-    held_by: int | None = None
-    picked: bool = False
-    in_bin: bool = False
-    busy: bool = False
-    """Some station overlaps it or touches it (it stays off the fast path)."""
-    constraint: int | None = None
-    polled_step: int = -1
-    next_poll_step: int = 0
-    released_step: int = -1
-    final_truth: GroundTruth | None = None
-    """Once it is no longer simulated (it lies in a bin), its ground truth does not change."""
-
-    @property
-    def held(self) -> bool:
-        return self.held_by is not None
-
-    @property
-    def in_workspace(self) -> bool:
-        return any(a.in_window for a in self.at)
-
-    @property
-    def class_name(self) -> str:
-        return self.placement.spec.class_name
-
-
-@dataclass
-class _Watch:
-    """What the monitor keeps of one station between steps."""
-
-    station: Station
-    tcp_shape: int
-    lo_x_m: float
-    hi_x_m: float
-    tcp_pose: Pose
-    held: _Record | None = None
-    fingers: dict[int, dict[int, Normal]] = field(default_factory=dict)
-    arm: dict[int, set[int]] = field(default_factory=dict)
-    grasped: list[tuple[float, _Record, float]] = field(default_factory=list)
-    """This step's objects the tool grasps in the pick window: (squared horizontal distance
-    from the TCP, record, overlap time)."""
-
-    @property
-    def name(self) -> str:
-        return self.station.spec.name
-
-
-_Tcp = tuple[float, float, float, float, int]
-"""A station's TCP x and y, its pick window's limits and its index (for the fast path)."""
-
-
-class _Emitter:
-    """Appends one step's events (time and step fixed) to a list."""
-
-    def __init__(self, events: list[Event], step: int, time_s: float) -> None:
-        self.events = events
-        self.step = step
-        self.time_s = time_s
-
-    def __call__(self, kind: EventType, record: _Record, **data: object) -> None:
-        self.events.append(
-            Event(
-                time_s=self.time_s,
-                step=self.step,
-                type=kind,
-                object_id=record.id,
-                class_name=record.class_name,
-                data=data,
-            )
-        )
-
-
 class Monitor:
     """Watches every object of one episode; :meth:`update` returns the step's new events."""
 
@@ -205,28 +81,15 @@ class Monitor:
         self.cell = cell
         self.world = world
         self.stations = stations
-        self._records: list[_Record] = []
-        self._vertex_cache: dict[tuple[str, float], FloatArray] = {}
-        self._active: list[_Record] = []  # simulated ones, in spawn order
+        self._records: list[ObjectRecord] = []
+        self._meshes = MeshCache()
+        self._active: list[ObjectRecord] = []  # simulated ones, in spawn order
         self._step = 0
         self._poll_reach_m = _MAX_CLOSING_SPEED_MPS / cell.physics.physics_hz
         self._poll_vertical_ratio = _MAX_CLOSING_SPEED_MPS / _MAX_SINKING_SPEED_MPS
-        self._by_body: dict[int, _Record] = {}
+        self._by_body: dict[int, ObjectRecord] = {}
         self._bins: list[tuple[BinSpec, str]] = [(b, s.name) for s in cell.stations for b in s.bins]
-        self._watches = tuple(
-            _Watch(
-                station=station,
-                tcp_shape=pb.createCollisionShape(
-                    pb.GEOM_BOX,
-                    halfExtents=list(station.tool.spec.tcp_half_extents_m),
-                    physicsClientId=client,
-                ),
-                lo_x_m=station.spec.pick_window_x_m[0],
-                hi_x_m=station.spec.pick_window_x_m[1],
-                tcp_pose=station.tool.tcp_pose(),
-            )
-            for station in stations
-        )
+        self._watches = tuple(StationWatch.of(station, client) for station in stations)
         self.load_mass_kg = 0.0
         self._pending: list[Event] = []
         self._truth_cache: tuple[GroundTruth, ...] | None = None  # of this step
@@ -247,14 +110,14 @@ class Monitor:
         """Register a freshly spawned object; returns its ``spawned`` event (``extra`` added
         to its data: :class:`twin.spawn_fit.SpawnFit`'s judgement)."""
         qx, qy, qz, qw = spawned.inertial_quat_xyzw
-        record = _Record(
+        record = ObjectRecord(
             id=len(self._records) + 1,
             placement=placement,
             body=spawned.body,
             mass_kg=spawned.mass_kg,
             height_m=spawned.height_m,
             inertial_inv=(-qx, -qy, -qz, qw),
-            at=[_AtStation() for _ in self._watches],
+            at=[AtStation() for _ in self._watches],
             position=placement.position_m,
             on_belt=True,
         )
@@ -310,7 +173,7 @@ class Monitor:
             return record.body if record.active else None
         return None
 
-    def _fresh(self, record: _Record) -> None:
+    def _fresh(self, record: ObjectRecord) -> None:
         """Read the record's pose from the physics unless it was read at this step."""
         if record.polled_step != self._step:
             record.position, record.orientation = pb.getBasePositionAndOrientation(
@@ -329,7 +192,7 @@ class Monitor:
         here (it runs for most objects at every step); a line's is :meth:`_ride`.
         """
         events, self._pending = self._pending, []
-        emit = _Emitter(events, step, time_s)
+        emit = Emitter(events, step, time_s)
         for watch in self._watches:
             watch.station.tool.tick(time_s)
         touched, stations = self._read_contacts()
@@ -394,7 +257,7 @@ class Monitor:
         return events
 
     def _ride(
-        self, record: _Record, emit: _Emitter, belt_m: float, stations: tuple[_Tcp, ...]
+        self, record: ObjectRecord, emit: Emitter, belt_m: float, stations: tuple[TcpZone, ...]
     ) -> float | None:
         """The fast path of an object riding the belt ``belt_m`` from its edges: None when it
         is near a TCP (the full evaluation follows, and finds the same window crossings in the
@@ -410,7 +273,7 @@ class Monitor:
                 self._cross(record, s, x, emit)
         return margin_m
 
-    def _cross(self, record: _Record, s: int, x: float, emit: _Emitter) -> None:
+    def _cross(self, record: ObjectRecord, s: int, x: float, emit: Emitter) -> None:
         """An object riding the belt crossed station ``s``'s pick window limit."""
         watch, at = self._watches[s], record.at[s]
         if not at.in_window:
@@ -419,7 +282,7 @@ class Monitor:
             self._left_window(record, watch, at, x, emit)
         at.in_window = not at.in_window
 
-    def _read_contacts(self) -> tuple[set[int], tuple[_Tcp, ...]]:
+    def _read_contacts(self) -> tuple[set[int], tuple[TcpZone, ...]]:
         """Every tool and arm contact of every station's robot with an object, and the TCPs.
 
         Returns the ids of the objects a robot touches, and per station its TCP's x and y, its
@@ -447,7 +310,7 @@ class Monitor:
             tcps.append((tcp[0][0], tcp[0][1], watch.lo_x_m, watch.hi_x_m, i))
         return touched, tuple(tcps)
 
-    def _evaluate(self, record: _Record, emit: _Emitter, time_s: float) -> bool:
+    def _evaluate(self, record: ObjectRecord, emit: Emitter, time_s: float) -> bool:
         """Every rule for an object off the fast path; whether it lay on the belt at this step
         (before a grasp in it lifts it: its mass is on the belt drive's load this step)."""
         x, y, z = record.position
@@ -480,7 +343,7 @@ class Monitor:
         return None
 
     def _carry(
-        self, record: _Record, over: tuple[BinSpec, str] | None, emit: _Emitter, time_s: float
+        self, record: ObjectRecord, over: tuple[BinSpec, str] | None, emit: Emitter, time_s: float
     ) -> None:
         """Let go of a held object once its station's tool does (released, slipped, ...)."""
         assert record.held_by is not None
@@ -497,7 +360,7 @@ class Monitor:
                     reason=reason,
                 )
 
-    def _fate(self, record: _Record, over: tuple[BinSpec, str] | None, emit: _Emitter) -> bool:
+    def _fate(self, record: ObjectRecord, over: tuple[BinSpec, str] | None, emit: Emitter) -> bool:
         """Placed in a bin or fallen off: the object leaves the physics (returns True)."""
         x, _, z = record.position
         if over is not None and not record.held:
@@ -527,7 +390,7 @@ class Monitor:
         return False
 
     def _left_window(
-        self, record: _Record, watch: _Watch, at: _AtStation, x: float, emit: _Emitter
+        self, record: ObjectRecord, watch: StationWatch, at: AtStation, x: float, emit: Emitter
     ) -> None:
         if record.held:
             direction = "lifted"
@@ -543,7 +406,7 @@ class Monitor:
             emit(EventType.MISSED, record, station=watch.name)
 
     def _station_rules(
-        self, watch: _Watch, at: _AtStation, record: _Record, emit: _Emitter, time_s: float
+        self, watch: StationWatch, at: AtStation, record: ObjectRecord, emit: Emitter, time_s: float
     ) -> bool:
         """TCP overlap, contacts and the grasp of one station; whether it is busy with the
         object (overlapping or touching it)."""
@@ -583,15 +446,15 @@ class Monitor:
                 overlap_s=time_s - at.overlap_since,
                 touching=touching,
                 tcp_pose=watch.tcp_pose,
-                shape_key=self._shape_key(record),
-                mesh_pose=partial(self._mesh_pose, record),
-                triangles=partial(self._triangles, record),
+                shape_key=shape_key(record),
+                mesh_pose=partial(mesh_pose, record),
+                triangles=partial(self._meshes.triangles, record),
             )
             if tool.grasps(candidate) and at.in_window:
                 watch.grasped.append((dx * dx + dy * dy, record, candidate.overlap_s))
         return at.overlap_since is not None or bool(at.fingers) or bool(at.arm_links)
 
-    def _credit(self, watch: _Watch, emit: _Emitter, time_s: float) -> None:
+    def _credit(self, watch: StationWatch, emit: Emitter, time_s: float) -> None:
         """The station's tool holds the object it grasps nearest its TCP: attach it, credit
         the pick."""
         _, record, overlap_s = min(watch.grasped, key=lambda g: (g[0], g[1].id))
@@ -608,7 +471,7 @@ class Monitor:
         )
 
     def _contacts(
-        self, watch: _Watch, at: _AtStation, record: _Record, engaged: bool, emit: _Emitter
+        self, watch: StationWatch, at: AtStation, record: ObjectRecord, engaged: bool, emit: Emitter
     ) -> dict[int, Normal]:
         """New tool-link contacts (``finger_contact``) and unintended contacts of the robot;
         returns the tool's contacts with the object (contact link index -> normal)."""
@@ -633,7 +496,7 @@ class Monitor:
         at.arm_links = links
         return touching
 
-    def _attach(self, record: _Record, watch: _Watch, time_s: float) -> None:
+    def _attach(self, record: ObjectRecord, watch: StationWatch, time_s: float) -> None:
         c = self.client
         station = watch.station
         link_pos, link_orn = station.tool.link_pose()
@@ -669,7 +532,7 @@ class Monitor:
             time_s,
         )
 
-    def _release(self, record: _Record) -> None:
+    def _release(self, record: ObjectRecord) -> None:
         if record.constraint is not None:
             pb.removeConstraint(record.constraint, physicsClientId=self.client)
             record.constraint = None
@@ -681,7 +544,7 @@ class Monitor:
         record.held_by = None
         record.released_step = self._step
 
-    def _deactivate(self, record: _Record) -> None:
+    def _deactivate(self, record: ObjectRecord) -> None:
         if record.held:
             self._release(record)
         record.active = False
@@ -694,51 +557,16 @@ class Monitor:
         self._by_body.pop(record.body, None)
         self.world.remove(record.body)
 
-    @staticmethod
-    def _shape_key(record: _Record) -> tuple[str, float]:
-        """Objects with the same key have the same mesh (scaled to the same height)."""
-        return (str(record.placement.spec.mesh_path), record.height_m)
-
-    def _mesh_pose(self, record: _Record) -> Pose:
-        """The pose of the object's mesh frame, world (its pose as of this step)."""
-        _, orientation = pb.multiplyTransforms(
-            (0.0, 0.0, 0.0), record.orientation, (0.0, 0.0, 0.0), record.inertial_inv
-        )
-        q = (orientation[0], orientation[1], orientation[2], orientation[3])
-        return record.position, q
-
-    def _triangles(self, record: _Record) -> FloatArray:
-        """The object's mesh triangles ``(n, 3, 3)`` in its mesh frame, m (cached)."""
-        return self._vertices(record).reshape(-1, 3, 3)
-
-    def _vertices(self, record: _Record) -> FloatArray:
-        """The object's mesh vertices in its body frame, m (z scaled to its height); cached."""
-        spec = record.placement.spec
-        key = self._shape_key(record)
-        vertices = self._vertex_cache.get(key)
-        if vertices is None:
-            vertices = read_obj_triangles(spec.mesh_path).reshape(-1, 3)
-            vertices[:, 2] *= record.height_m / spec.height_m
-            self._vertex_cache[key] = vertices
-        return vertices
+    def _vertices(self, record: ObjectRecord) -> FloatArray:
+        """The object's mesh vertices in its body frame (:class:`twin.object_truth.MeshCache`)."""
+        return self._meshes.vertices(record)
 
     # -- ground truth -----------------------------------------------------------------------
     def landing_in_bins(self) -> list[int]:
         """Ids of objects released over a bin within the last ``LANDING_S`` that have not
-        reached it yet (below its top): their fate is not decided at this instant, so an episode
-        that ends now counts them neither placed nor lost. (An object left lying on a bin's rim
-        for longer is not landing.)"""
-        c = self.client
-        recent = self._step - LANDING_S * self.cell.physics.physics_hz
-        ids: list[int] = []
-        for record in self._active:
-            if record.held or record.in_bin or record.released_step < max(0.0, recent):
-                continue
-            (x, y, z), _ = pb.getBasePositionAndOrientation(record.body, physicsClientId=c)
-            over = self._bin_at(x, y)
-            if over is not None and z >= over[0].top_z_m:
-                ids.append(record.id)
-        return ids
+        reached it yet (:func:`twin.object_truth.landing`)."""
+        since = max(0.0, self._step - LANDING_S * self.cell.physics.physics_hz)
+        return landing(self._active, self._bin_at, since_step=since, client=self.client)
 
     def ground_truth(self) -> tuple[GroundTruth, ...]:
         """Every object that is on the belt, held, or in a bin (not those that fell off).
@@ -752,7 +580,7 @@ class Monitor:
             )
         return self._truth_cache
 
-    def _truth(self, record: _Record) -> GroundTruth:
+    def _truth(self, record: ObjectRecord) -> GroundTruth:
         if record.final_truth is not None:
             return record.final_truth
         if not record.active:
@@ -760,42 +588,12 @@ class Monitor:
             return record.final_truth
         return self._truth_now(record)
 
-    def _truth_now(self, record: _Record) -> GroundTruth:
+    def _truth_now(self, record: ObjectRecord) -> GroundTruth:
         if record.active:
             self._fresh(record)
-            lin, ang = pb.getBaseVelocity(record.body, physicsClientId=self.client)
-        else:
-            lin, ang = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-        spec = record.placement.spec
-        scale = record.height_m / spec.height_m
-        _, orientation = pb.multiplyTransforms(
-            (0.0, 0.0, 0.0), record.orientation, (0.0, 0.0, 0.0), record.inertial_inv
-        )
         vertices: Callable[[], FloatArray] = partial(self._vertices, record)
-        return GroundTruth(
-            id=record.id,
-            source_id=spec.object_id,
-            class_name=spec.class_name,
-            position_m=record.position,
-            orientation_xyzw=tuple(orientation),
-            linear_velocity_mps=tuple(lin),
-            angular_velocity_radps=tuple(ang),
-            top_view=top_view(
-                orientation,
-                spec.yaw_rad,
-                length_m=spec.length_m,
-                width_m=spec.width_m,
-                height_m=record.height_m,
-                vertices_m=vertices,
-            ),
-            length_m=spec.length_m,
-            width_m=spec.width_m,
-            area_m2=spec.area_m2,
-            volume_m3=spec.volume_m3 * scale,
-            height_m=record.height_m,
-            mass_kg=record.mass_kg,
-            on_belt=record.on_belt,
-            in_workspace=record.in_workspace,
-            held=record.held,
-            in_bin=record.in_bin,
-        )
+        return truth_of(record, client=self.client, vertices=vertices)
+
+
+__all__ = ["LANDING_S", "GroundTruth", "Monitor"]
+"""``GroundTruth`` is :mod:`twin.ground_truth`'s, re-exported for the importers of its old home."""

@@ -28,22 +28,14 @@ from pathlib import Path
 import numpy as np
 
 from interfaces.materials import MaterialsError, dataset_table
+from interfaces.scene_csv import (
+    INDEX_REQUIRED_COLUMNS,
+    SCENE_FLOAT_COLUMNS,
+    SCENE_REQUIRED_COLUMNS,
+)
 from meshgen.errors import ObjFileError
 from meshgen.objfile import ObjMesh, read_obj
 from twin.errors import SceneError
-
-_FLOAT_FIELDS = (
-    "centroid_x_m",
-    "centroid_y_m",
-    "yaw_rad",
-    "length_m",
-    "width_m",
-    "area_m2",
-    "height_m",
-    "volume_m3",
-    "mass_kg",
-)
-_REQUIRED = ("object_id", "source_image", "class_name", *_FLOAT_FIELDS, "mesh_path", "convex_path")
 
 MAX_MESH_VERTICES = 100_000
 """Default bound on the vertices of one mesh file (meshgen writes at most a few thousand: two
@@ -235,11 +227,11 @@ def _parse_object(
     root: Path,
     limits: MeshLimits,
 ) -> ObjectSpec:
-    for key in _REQUIRED:
+    for key in SCENE_REQUIRED_COLUMNS:
         if key not in row or row[key] is None:
             msg = f"{path}:{line}: missing field {key!r}"
             raise SceneError(msg)
-    values = {key: _float(path, line, row, key) for key in _FLOAT_FIELDS}
+    values = {key: _float(path, line, row, key) for key in SCENE_FLOAT_COLUMNS}
     for key in ("length_m", "width_m", "area_m2", "height_m", "volume_m3", "mass_kg"):
         if values[key] <= 0.0:
             msg = f"{path}:{line}: field {key!r} = {values[key]!r} must be positive"
@@ -305,7 +297,7 @@ def load_dataset(
         raise SceneError(msg) from None
     layouts = []
     for line, row in rows:
-        for key in ("image", "width_px", "height_px", "m_per_px", "scene_csv"):
+        for key in INDEX_REQUIRED_COLUMNS:
             if not row.get(key):
                 msg = f"{index_path}:{line}: missing field {key!r}"
                 raise SceneError(msg)

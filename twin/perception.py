@@ -42,7 +42,7 @@ from interfaces.detections import Detection, DetectionFrame, wrap_half_pi
 from twin.perception_config import PerceptionConfig
 
 if TYPE_CHECKING:
-    from twin.monitor import GroundTruth
+    from twin.ground_truth import GroundTruth
 
 
 class Perception:

@@ -41,7 +41,7 @@ import yaml
 from interfaces.bins import BinsMap, check_map
 from interfaces.cell import Cell, load_cell, resolve_cell, resolve_cell_path
 from interfaces.dataclass_io import from_data, to_data
-from interfaces.errors import cut, cut_message
+from interfaces.errors import cut, cut_message, require
 from interfaces.fileio import read_text_capped, write_atomic
 from interfaces.materials import ClassTable
 from interfaces.yamlio import load_yaml_strict
@@ -49,15 +49,9 @@ from twin.errors import ConfigError
 from twin.perception_config import PerceptionConfig
 
 
-def _check(condition: bool, key: str, value: object, what: str) -> None:
-    if not condition:
-        msg = f"{key} = {cut(value)}: {what}"
-        raise ConfigError(msg)
-
-
 def _check_range(key: str, lo_hi: tuple[float, float], lo: float, hi: float) -> None:
     a, b = lo_hi
-    _check(lo <= a <= b <= hi, key, list(lo_hi), f"needs {lo} <= low <= high <= {hi}")
+    require(lo <= a <= b <= hi, key, list(lo_hi), f"needs {lo} <= low <= high <= {hi}")
 
 
 @dataclass(frozen=True)
@@ -84,17 +78,17 @@ class ObjectLevel:
 
     def __post_init__(self) -> None:
         if self.max_objects is not None:
-            _check(self.max_objects >= 1, "objects.max_objects", self.max_objects, "must be >= 1")
+            require(self.max_objects >= 1, "objects.max_objects", self.max_objects, "must be >= 1")
         if self.max_width_m is not None:
-            _check(self.max_width_m > 0.0, "objects.max_width_m", self.max_width_m, "must be > 0")
+            require(self.max_width_m > 0.0, "objects.max_width_m", self.max_width_m, "must be > 0")
         if self.min_height_m is not None:
-            _check(
+            require(
                 0.0 < self.min_height_m < 1.0,
                 "objects.min_height_m",
                 self.min_height_m,
                 "must be in (0, 1)",
             )
-        _check(
+        require(
             0.0 <= self.orientation_jitter_rad <= np.pi,
             "objects.orientation_jitter_rad",
             self.orientation_jitter_rad,
@@ -102,7 +96,7 @@ class ObjectLevel:
         )
         for name, rng in self.height_ranges_m.items():
             _check_range(f"objects.height_ranges_m.{name}", rng, 0.001, 1.0)
-        _check(
+        require(
             len(set(self.classes)) == len(self.classes),
             "objects.classes",
             list(self.classes),
@@ -119,13 +113,13 @@ class PerturbationLevel:
     correlation_time_s: float = 0.5
 
     def __post_init__(self) -> None:
-        _check(
+        require(
             self.force_std_N >= 0.0,
             "system.perturbation.force_std_N",
             self.force_std_N,
             "must be >= 0",
         )
-        _check(
+        require(
             self.correlation_time_s > 0.0,
             "system.perturbation.correlation_time_s",
             self.correlation_time_s,
@@ -150,26 +144,26 @@ class SystemLevel:
     prefill_m: float = 0.0
 
     def __post_init__(self) -> None:
-        _check(
+        require(
             0.0 <= self.prefill_m <= 100.0,
             "system.prefill_m",
             self.prefill_m,
             "must be in [0, 100] m",
         )
-        _check(
+        require(
             0.0 <= self.belt_speed_mps <= 2.0,
             "system.belt_speed_mps",
             self.belt_speed_mps,
             "must be in [0, 2] m/s",
         )
-        _check(
+        require(
             0.0 <= self.image_gap_m <= 10.0,
             "system.image_gap_m",
             self.image_gap_m,
             "must be in [0, 10] m",
         )
         for i, (t_s, v) in enumerate(self.speed_schedule):
-            _check(
+            require(
                 t_s >= 0.0 and 0.0 <= v <= 2.0,
                 f"system.speed_schedule[{i}]",
                 [t_s, v],
@@ -195,7 +189,7 @@ class PhysicsLevel:
 
 def _check_windows(key: str, windows: tuple[tuple[float, float], ...]) -> None:
     for i, (start_s, end_s) in enumerate(windows):
-        _check(
+        require(
             0.0 <= start_s < end_s <= 86400.0,
             f"{key}[{i}]",
             [start_s, end_s],
@@ -221,7 +215,7 @@ class FaultLevel:
         _check_windows("faults.detection_dropout", self.detection_dropout)
         _check_windows("faults.belt_stall", self.belt_stall)
         for i, t_s in enumerate(self.controller_restart_at_s):
-            _check(
+            require(
                 0.0 < t_s <= 86400.0,
                 f"faults.controller_restart_at_s[{i}]",
                 t_s,
@@ -279,7 +273,7 @@ class Scenario:
     faults: FaultLevel = field(default_factory=FaultLevel)
 
     def __post_init__(self) -> None:
-        _check(
+        require(
             _is_folder_name(self.name),
             "name",
             self.name,
@@ -288,14 +282,14 @@ class Scenario:
         )
         for key in ("controller", "cell", "dataset"):
             value: str = getattr(self, key)
-            _check(
+            require(
                 0 < len(value) <= 4096 and "\0" not in value,
                 key,
                 value,
                 "must be a name or a path (not empty, at most 4096 characters, no NUL)",
             )
-        _check(0 <= self.seed <= MAX_SEED, "seed", self.seed, "must be in [0, 2**64 - 1]")
-        _check(
+        require(0 <= self.seed <= MAX_SEED, "seed", self.seed, "must be in [0, 2**64 - 1]")
+        require(
             0.0 < self.duration_s <= 86400.0,
             "duration_s",
             self.duration_s,

@@ -250,7 +250,7 @@ def _check_meshgen_folder(dataset_dir: Path, where: str) -> Path:
         raise refuse("no index.csv: not a meshgen output folder (make one with `cdw-twin meshgen`)")
     if is_meshgen_output(dataset_dir):
         return index
-    from meshgen.export import INDEX_COLUMNS
+    from interfaces.scene_csv import INDEX_COLUMNS
 
     try:
         with index.open(encoding="utf-8", newline="") as handle:

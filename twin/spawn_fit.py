@@ -25,7 +25,7 @@ from twin.suction_point import SuctionPoints
 from twin.top_view import FloatArray, TopView, top_view
 
 if TYPE_CHECKING:
-    from twin.monitor import GroundTruth
+    from twin.ground_truth import GroundTruth
     from twin.objects import ObjectSpec
 
 
@@ -63,7 +63,7 @@ def resting_truth(
     """The ground truth of a piece at rest at the origin in ``orientation_xyzw`` (its mesh
     frame's), ``height_m`` tall (``key`` its id for the suction-point finder): what its top
     view and suction point are computed from."""
-    from twin.monitor import GroundTruth
+    from twin.ground_truth import GroundTruth
 
     view: TopView = top_view(
         orientation_xyzw,

@@ -20,22 +20,11 @@ import numpy as np
 
 from interfaces.cell import BeltSpec
 from interfaces.materials import ClassTable, shipped_table
-from twin.objects import ImageLayout, ObjectSpec
+from twin.objects import ImageLayout
+from twin.placement import Placement
 from twin.scenario import Scenario, SeedTree
 
 _CLEARANCE_M = 0.002
-
-
-@dataclass(frozen=True)
-class Placement:
-    """Where and how one object enters the belt (world frame)."""
-
-    spec: ObjectSpec
-    position_m: tuple[float, float, float]
-    yaw_rad: float
-    height_m: float
-    friction: float
-    restitution: float
 
 
 @dataclass(frozen=True)

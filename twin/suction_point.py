@@ -26,7 +26,7 @@ from twin.tools.suction_cup import Face, planar_faces
 from twin.top_view import FloatArray, rotation_matrix
 
 if TYPE_CHECKING:
-    from twin.monitor import GroundTruth
+    from twin.ground_truth import GroundTruth
 
 POLE_TOLERANCE_M = 1e-4
 """How close ``polylabel`` gets to the pole."""

@@ -20,8 +20,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from interfaces.metrics import TRACKING_THRESHOLD_M, SettleTimer
+from interfaces.phases import TRACKED_PHASES
 
-PURSUIT_PHASES = frozenset({"approach", "descend", "dwell", "track"})
+PURSUIT_PHASES = TRACKED_PHASES  # the announced phases the twin measures (interfaces.phases)
 
 Pose = tuple[tuple[float, float, float], tuple[float, float, float, float]]
 

@@ -19,7 +19,7 @@ from control.errors import ControlConfigError
 from interfaces.tools import ParallelJawSpec, SuctionCupSpec, ToolSpec
 
 if TYPE_CHECKING:
-    from control.config import PickConfig
+    from control.config_sections import PickConfig
     from control.tracking import Track
     from interfaces.materials import ClassTable
 
@@ -146,7 +146,7 @@ class ControllerTool(Protocol):
         face_tilt_rad: float = math.nan,
     ) -> str | None:
         """Why an object of this size cannot be grasped (one of
-        :data:`control.scheduler.UNTARGETED_REASONS`), or None. ``face_radius_m`` is the
+        :data:`interfaces.untargeted.UNTARGETED_REASONS`), or None. ``face_radius_m`` is the
         radius of the largest disc on its top face the camera reports and ``face_tilt_rad``
         that face's tilt from level (NaN: none)."""
         ...

@@ -33,7 +33,7 @@ from control.tools import Footprint, GraspTiming, suction_point_depth_m
 from interfaces.tools import SuctionCupSpec
 
 if TYPE_CHECKING:
-    from control.config import PickConfig
+    from control.config_sections import PickConfig
     from control.tracking import Track
     from interfaces.materials import ClassTable
 

@@ -10,8 +10,9 @@ import pytest
 
 from control.config import PARAMS_DIR, ControllerConfig, station_configs
 from control.fit import REFUSALS, Piece, line_refusal, piece_track, takeable
-from control.scheduler import STATIC_REASONS, schedule, static_reason
+from control.scheduler import schedule, static_reason
 from interfaces.cell import load_cell
+from interfaces.untargeted import STATIC_REASONS
 
 PIECES = (
     Piece(class_name="brick", length_m=0.10, width_m=0.05, height_m=0.04),

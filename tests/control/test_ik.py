@@ -111,11 +111,15 @@ def test_fk_and_ik_match_pybullet(client: int, arm: Arm) -> None:
 def test_ik_failure_is_flagged_and_stays_in_limits() -> None:
     kin = PANDA.kinematics(IkConfig(max_iterations=50))
     q0 = np.asarray(PANDA_SPEC.ready_joint_positions_rad)
-    result = kin.solve(tool_pose((1.0, 0.0, 0.333), 0.0), q0)  # within the bound, too far
+    result = kin.solve(tool_pose((0.1, 0.0, 0.1), 0.0), q0)  # in reach, into the arm itself
     assert not result.success
     assert result.iterations == 50
     assert result.error_norm > 0.1
     assert kin.within_limits(result.q)
+    wide = kin.solve(tool_pose((1.0, 0.0, 0.333), 0.0), q0)  # the wrist cannot be that far
+    assert not wide.success
+    assert wide.iterations == 0
+    assert kin.within_limits(wide.q)
     far = kin.solve(tool_pose((2.0, 0.0, 0.3), 0.0), q0)  # beyond the reach bound
     assert not far.success
     assert far.iterations == 0

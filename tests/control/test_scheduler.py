@@ -12,7 +12,6 @@ import pytest
 from control.config import ControllerConfig, SchedulerConfig
 from control.errors import ControlConfigError
 from control.scheduler import (
-    UNTARGETED_REASONS,
     approach_time_s,
     blocked_by,
     descend_after_s,
@@ -27,6 +26,7 @@ from control.scheduler import (
 from control.tracking import Track
 from interfaces.cell import load_cell
 from interfaces.tools import SuctionCupSpec
+from interfaces.untargeted import UNTARGETED_REASONS
 
 TCP = (0.0, 0.45, 0.30)
 

@@ -591,7 +591,7 @@ def _fault_kinds_in_code() -> set[str]:
     """Every ``fault`` kind the twin can record: rejection reasons, controller timeouts,
     injected faults."""
     kinds: set[str] = set()
-    for module in ("commands", "ros_node", "sim"):
+    for module in ("commands", "ros_node", "claims_relay", "step_loop", "sim"):
         tree = ast.parse((ROOT / "twin" / f"{module}.py").read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if isinstance(node, ast.Call) and node.args:

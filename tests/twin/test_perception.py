@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from twin.monitor import GroundTruth
-from twin.perception import Perception, wrap_half_pi
+from interfaces.detections import wrap_half_pi
+from twin.ground_truth import GroundTruth
+from twin.perception import Perception
 from twin.perception_config import PerceptionConfig
 from twin.top_view import TopView
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from twin.errors import ConfigError
-from twin.monitor import GroundTruth
+from twin.ground_truth import GroundTruth
 from twin.perception import Perception
 from twin.perception_config import PerceptionConfig
 from twin.top_view import TopView

@@ -10,7 +10,7 @@ import pytest
 import trimesh
 from shapely.geometry import Point, Polygon, box
 
-from twin.monitor import GroundTruth
+from twin.ground_truth import GroundTruth
 from twin.suction_point import SuctionPoints
 from twin.top_view import TopView
 

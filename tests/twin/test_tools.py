@@ -22,7 +22,7 @@ from interfaces.cell import Cell, default_cell
 from interfaces.events import Event, EventType
 from interfaces.robots import robot_from_data
 from interfaces.tools import tool_from_data
-from twin.monitor import GroundTruth
+from twin.ground_truth import GroundTruth
 from twin.scenario import PhysicsLevel, Scenario, SystemLevel
 from twin.sim import ArmCommand, Twin
 
@@ -113,7 +113,7 @@ def _of(events: tuple[Event, ...], kind: EventType) -> list[Event]:
     ids=["panda-suction", "ur10-suction", "ur10-wide-13cm"],
 )
 def test_every_tool_kind_picks_and_places_on_any_station(
-    mesh_polygons: Callable[..., Path], robot: str, tool: str, polygons: dict[str, list]
+    mesh_polygons: Callable[..., Path], robot: str, tool: str, polygons: dict[str, list[object]]
 ) -> None:
     with Twin(_still(), dataset_dir=mesh_polygons(polygons), cell=_cell(robot, tool)) as twin:
         obs, _ = twin.reset(seed=0)
