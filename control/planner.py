@@ -418,6 +418,9 @@ class JointPlanner:
         Raises ``PlanningError`` when the target is outside the limits or Ruckig fails.
         """
         q_target = np.asarray(q_target, dtype=np.float64)
+        if not self._dq.any() and not self._ddq.any() and np.array_equal(self._q, q_target):
+            # at rest on the target (a waiting arm): Ruckig would plan a zero-length move
+            return JointStep(q=self._q.copy(), dq=self._dq.copy(), remaining_s=0.0)
         try:
             self._checked(q_target, None, 0.0, self._trajectory)
         except PlanningError as exc:

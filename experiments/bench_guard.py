@@ -129,7 +129,7 @@ FAMILIES: tuple[Family, ...] = (
     ),
     Family(
         name="meshgen",
-        argv=lambda out: ["bench", "meshgen", "--json", "--repeats", "1", "--tmp-dir", str(out)],
+        argv=lambda out: ["bench", "meshgen", "--json", "--repeats", "1"],
         figures={"ms_per_object": SPEED_LOWER},
     ),
     Family(
@@ -310,7 +310,7 @@ def run(args: argparse.Namespace) -> int:
     names = {f.name for f in families}
     every = _figures(_load_baseline(args.baseline))
     scoped: JsonObject = {
-        "figures": {k: v for k, v in every.items() if k.split(".", 1)[0] in names}
+        "figures": {k: v for k, v in every.items() if k.rsplit(".", 1)[0] in names}
     }
     measured = {f"{r.family}.{k}": v for r in runs for k, v in r.figures.items()}
     rows = compare(scoped, measured)

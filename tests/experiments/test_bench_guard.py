@@ -68,7 +68,7 @@ def test_the_shipped_baseline_covers_every_family() -> None:
     shipped = json.loads(
         (Path(__file__).parents[2] / "experiments" / "guard_baseline.json").read_text("utf-8")
     )
-    families = {name.split(".", 1)[0] for name in shipped["figures"]}
+    families = {name.rsplit(".", 1)[0] for name in shipped["figures"]}
     assert families == {f.name for f in FAMILIES}
 
 
