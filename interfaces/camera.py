@@ -32,14 +32,20 @@ import numpy as np
 from interfaces.errors import require
 
 __all__ = [
+    "CameraInfoFields",
     "DepthNoise",
     "Intrinsics",
     "RgbdCameraSpec",
     "RgbdFrame",
+    "StaticFrame",
+    "belt_view_x_m",
+    "camera_info",
     "deproject",
     "linkMoptical",
     "project",
     "rpy_matrix",
+    "sees_point",
+    "static_frames",
     "world_points",
 ]
 
@@ -291,3 +297,133 @@ def project(
         u = intrinsics.fx_px * pts[:, 0] / z + intrinsics.cx_px
         v = intrinsics.fy_px * pts[:, 1] / z + intrinsics.cy_px
     return np.stack((u, v), axis=-1), z
+
+
+@dataclass(frozen=True, kw_only=True)
+class CameraInfoFields:
+    """The fields of one camera's ``sensor_msgs/CameraInfo`` as plain values (row-major): the
+    ``plumb_bob`` model with zero distortion ``d`` (5), ``k`` (9), ``r = I`` (9), ``p = [K | 0]``
+    (12), stamped in ``frame_id`` (the camera's optical frame)."""
+
+    frame_id: str
+    width: int
+    height: int
+    distortion_model: str
+    d: tuple[float, ...]
+    k: tuple[float, ...]
+    r: tuple[float, ...]
+    p: tuple[float, ...]
+
+
+@dataclass(frozen=True, kw_only=True)
+class StaticFrame:
+    """One static transform for ``/tf_static``: frame ``child`` in frame ``parent``, a
+    translation (m) and a unit quaternion ``(x, y, z, w)``."""
+
+    parent: str
+    child: str
+    translation_m: tuple[float, float, float]
+    rotation_xyzw: tuple[float, float, float, float]
+
+
+def camera_info(spec: RgbdCameraSpec) -> CameraInfoFields:
+    """The ``CameraInfo`` of camera ``spec`` (see :class:`CameraInfoFields`)."""
+    k = spec.intrinsics.K
+    p = np.zeros((3, 4))
+    p[:, :3] = k
+    return CameraInfoFields(
+        frame_id=spec.optical_frame,
+        width=spec.width_px,
+        height=spec.height_px,
+        distortion_model="plumb_bob",
+        d=(0.0,) * 5,
+        k=tuple(float(v) for v in k.ravel()),
+        r=(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        p=tuple(float(v) for v in p.ravel()),
+    )
+
+
+def _quaternion_xyzw(rotation: np.ndarray) -> tuple[float, float, float, float]:
+    """The unit quaternion ``(x, y, z, w)`` of a rotation matrix ``(3, 3)`` (w >= 0)."""
+    m = np.asarray(rotation, dtype=np.float64)
+    trace = float(np.trace(m))
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4)
+    else:
+        i = int(np.argmax(np.diag(m)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(max(1.0 + m[i, i] - m[j, j] - m[k, k], 1e-300))
+        v = [0.0, 0.0, 0.0]
+        v[i] = s / 4
+        v[j] = (m[j, i] + m[i, j]) / s
+        v[k] = (m[k, i] + m[i, k]) / s
+        q = (v[0], v[1], v[2], (m[k, j] - m[j, k]) / s)
+    quat = np.array(q, dtype=np.float64)
+    quat /= np.linalg.norm(quat)
+    if quat[3] < 0.0:
+        quat = -quat
+    return (float(quat[0]), float(quat[1]), float(quat[2]), float(quat[3]))
+
+
+def static_frames(spec: RgbdCameraSpec, world_frame: str = "world") -> tuple[StaticFrame, ...]:
+    """The camera's two static frames (REP 103 / 105): ``NAME_link`` in ``world_frame`` (its
+    pose in the cell file) and ``NAME_optical_frame`` in ``NAME_link`` (rpy ``(-pi/2, 0,
+    -pi/2)``)."""
+    worldMlink = spec.worldMlink()  # noqa: N806 (a pose name, aMb)
+    optical = linkMoptical()
+    return (
+        StaticFrame(
+            parent=world_frame,
+            child=spec.link_frame,
+            translation_m=(
+                float(worldMlink[0, 3]),
+                float(worldMlink[1, 3]),
+                float(worldMlink[2, 3]),
+            ),
+            rotation_xyzw=_quaternion_xyzw(worldMlink[:3, :3]),
+        ),
+        StaticFrame(
+            parent=spec.link_frame,
+            child=spec.optical_frame,
+            translation_m=(0.0, 0.0, 0.0),
+            rotation_xyzw=_quaternion_xyzw(optical[:3, :3]),
+        ),
+    )
+
+
+def sees_point(spec: RgbdCameraSpec, point_m: tuple[float, float, float]) -> bool:
+    """Whether world point ``point_m`` projects inside camera ``spec``'s image at a depth within
+    its range (nothing in between considered)."""
+    uv, z = project(np.array([point_m], dtype=np.float64), spec.intrinsics, spec.worldMoptical())
+    u, v = float(uv[0, 0]), float(uv[0, 1])
+    k = spec.intrinsics
+    return (
+        spec.depth_min_m <= float(z[0]) <= spec.depth_max_m
+        and -0.5 <= u <= k.width_px - 0.5
+        and -0.5 <= v <= k.height_px - 0.5
+    )
+
+
+def belt_view_x_m(
+    spec: RgbdCameraSpec, *, centre_y_m: float, surface_z_m: float, step_m: float = 0.01
+) -> tuple[float, float] | None:
+    """The x interval of the belt's centreline (``y = centre_y_m`` on ``z = surface_z_m``)
+    that camera ``spec`` sees, to ``step_m`` (None: it sees none of it within 50 m of itself)."""
+    x0 = spec.position_m[0]
+    xs = np.arange(x0 - 50.0, x0 + 50.0 + step_m / 2, step_m)
+    points = np.stack((xs, np.full_like(xs, centre_y_m), np.full_like(xs, surface_z_m)), axis=1)
+    uv, z = project(points, spec.intrinsics, spec.worldMoptical())
+    k = spec.intrinsics
+    with np.errstate(invalid="ignore"):
+        seen = (
+            (z >= spec.depth_min_m)
+            & (z <= spec.depth_max_m)
+            & (uv[:, 0] >= -0.5)
+            & (uv[:, 0] <= k.width_px - 0.5)
+            & (uv[:, 1] >= -0.5)
+            & (uv[:, 1] <= k.height_px - 0.5)
+        )
+    if not seen.any():
+        return None
+    return float(xs[seen].min()), float(xs[seen].max())

@@ -30,6 +30,13 @@ other value a path (relative to the cell file) to a third-party FMU whose variab
 ``mapping`` names; ``parameters`` are set before initialisation. Every error names the file and
 the dotted key.
 
+The optional ``cameras:`` list declares the cell's RGB-D cameras (:class:`interfaces.camera.
+RgbdCameraSpec`: name, pose of ``NAME_link`` in the world, image size, field of view, rate,
+depth range, depth noise), which a scenario with ``perception.source: camera`` renders and
+detects on (``docs/camera.md``); every camera must see the belt, and together they must see the
+belt's centreline :data:`CAMERA_UPSTREAM_VIEW_M` upstream of the first pick window. The
+``camera`` field-of-view interval stays: the oracle's detections come from it.
+
 An impossible cell is refused when it is loaded (:func:`check_layout`): every physical quantity
 is finite and within its range (a positive size, gravity pointing down, a vacuum below the
 atmosphere's pressure), every pick window lies on the belt downstream of the infeed, no two
@@ -49,6 +56,7 @@ from pathlib import Path
 import yaml
 
 from interfaces.bins import MAX_COORDINATE_M, BinsMap, BinSpec, assign_bins
+from interfaces.camera import RgbdCameraSpec, belt_view_x_m, sees_point
 from interfaces.dataclass_io import from_data, to_data
 from interfaces.errors import ConfigError, cut, cut_message, require
 from interfaces.fileio import write_atomic
@@ -393,6 +401,7 @@ class Cell:
     name: str = "cell"
     belt: BeltSpec = field(default_factory=BeltSpec)
     camera: CameraSpec = field(default_factory=CameraSpec)
+    cameras: tuple[RgbdCameraSpec, ...] = ()
     drive: DriveSpec = field(default_factory=DriveSpec)
     physics: PhysicsSpec = field(default_factory=PhysicsSpec)
     stations: tuple[StationSpec, ...] = ()
@@ -410,6 +419,8 @@ class Cell:
             spaces,
             "station namespaces must differ (two stations cannot share their topics)",
         )
+        cams = [c.name for c in self.cameras]
+        require(len(set(cams)) == len(cams), "cameras", cams, "camera names must differ")
         for i, station in enumerate(self.stations):
             for j, b in enumerate(station.bins):
                 require(
@@ -481,6 +492,37 @@ def bin_key(station: int, index: int, bin_spec: BinSpec) -> str:
 
 MIN_BASE_SEPARATION_M = 0.3
 """Closest two stations' robot bases may stand (their footprints would overlap)."""
+
+CAMERA_UPSTREAM_VIEW_M = 0.1
+"""How far upstream of the first pick window a cell's cameras must see the belt's centreline
+(a piece is detected before it enters the first window)."""
+
+
+def check_cameras(cell: Cell) -> None:
+    """Refuse cameras that cannot serve the line (:class:`ConfigError` naming the key): a
+    camera that sees none of the belt's centreline, or cameras none of which sees the
+    centreline :data:`CAMERA_UPSTREAM_VIEW_M` upstream of the first pick window."""
+    if not cell.cameras:
+        return
+    belt = cell.belt
+    for i, spec in enumerate(cell.cameras):
+        seen = belt_view_x_m(spec, centre_y_m=belt.centre_y_m, surface_z_m=belt.surface_z_m)
+        require(
+            seen is not None and seen[1] > belt.start_x_m and seen[0] < belt.end_x_m,
+            f"cameras[{i}] ({spec.name}).position_m",
+            spec.position_m,
+            "the camera sees none of the belt's centreline (check its pose, field of view and "
+            "depth range)",
+        )
+    first_x_m = min(s.pick_window_x_m[0] for s in cell.stations)
+    point = (first_x_m - CAMERA_UPSTREAM_VIEW_M, belt.centre_y_m, belt.surface_z_m)
+    require(
+        any(sees_point(spec, point) for spec in cell.cameras),
+        "cameras",
+        [spec.name for spec in cell.cameras],
+        f"no camera sees the belt's centreline at x = {point[0]:.3g} m, "
+        f"{CAMERA_UPSTREAM_VIEW_M:g} m upstream of the first pick window",
+    )
 
 
 def _squares_overlap(a: BinSpec, b: BinSpec) -> bool:
@@ -564,6 +606,7 @@ def check_layout(cell: Cell) -> None:
                     "cannot stand in one place",
                 )
             placed.append((key, b))
+    check_cameras(cell)
 
 
 # -- loading --------------------------------------------------------------------------------
@@ -584,6 +627,25 @@ def _station_from_data(raw: object, where: str) -> StationSpec:
     return from_data(StationSpec, {**data, "robot": robot, "tool": tool}, where)
 
 
+def _cameras_from_data(raw: object, where: str) -> tuple[RgbdCameraSpec, ...]:
+    """The ``cameras:`` list (None or absent: none); errors name ``cameras[i]``."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, list):
+        msg = f"{where}: cameras = {cut(raw)}: expected a list of cameras"
+        raise CellError(msg)
+    cameras = []
+    for i, item in enumerate(raw):
+        try:
+            cameras.append(from_data(RgbdCameraSpec, item, f"cameras[{i}]"))
+        except ConfigError as exc:
+            text = str(exc)
+            if not text.startswith(f"cameras[{i}]"):
+                text = f"cameras[{i}]: {text}"
+            raise CellError(cut_message(f"{where}: {text}")) from None
+    return tuple(cameras)
+
+
 def cell_from_data(data: object, where: str, *, base_dir: Path | None = None) -> Cell:
     """Build a cell from plain data (a parsed YAML file); errors name ``where`` and the key.
 
@@ -597,6 +659,7 @@ def cell_from_data(data: object, where: str, *, base_dir: Path | None = None) ->
         raise CellError(msg)
     raw = dict(data)
     raw_stations = raw.pop("stations", None)
+    raw["cameras"] = _cameras_from_data(raw.pop("cameras", []), where)
     if not isinstance(raw_stations, list) or not raw_stations:
         msg = f"{where}: stations = {cut(raw_stations)}: list at least one station"
         raise CellError(msg)

@@ -22,8 +22,10 @@ class PerceptionConfig:
 
     ``source`` says where the controllers' detections come from: ``oracle`` (the default: the
     ground truth through this error model, :class:`twin.perception.Perception`) or ``camera``
-    (the cell's rendered RGB-D cameras through a detector, :mod:`twin.camera`); the error-model
-    fields apply to the oracle only, ``rate_hz`` and ``latency_s`` to both."""
+    (the cell's rendered RGB-D cameras, its ``cameras:`` list, through a detector:
+    :mod:`twin.perception_source`, ``docs/camera.md``); the error-model fields apply to the
+    oracle only, ``rate_hz`` and ``latency_s`` to both (every camera is rendered at ``rate_hz``
+    and its merged detections released ``latency_s`` after the exposure)."""
 
     source: str = "oracle"
     rate_hz: float = 30.0

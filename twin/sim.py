@@ -19,7 +19,10 @@ tests and users. The co-simulation master runs a fixed physics step (240 Hz defa
 the belt), calls ``doStep`` and reads the belt speed that drives the kinematic belt. Time is
 ``step * dt``, never accumulated.
 
-The camera model is the scenario's ``perception`` unless a :class:`PerceptionConfig` is passed.
+The camera model is the scenario's ``perception`` unless a :class:`PerceptionConfig` is passed:
+the oracle (ground truth through its error model) or, with ``source: camera``, the cell's
+rendered RGB-D cameras through a detector, scored against ground truth
+(:mod:`twin.perception_source`, :meth:`Twin.perception_summary`, ``docs/camera.md``).
 Injected faults (the scenario's ``faults``): inside a ``belt_stall`` window the FMU receives a
 setpoint of 0 whatever was commanded (``setpoint_mps`` keeps the commanded value); inside a
 ``detection_dropout`` window no detection frame is released. Each window's start and end is
@@ -33,147 +36,46 @@ as they happen, so a killed process still leaves them behind.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from types import TracebackType
 
 import numpy as np
 import pybullet as pb
 
-from interfaces.cell import Cell, DriveSpec
+from interfaces.cell import Cell
 from interfaces.detections import DetectionFrame
 from interfaces.events import Event, EventType
 from interfaces.materials import dataset_table as dataset_materials
 from interfaces.metrics import Counts, count_events, event_scores, exit_station
 from twin.belt_drive import BeltDrive, BeltState
-from twin.builtin import cache_root
+from twin.episode_setup import collision_cache_dir, drive_parameters, entering_classes
 from twin.errors import ConfigError
 from twin.monitor import GroundTruth, Monitor
 from twin.objects import ImageLayout, ObjectSpec, load_dataset, read_obj_triangles
+from twin.observation import ArmState, Observation
 from twin.perception import Perception
 from twin.perception_config import PerceptionConfig
-from twin.scenario import PerturbationLevel, Scenario, episode_cell, scenario_cell, seed_tree
+from twin.perception_source import PerceptionStepper
+from twin.scenario import Scenario, episode_cell, scenario_cell, seed_tree
 from twin.spawn_fit import PieceJudge, SpawnFit
 from twin.station import ArmCommand, Station
 from twin.stream import ImageBatch, Stream
-from twin.suction_point import SuctionPoints
 from twin.target_metric import TrackingResult
 from twin.world import World
 
-__all__ = ["ArmCommand", "ArmState", "EventSink", "Observation", "Twin", "collision_cache_dir"]
-
-
-def collision_cache_dir() -> tuple[Path, tempfile.TemporaryDirectory[str] | None]:
-    """Where merged collision shapes go: ``<cache root>/collision``, shared by every episode.
-
-    The files are keyed by content (:func:`twin.collision.merged_collision_file`), so one merge
-    per mesh per machine serves every later episode. Where the cache root cannot be created
-    (a read-only home), a temporary folder of this twin's own, removed on close.
-    """
-    folder = cache_root() / "collision"
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        usable = os.access(folder, os.W_OK | os.X_OK)
-    except OSError:
-        usable = False
-    if not usable:
-        temporary = tempfile.TemporaryDirectory(prefix="cdw-twin-shapes-")
-        return Path(temporary.name), temporary
-    return folder, None
-
-
-def drive_parameters(
-    drive: DriveSpec, perturbation: PerturbationLevel, fmu_seed: int
-) -> dict[str, float]:
-    """The belt-drive FMU's parameters for an episode: the cell's ``drive.parameters``, and
-    the scenario's perturbation (off: force 0) through the drive's perturbation mapping.
-
-    A drive without a perturbation mapping takes none; a scenario that enables one is refused.
-    """
-    params = dict(drive.parameters)
-    names = drive.perturbation
-    if names is None:
-        if perturbation.enabled:
-            msg = (
-                f"system.perturbation.enabled: the belt drive {drive.fmu!r} has no perturbation "
-                "mapping (drive.perturbation in the cell file)"
-            )
-            raise ConfigError(msg)
-        return params
-    params.setdefault(names.force_std, perturbation.force_std_N if perturbation.enabled else 0.0)
-    params.setdefault(names.correlation_time, perturbation.correlation_time_s)
-    params.setdefault(names.seed, fmu_seed % 2**31)
-    return params
-
-
-def entering_classes(
-    layouts: tuple[ImageLayout, ...], scenario: Scenario, cell: Cell
-) -> tuple[str, ...]:
-    """The classes objects of the dataset can enter the belt with (``objects.classes``, empty:
-    all), in the cell's order (its bins'), then any the cell has no bin for."""
-    present = {spec.class_name for layout in layouts for spec in layout.objects}
-    wanted = scenario.objects.classes
-    kept = {name for name in present if not wanted or name in wanted}
-    ordered = [name for name in cell.classes if name in kept]
-    return (*ordered, *sorted(kept - set(ordered)))
-
-
-@dataclass(frozen=True)
-class ArmState:
-    """One station's arm and tool at one instant (ground truth)."""
-
-    joint_positions: tuple[float, ...]
-    joint_velocities: tuple[float, ...]
-    tcp_position_m: tuple[float, float, float]
-    tcp_orientation_xyzw: tuple[float, float, float, float]
-    gripper_width_m: float
-
-
-@dataclass(frozen=True)
-class Observation:
-    """What the twin knows at one instant (ground truth); ``arms`` has one entry per station.
-
-    ``joint_positions`` ... ``gripper_width_m`` are the first station's (the only one of a
-    one-station cell).
-    """
-
-    time_s: float
-    step: int
-    belt: BeltState
-    setpoint_mps: float
-    load_mass_kg: float
-    objects: tuple[GroundTruth, ...]
-    arms: tuple[ArmState, ...]
-    events: tuple[Event, ...] = field(default=())
-
-    @property
-    def joint_positions(self) -> tuple[float, ...]:
-        """The first station's arm joint positions."""
-        return self.arms[0].joint_positions
-
-    @property
-    def joint_velocities(self) -> tuple[float, ...]:
-        """The first station's arm joint velocities."""
-        return self.arms[0].joint_velocities
-
-    @property
-    def tcp_position_m(self) -> tuple[float, float, float]:
-        """The first station's TCP position."""
-        return self.arms[0].tcp_position_m
-
-    @property
-    def tcp_orientation_xyzw(self) -> tuple[float, float, float, float]:
-        """The first station's TCP orientation."""
-        return self.arms[0].tcp_orientation_xyzw
-
-    @property
-    def gripper_width_m(self) -> float:
-        """The first station's measured gripper opening."""
-        return self.arms[0].gripper_width_m
+__all__ = [
+    "ArmCommand",
+    "ArmState",
+    "EventSink",
+    "Observation",
+    "Twin",
+    "collision_cache_dir",
+    "drive_parameters",
+    "entering_classes",
+]
 
 
 EventSink = Callable[[Event], None]
@@ -221,8 +123,8 @@ class Twin:
         self.realtime = realtime
         self.perception_config = perception or scenario.perception
         self.perception_enabled = perception_enabled
-        self.perception: Perception | None = None
-        self._released: list[DetectionFrame] = []
+        self.perception: Perception | None = None  # the oracle of the episode, if it is one
+        self._perception = PerceptionStepper(self)
         self.dataset_dir = dataset_dir
         self.classes = entering_classes(self.layouts, scenario, self.cell)
         drive_parameters(self.cell.drive, scenario.system.perturbation, 0)  # refused early
@@ -259,7 +161,8 @@ class Twin:
         self.close()
 
     def close(self) -> None:
-        """Release the FMU and the PyBullet client."""
+        """Release the FMU, the cameras and the PyBullet client."""
+        self._perception.close()
         if self._drive is not None:
             self._drive.__exit__(None, None, None)
             self._drive = None
@@ -309,17 +212,7 @@ class Twin:
         self._belt_state = BeltState(0.0, 0.0, 0.0, 0.0, 0.0)
         self._events = []
         self._shapes = {}
-        self.perception = Perception(
-            self.perception_config,
-            self.classes,
-            self.cell.belt.surface_z_m,
-            self.dt_s,
-            seeds.perception,
-            camera=self.cell.camera,
-            dropout_windows_s=self.scenario.faults.detection_dropout,
-            suction_points=SuctionPoints(lambda object_id: self.object_mesh(object_id)[0]),
-        )
-        self._released = []
+        self.perception = self._perception.reset(self.scenario.seed, seeds.perception)
         judge = self.spawn_judge
         self._spawn_fit = None if judge is None else SpawnFit(judge, self._mesh_of)
         self._spawn_due()
@@ -403,10 +296,8 @@ class Twin:
         for station in self.stations:
             if station.targets.active:
                 self._track(station, monitor, new)
-        if self.perception is not None and self.perception_enabled:
-            if self.perception.capture_due(self.step_count):
-                self.perception.capture(self.time_s, monitor.ground_truth())
-            self._released.extend(self.perception.released(self.time_s))
+        if self.perception_enabled:
+            self._perception.step(self.step_count, self.time_s)
         if self.realtime:
             target = self._wall_start + self.time_s / self._realtime_factor
             delay = target - time.perf_counter()
@@ -463,8 +354,13 @@ class Twin:
 
     def take_detections(self) -> list[DetectionFrame]:
         """Detection frames released since the last call (after their latency)."""
-        frames, self._released = self._released, []
-        return frames
+        return self._perception.take()
+
+    def perception_summary(self) -> dict[str, float] | None:
+        """The episode's perception scored against ground truth so far (flat keys with units:
+        :data:`twin.perception_score.PERCEPTION_METRICS`), or None unless the scenario's
+        ``perception.source`` is ``camera``."""
+        return self._perception.summary()
 
     @property
     def drive_setpoint_mps(self) -> float:
@@ -564,6 +460,20 @@ class Twin:
             triangles[..., 2] *= height_m / spec.height_m
             self._triangles[key] = triangles
         return triangles
+
+    def object_shape(self, object_id: int) -> tuple[ObjectSpec, float] | None:
+        """The meshgen spec and sampled height of object ``object_id`` of this episode (None:
+        no object has that id yet)."""
+        return self._shapes.get(object_id)
+
+    def body_of(self, object_id: int) -> int | None:
+        """The PyBullet body of object ``object_id`` while it is simulated, else None."""
+        return None if self._monitor is None else self._monitor.body_of(object_id)
+
+    @property
+    def world(self) -> World | None:
+        """The episode's static scene (belt, floor, bins; None before the first reset)."""
+        return self._world
 
     def landing_in_bins(self) -> list[int]:
         """Ids of released objects over a bin, still above its top (see :class:`Monitor`)."""

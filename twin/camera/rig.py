@@ -61,13 +61,17 @@ if TYPE_CHECKING:
     from twin.robot import Robot
     from twin.sim import Twin
 
-__all__ = ["BELT_RGB", "FLOOR_RGB", "CameraRig", "Snapshot"]
+__all__ = ["BELT_RGB", "FLOOR_RGB", "ROBOT_ID", "CameraRig", "Snapshot"]
 
 BELT_RGB: RGB = (0.07, 0.07, 0.075)
 """The belt's colour: near-black rubber, as a real conveyor belt."""
 
 FLOOR_RGB: RGB = (0.42, 0.42, 0.40)
 """The floor's colour: a mid grey concrete."""
+
+ROBOT_ID = -1
+"""The id the renderers write for a robot link (:meth:`CameraRig.capture_with_robot` turns it
+into the robot's mask; the frame's ``instance_ids`` say 0 there)."""
 
 
 def _triangle_mesh(
@@ -153,8 +157,21 @@ class CameraRig:
         several cameras share one), stamped with its time: colour, depth with the camera's
         noise drawn from ``rng`` (None: no noise, the rendered depth with NaN outside
         ``[depth_min_m, depth_max_m]``), and the object id of every pixel (0 elsewhere)."""
+        return self.capture_with_robot(spec, rng=rng, snapshot=snapshot)[0]
+
+    def capture_with_robot(
+        self,
+        spec: RgbdCameraSpec,
+        *,
+        rng: np.random.Generator | None = None,
+        snapshot: Snapshot | None = None,
+    ) -> tuple[RgbdFrame, np.ndarray]:
+        """:meth:`capture`, and where a robot link was drawn, ``(H, W) bool``: what a robot
+        self-filter (the arm's known pose) removes before detection."""
         taken = snapshot if snapshot is not None else self.snapshot()
         images = self.draw(spec, taken)
+        robot = images.instance_ids == ROBOT_ID
+        images.instance_ids[robot] = 0
         if rng is not None:
             depth = noisy_depth(
                 images.depth_m,
@@ -167,7 +184,7 @@ class CameraRig:
             depth = images.depth_m
             with np.errstate(invalid="ignore"):
                 depth[(depth < spec.depth_min_m) | (depth > spec.depth_max_m)] = np.nan
-        return RgbdFrame(
+        frame = RgbdFrame(
             camera=spec.name,
             stamp_s=taken.stamp_s,
             rgb=images.rgb,
@@ -176,6 +193,7 @@ class CameraRig:
             worldMoptical=spec.worldMoptical(),
             instance_ids=images.instance_ids,
         )
+        return frame, robot
 
     def render(self, spec: RgbdCameraSpec) -> RenderedImages:
         """The clean images of camera ``spec`` now (no sensor noise; depth NaN only where
@@ -193,9 +211,11 @@ class CameraRig:
         objects = self._objects.live()
         stamp_s = self.twin.time_s
         if self._gl is None:
+            bodies = {s.robot.body: ROBOT_ID for s in self.twin.stations}
+            bodies.update({o.body: o.object_id for o in objects})
             return Snapshot(
                 stamp_s=stamp_s,
-                bodies={o.body: o.object_id for o in objects},
+                bodies=bodies,
                 classes={o.object_id: o.spec.class_name for o in objects},
             )
         gl = self._gl
@@ -206,7 +226,7 @@ class CameraRig:
             instances.append(Instance(mesh=key, worldMobject=pose, instance_id=obj.object_id))
         for links, keys in self._robots:
             for key, pose in zip(keys, links.poses(), strict=True):
-                instances.append(Instance(mesh=key, worldMobject=pose))
+                instances.append(Instance(mesh=key, worldMobject=pose, instance_id=ROBOT_ID))
         instances.extend(self._static)
         return Snapshot(stamp_s=stamp_s, instances=tuple(instances))
 
@@ -219,7 +239,7 @@ class CameraRig:
         if self._tiny is None:
             self._tiny = TinyRenderer(self.twin.client)
         for body in snapshot.bodies:
-            if body not in self._painted:
+            if body not in self._painted and snapshot.bodies[body] != ROBOT_ID:
                 class_name = snapshot.classes[snapshot.bodies[body]]
                 self._paint(body, self._class_rgb(class_name))
                 self._painted.add(body)

@@ -7,8 +7,8 @@ forward kinematics (as :meth:`twin.robot.Robot.link_poses`). Quaternions become 
 vectorised step for all bodies.
 
 :class:`TwinObjects` is the one place that reads the twin's object table (which PyBullet body
-and which meshgen spec and sampled height each object id has); :class:`twin.sim.Twin` has no
-public accessor for it yet, so it reads ``Twin._shapes`` and ``Twin._monitor``.
+and which meshgen spec and sampled height each object id has), through the twin's read-only
+accessors :meth:`twin.sim.Twin.object_shape` and :meth:`twin.sim.Twin.body_of`.
 """
 
 from __future__ import annotations
@@ -99,13 +99,9 @@ class TwinObjects:
     def live(self) -> list[SceneObject]:
         """Every simulated object now."""
         twin = self.twin
-        shapes = twin._shapes  # no public accessor yet: see the module
-        monitor = twin._monitor
-        if monitor is None:
-            return []
-        while self._next_id in shapes:
-            spec, height_m = shapes[self._next_id]
-            body = monitor.body_of(self._next_id)
+        while (shape := twin.object_shape(self._next_id)) is not None:
+            spec, height_m = shape
+            body = twin.body_of(self._next_id)
             if body is not None:
                 frame = inertia_of(spec, height_m / spec.height_m).frame_quat_xyzw
                 inverse = np.eye(4)
@@ -118,7 +114,7 @@ class TwinObjects:
                     inertialMobject=inverse,
                 )
             self._next_id += 1
-        gone = [i for i in self._live if monitor.body_of(i) is None]
+        gone = [i for i in self._live if twin.body_of(i) is None]
         for object_id in gone:
             del self._live[object_id]
         return list(self._live.values())
@@ -195,7 +191,7 @@ class WorldBodies:
 
 def world_bodies(twin: Twin) -> WorldBodies | None:
     """The static bodies of the twin's current episode (None before its first reset)."""
-    world = twin._world  # no public accessor yet: see the module
+    world = twin.world
     if world is None:
         return None
     classes = [spec.class_name for spec in twin.cell.bins]
