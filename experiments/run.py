@@ -897,7 +897,14 @@ def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
         line_exit=exit_station(cell.stations),
     )
     line = scope_metrics(record, None)
+    perception = summary.get("perception")  # the camera's scores (perception.source: camera)
+    scored = (
+        {f"perception_{k}": v for k, v in perception.items() if "/" not in k}
+        if isinstance(perception, dict)
+        else {}
+    )
     return {
+        **scored,
         "speed_mps": summary.get("belt_speed_mps"),
         "seed": summary["seed"],
         "mode": mode,
@@ -932,6 +939,7 @@ def _means(blocks: Sequence[dict[str, Any]], keys: Sequence[str]) -> dict[str, A
 def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Means over the successful episodes of every numeric line metric (failed ones left out)."""
     keys = [k for k in METRIC_KEYS if k not in ("mode", "seed", "speed_mps")]
+    keys += sorted({k for r in rows for k in r if k.startswith("perception_")})
     return _means(succeeded(rows), keys)
 
 

@@ -47,6 +47,7 @@ import contextlib
 import ctypes
 import ctypes.util
 import dataclasses
+import math
 import os
 import signal
 import time
@@ -571,6 +572,11 @@ def _serve(
         "final_state": _final_state(twin),
         **node.telemetry.summary(),
     }
+    perception = twin.perception_summary()
+    if perception is not None:  # the camera's detections scored against ground truth
+        summary["perception"] = {
+            k: (v if math.isfinite(v) else None) for k, v in sorted(perception.items())
+        }
     if interrupted:
         summary["stopped_by"] = signal.Signals(stop[0]).name
     out: Path | None = args.out
