@@ -570,7 +570,7 @@ def _stop_head(head: Any, temp: str) -> None:
 
     try:
         os.killpg(head.pid, signal.SIGTERM)
-        head.wait(timeout=20)
+        head.wait(timeout=3)  # `ray start --block` often ignores SIGTERM for 20 s
     except (ProcessLookupError, subprocess.TimeoutExpired):
         with contextlib.suppress(ProcessLookupError):
             os.killpg(head.pid, signal.SIGKILL)

@@ -458,7 +458,7 @@ def test_an_episode_row_gives_bin_purity_drops_and_allocation_per_station(
 TWO_STATIONS = """\
 name: two
 cell: two_pandas
-duration_s: 30.0
+duration_s: 15.0
 objects: {max_width_m: 0.065, min_height_m: 0.02}
 system: {belt_speed_mps: 0.3, object_order: shuffled, image_gap_m: 0.0, prefill_m: 2.5}
 faults: {controller_restart_at_s: [3.0]}
@@ -531,7 +531,7 @@ TWO_STATIONS_REALTIME = """\
 name: two_realtime
 cell: two_pandas
 controller: throughput
-duration_s: 30.0
+duration_s: 15.0
 objects: {max_width_m: 0.065, min_height_m: 0.02}
 system: {belt_speed_mps: 0.3, object_order: shuffled, image_gap_m: 0.0, prefill_m: 2.5}
 """
@@ -544,7 +544,7 @@ def test_a_cell_of_two_stations_runs_in_realtime_and_both_pick(
     """The shipped two-Panda cell paced to the wall clock: two controller processes, each in
     its namespace, both pick, the line's and each station's scores agree with the twin. The
     throughput parameters (joint-space approach) pick about twice as often as the default's
-    in these 30 s, so the test does not hang on one or two picks per station."""
+    in these 15 s, so the test does not hang on one or two picks per station."""
     _needs_ros()
     scenario = tmp_path / "two.yaml"
     scenario.write_text(TWO_STATIONS_REALTIME, encoding="utf-8")
