@@ -44,7 +44,7 @@ typecheck: $(STAMPS)/deps
 	$(VENV)/bin/mypy
 
 pytest: setup
-	$(VENV)/bin/pytest -q
+	$(VENV)/bin/pytest -q -n 2 --dist loadfile
 
 test: setup lint typecheck pytest
 

@@ -2,12 +2,41 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import signal
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import pytest
 
 SHARED_SAMPLE = Path(__file__).resolve().parents[2] / "shared" / "datasets" / "cdw_stacked_sample"
+
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_SESSION_HANDLERS = {sig: signal.getsignal(sig) for sig in _STOP_SIGNALS}
+CHANGED_HANDLERS: list[str] = []
+"""Tests after which SIGINT or SIGTERM was no longer handled as at the session's start."""
+
+
+@pytest.fixture(autouse=True)
+def _stop_signals_as_at_start(request: pytest.FixtureRequest) -> Iterator[None]:
+    """Every test starts with SIGINT and SIGTERM handled as when the session started (a
+    library that installs its own handlers in this process, or ignores SIGINT, would otherwise
+    change what later tests and the processes they start, which inherit an ignored signal, do
+    on Ctrl-C); the tests that changed them are listed at the end of the session."""
+    for sig, handler in _SESSION_HANDLERS.items():
+        if signal.getsignal(sig) is not handler:
+            signal.signal(sig, handler)
+    yield
+    if any(signal.getsignal(sig) is not h for sig, h in _SESSION_HANDLERS.items()):
+        CHANGED_HANDLERS.append(request.node.nodeid)
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    """Name the tests that left SIGINT or SIGTERM handled otherwise (they were reset)."""
+    if CHANGED_HANDLERS:
+        terminalreporter.write_line(
+            "stop-signal handlers changed (and reset) by: " + ", ".join(CHANGED_HANDLERS[:5])
+        )
+
 
 Polygon = tuple[int, Sequence[tuple[float, float]]]
 

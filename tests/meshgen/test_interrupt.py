@@ -42,6 +42,14 @@ def big_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
+def _default_stop_signals() -> None:
+    """In the child: SIGINT and SIGTERM at their defaults, as in a terminal, even when this
+    test session was started in the background (a shell starts background jobs with SIGINT
+    ignored, and an ignored signal is inherited across exec)."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_DFL)
+
+
 def _run_and_interrupt(
     dataset: Path, out: Path, sig: int, *, workers: int, whole_group: bool
 ) -> tuple[int, str, str]:
@@ -55,6 +63,7 @@ def _run_and_interrupt(
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=_default_stop_signals,  # noqa: PLW1509 (two signal() calls, no locks)
     )
     staging = out.parent / f".{out.name}.staging-{proc.pid}"
     # image folders that exist once the first batch is done (with one process the files are
@@ -139,6 +148,9 @@ def test_interrupt_leaves_the_earlier_output_in_place(big_dataset: Path, tmp_pat
 
 
 def test_deferred_interrupts_hold_ctrl_c_until_the_block_is_done() -> None:
+    # Ctrl-C raises KeyboardInterrupt, as in a foreground terminal (the suite's conftest puts
+    # the session's own handler back before the next test)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     handler = signal.getsignal(signal.SIGINT)
     steps: list[str] = []
 
