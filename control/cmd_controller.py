@@ -31,15 +31,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 from pathlib import Path
-from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 from control.config import DEFAULT_PARAMS
 from interfaces.fileio import write_atomic
-from interfaces.lifecycle import die_with_parent
+from interfaces.lifecycle import StopRequests, die_with_parent
 
 if TYPE_CHECKING:
     from interfaces.cell import Cell
@@ -135,14 +133,8 @@ def run(args: argparse.Namespace) -> int:
     except CdwTwinError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    stop: list[int] = []
-
-    def _request_stop(signum: int, frame: FrameType | None) -> None:
-        del frame
-        stop.append(signum)
-
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
-    previous = {sig: signal.signal(sig, _request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    stop = StopRequests()
     node: ControllerNode | None = None
     try:
         die_with_parent()
@@ -169,8 +161,7 @@ def run(args: argparse.Namespace) -> int:
                 write_json_atomic(args.stats_out, node.summary())
             node.destroy_node()
         try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        stop.restore()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -23,12 +23,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from types import FrameType
 from typing import TYPE_CHECKING
 
 from interfaces.fileio import write_atomic
@@ -156,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
 
     from detector.ros_node import DetectorNode
     from interfaces.errors import CdwTwinError
-    from interfaces.lifecycle import die_with_parent
+    from interfaces.lifecycle import StopRequests, die_with_parent
 
     if args.duration is not None and not args.duration > 0.0:
         sys.stderr.write(f"--duration: {args.duration!r} must be > 0 s\n")
@@ -168,14 +166,8 @@ def run(args: argparse.Namespace) -> int:
     except CdwTwinError as exc:
         sys.stderr.write(f"error: {exc}\n")
         return 2
-    stop: list[int] = []
-
-    def _request_stop(signum: int, frame: FrameType | None) -> None:
-        del frame
-        stop.append(signum)
-
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
-    previous = {sig: signal.signal(sig, _request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    stop = StopRequests()
     node: DetectorNode | None = None
     try:
         die_with_parent()
@@ -204,8 +196,7 @@ def run(args: argparse.Namespace) -> int:
                 write_atomic(args.stats_out, json.dumps(summary, indent=1) + "\n")
             node.destroy_node()  # type: ignore[no-untyped-call]
         try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        stop.restore()
 
 
 def main(argv: list[str] | None = None) -> int:

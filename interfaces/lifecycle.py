@@ -11,6 +11,7 @@ import ctypes
 import os
 import signal
 import sys
+from types import FrameType
 
 PARENT_PID_VARIABLE = "CDW_TWIN_PARENT_PID"
 """Environment variable naming the process a child must not outlive (set by the runner)."""
@@ -40,3 +41,25 @@ def die_with_parent(variable: str = PARENT_PID_VARIABLE) -> None:
         raise OSError(errno, msg)
     if os.getppid() != int(value):
         os.kill(os.getpid(), signal.SIGTERM)
+
+
+class StopRequests:
+    """SIGINT and SIGTERM recorded instead of raised, from construction until :meth:`restore`:
+    a node's spin loop (``while not stop:``) ends at its next turn and still writes its files.
+    True once a stop signal arrived; :attr:`signals` lists them in order."""
+
+    def __init__(self) -> None:
+        self.signals: list[int] = []
+        self._previous = {sig: signal.signal(sig, self._record) for sig in STOP_SIGNALS}
+
+    def _record(self, signum: int, frame: FrameType | None) -> None:
+        del frame
+        self.signals.append(signum)
+
+    def __bool__(self) -> bool:
+        return bool(self.signals)
+
+    def restore(self) -> None:
+        """Put back the handlers that were in place before."""
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
