@@ -46,7 +46,10 @@ typecheck: $(STAMPS)/deps
 pytest: setup
 	$(VENV)/bin/pytest -q -n 2 --dist loadfile
 
-test: setup lint typecheck pytest
+# ruff and mypy run beside the suite (-j: mypy is one core for ~20 s while the suite's workers
+# also wait on subprocesses and the wall clock); their lines are not mixed
+test: setup
+	$(MAKE) --no-print-directory -j3 --output-sync=line lint typecheck pytest
 
 clean:
 	rm -rf fmus/build interfaces/build $(STAMPS)

@@ -30,13 +30,11 @@ dies.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from control.config import DEFAULT_PARAMS
-from interfaces.fileio import write_atomic
 from interfaces.lifecycle import StopRequests, die_with_parent
 
 if TYPE_CHECKING:
@@ -105,12 +103,6 @@ def controller_cell(args: argparse.Namespace) -> Cell:
     return episode_cell(scenario, cell, table, where)
 
 
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write ``data`` as JSON to ``path`` atomically (:func:`interfaces.fileio.write_atomic`)."""
-    text = json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n"
-    write_atomic(path, text)
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the node; returns 0 on a clean shutdown, 2 on a configuration error."""
     import rclpy
@@ -158,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if node is not None:
             if args.stats_out is not None:
-                write_json_atomic(args.stats_out, node.summary())
+                node.summary().write(args.stats_out)
             node.destroy_node()
         try_shutdown()
         stop.restore()

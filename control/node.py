@@ -45,8 +45,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter, deque
-from collections.abc import Mapping, Sequence
-from dataclasses import asdict
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -91,6 +90,7 @@ from interfaces.contract import (
 )
 from interfaces.inproc import Bus, InprocLogger
 from interfaces.ros import RosWire, message_class, msg_stamp_ns, msg_stamp_s, time_msg
+from interfaces.run_records import ControllerStats, TimingUs
 from interfaces.wire import Wire
 
 FloatArray = NDArray[np.float64]
@@ -101,20 +101,14 @@ ERRORS_CHECK_EVERY = 12
 120 Hz)."""
 
 
-def _timing(values_s: Sequence[float]) -> dict[str, float | None]:
+def _timing(values_s: Sequence[float]) -> TimingUs:
     """Mean, median, 95th and 99th percentiles and maximum in microseconds (None without
     samples): the tick's p99 is what must fit the control period on a real cell."""
     if not values_s:
-        return {"mean": None, "p50": None, "p95": None, "p99": None, "max": None}
+        return TimingUs()
     us = 1e6 * np.asarray(values_s, dtype=np.float64)
     p50, p95, p99 = (float(v) for v in np.percentile(us, [50.0, 95.0, 99.0]))
-    return {
-        "mean": float(np.mean(us)),
-        "p50": p50,
-        "p95": p95,
-        "p99": p99,
-        "max": float(np.max(us)),
-    }
+    return TimingUs(mean=float(np.mean(us)), p50=p50, p95=p95, p99=p99, max=float(np.max(us)))
 
 
 class ControllerEndpoint:
@@ -474,25 +468,22 @@ class ControllerEndpoint:
             self._logged[kind] = now_s
             self._log.warning(text)
 
-    def summary(self) -> dict[str, Any]:
-        """Counters and timing as a JSON-ready mapping (written on shutdown)."""
-        stats = asdict(self._controller.stats()) if self._controller is not None else None
-        if stats is not None:
-            stats = {k: dict(v) if isinstance(v, Mapping) else v for k, v in stats.items()}
-        return {
-            "mode": "lockstep" if self.lockstep else "realtime",
-            "station": self.config.station.name,
-            "pick": stats,
-            "rejected_detections": dict(self._tracker.rejected),
-            "skipped": dict(sorted(self.skipped.items())),
-            "received": dict(sorted(self._received.items())),
-            "published": {topic: self.published[topic] for topic in self._commands},
-            "n_commands": self.n_commands,
-            "control_updates": self._updates,
-            "ticks_acked": self.ticks_acked,
-            "control_update_us": _timing(list(self.update_wall_s)),
-            "tick_to_ack_us": _timing(list(self.tick_to_ack_wall_s)),
-        }
+    def summary(self) -> ControllerStats:
+        """Counters and timing (the stats file written on shutdown)."""
+        return ControllerStats(
+            mode="lockstep" if self.lockstep else "realtime",
+            station=self.config.station.name,
+            pick=self._controller.stats() if self._controller is not None else None,
+            rejected_detections=dict(self._tracker.rejected),
+            skipped=dict(sorted(self.skipped.items())),
+            received=dict(sorted(self._received.items())),
+            published={topic: self.published[topic] for topic in self._commands},
+            n_commands=self.n_commands,
+            control_updates=self._updates,
+            ticks_acked=self.ticks_acked,
+            control_update_us=_timing(list(self.update_wall_s)),
+            tick_to_ack_us=_timing(list(self.tick_to_ack_wall_s)),
+        )
 
 
 class ControllerNode(Node, ControllerEndpoint):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +24,7 @@ from control.planner import CartesianState, CartesianTarget
 from control.poses import JointApproach, JointGoal
 from control.tracking import Track
 from interfaces.phases import Phase
+from interfaces.run_records import PickStats
 
 FloatArray = NDArray[np.float64]
 Vec3 = tuple[float, float, float]
@@ -60,30 +61,6 @@ class Command:
     tool_command: float
     grasp_point_m: Vec3 | None
     claims: tuple[Claim, ...] = ()
-
-
-@dataclass(frozen=True, kw_only=True)
-class PickStats:
-    """Counters since construction.
-
-    ``untargeted`` counts objects that were never targeted, by the last reason the scheduler gave;
-    ``aborted`` counts aborted picks by reason (``target_lost``, ``too_late``, ``ruckig_error``,
-    ``ik_failure``, ``grip_missed``: the tool closed on nothing); ``errors`` counts every
-    Ruckig/IK error, also outside a pick;
-    ``rate_limited`` counts joint commands slowed to the joint velocity limits;
-    ``sync_fallbacks`` counts Ruckig plans (Cartesian steps and joint moves) whose time
-    synchronisation failed and that were solved without it (see
-    :func:`control.planner.calculate_synchronised`).
-    """
-
-    targeted: int
-    completed: int
-    completed_by_class: Mapping[str, int]
-    aborted: Mapping[str, int]
-    untargeted: Mapping[str, int]
-    errors: Mapping[str, int]
-    rate_limited: int = 0
-    sync_fallbacks: int = 0
 
 
 @dataclass(frozen=True, kw_only=True)

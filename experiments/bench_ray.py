@@ -25,6 +25,7 @@ from typing import Any
 
 from experiments.bench_sweep import bench_grid
 from interfaces.errors import CdwTwinError
+from interfaces.run_folder import RunFolder
 from twin.scenario import Scenario
 
 TIMING = frozenset({"real_time_factor"})
@@ -52,9 +53,10 @@ def _episodes(out: Path) -> list[tuple[dict[str, Any], bytes]]:
     """Every episode of a sweep folder: its row less the timing figures, and its events."""
     found = []
     for cell in sorted(p for p in out.iterdir() if p.is_dir()):
-        rows = json.loads((cell / "episodes.json").read_text(encoding="utf-8"))
+        run = RunFolder(cell)
+        rows = json.loads(run.episodes_json.read_text(encoding="utf-8"))
         for row in rows:
-            events = cell / f"ep{row['episode']:03d}" / "twin" / "events.jsonl"
+            events = run.episode(int(row["episode"])).events
             kept = {k: v for k, v in row.items() if k not in TIMING}
             found.append((kept, events.read_bytes()))
     return found

@@ -22,9 +22,12 @@ import argparse
 import contextlib
 import csv
 import io
-import json
 from collections import defaultdict
 from pathlib import Path
+
+from interfaces.errors import CdwTwinError
+from interfaces.run_folder import RunFolder
+from interfaces.run_records import EpisodeMetrics, EpisodeSummary, RunMeans, read_rows
 
 SPEEDS_MPS = (0.2, 0.4, 0.6)
 LINE_SECONDS = 20.0
@@ -86,21 +89,28 @@ def _fmt(value: object, pattern: str) -> str:
     return "-" if value is None else format(value, pattern)
 
 
+def _first_row(run_dir: Path) -> EpisodeMetrics:
+    """The metrics the run wrote for its first episode."""
+    row = read_rows(RunFolder(run_dir).episodes_json)[0]
+    if not isinstance(row, EpisodeMetrics):
+        msg = f"{RunFolder(run_dir).episodes_json}: the episode failed: {row.reason}"
+        raise CdwTwinError(msg)
+    return row
+
+
 def _speed_row(run_dir: Path) -> list[str]:
-    rows = json.loads((run_dir / "episodes.json").read_text(encoding="utf-8"))
-    row = rows[0]
-    twin = json.loads((run_dir / "ep000" / "twin" / "summary.json").read_text(encoding="utf-8"))
-    latency = twin.get("latency") or {}
+    row = _first_row(run_dir)
+    latency = EpisodeSummary.read(RunFolder(run_dir).episode(0).summary).latency
     return [
-        f"{row['speed_mps']:.1f}",
-        str(row["picks"]),
-        str(row["targeted"]),
-        _fmt(row["success_rate"], ".2f"),
-        _fmt(row["miss_rate"], ".2f"),
-        _fmt(row["tracking_time_4mm_mean_s"], ".2f"),
-        _fmt(latency.get("rtt_ms_p50"), ".2f"),
-        _fmt(latency.get("rtt_ms_p99"), ".2f"),
-        _fmt(row["real_time_factor"], ".2f"),
+        _fmt(row.speed_mps, ".1f"),
+        str(row.metric("picks")),
+        str(row.metric("targeted")),
+        _fmt(row.metric("success_rate"), ".2f"),
+        _fmt(row.metric("miss_rate"), ".2f"),
+        _fmt(row.metric("tracking_time_4mm_mean_s"), ".2f"),
+        _fmt(latency.rtt_ms_p50, ".2f"),
+        _fmt(latency.rtt_ms_p99, ".2f"),
+        _fmt(row.metric("real_time_factor"), ".2f"),
     ]
 
 
@@ -137,8 +147,8 @@ def _run_episode(
 def line_rows(run_dir: Path) -> list[list[str]]:
     """The line table of a run folder's first episode: per station, then the line, the picks
     per minute, recovery, success and miss rate (``episodes.json``)."""
-    row = json.loads((run_dir / "episodes.json").read_text(encoding="utf-8"))[0]
-    blocks = [*((f"  {k}", v) for k, v in row["stations"].items()), ("line", row)]
+    row = _first_row(run_dir)
+    blocks = [*((f"  {k}", v) for k, v in row.stations.items()), ("line", row.line)]
     return [
         [
             name,
@@ -206,10 +216,10 @@ def run(args: argparse.Namespace) -> int:
         ],
         [_speed_row(d) for d in run_dirs[:-1]],
     )
-    line = json.loads((line_dir / "run.json").read_text(encoding="utf-8"))
+    line = RunMeans.read(RunFolder(line_dir).run_json).info
     _print_table(
-        f"The line: cell {line['cell']}, {len(line['stations'])} stations, "
-        f"{line['speed_mps']} m/s, {args.line_seconds:.0f} s (lockstep, in one process)",
+        f"The line: cell {line.cell}, {len(line.stations)} stations, "
+        f"{line.speed_mps} m/s, {args.line_seconds:.0f} s (lockstep, in one process)",
         ["station", "picks", "picks/min", "recovery", "success", "miss"],
         line_rows(line_dir),
     )

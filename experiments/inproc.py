@@ -20,12 +20,10 @@ Example::
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from interfaces.errors import CdwTwinError
-from interfaces.fileio import write_atomic
 
 if TYPE_CHECKING:
     from control.node import InprocController
@@ -104,8 +102,7 @@ class Controllers:
         """Write each controller's stats (JSON, atomically)."""
         for controller, path in self._controllers:
             if path is not None:
-                text = json.dumps(controller.summary(), indent=2, sort_keys=True, allow_nan=False)
-                write_atomic(path, text + "\n")
+                controller.summary().write(path)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -5,10 +5,11 @@ The twin scores an episode from its events alone (:func:`interfaces.metrics.coun
 is enough to recompute the scores exactly, for the line and for each station::
 
     from experiments.offline import offline_metrics, read_topic
-    metrics = offline_metrics(Path("runs/ep0/recording.mcap"))
-    metrics["scores"]                       # == summary.json["scores"]
-    metrics["stations"]["upstream"]         # == summary.json["stations"]["upstream"]["scores"]
-    metrics["bins"]["upstream"]["brick"]    # the purity of upstream's brick bin
+    metrics = offline_metrics(Path("runs/a/ep000/recording.mcap"), Path("runs/a/cell.yaml"))
+    metrics.scores                          # == summary.json["scores"]
+    metrics.stations["upstream"]            # == summary.json["stations"]["upstream"]["scores"]
+    metrics.bins["upstream"]["brick"]       # the purity of upstream's brick bin
+    metrics.mismatches(row)                 # [] for the episode's row of episodes.json
     for log_time_ns, msg in read_topic(Path("runs/ep0/recording.mcap"), "/conveyor/state"):
         msg.header.stamp.sec, msg.speed_mps
 
@@ -24,7 +25,7 @@ What a recording cannot give:
 - the tracking time to 4 mm: the twin measures it every physics step against the true pose of the
   pursued object, from the moment a ``PickTarget`` reaches it. The recording holds ground truth
   at 30 Hz over a best-effort topic and the targets' send times, not the twin's receive step, so
-  the twin's tracking results cannot be reproduced exactly; ``tracking`` is None and says why.
+  the twin's tracking results cannot be reproduced exactly; ``tracking_note`` says why.
 
 Partial recordings (``OUT.partial`` left by a killed recorder, no footer) are read up to the cut.
 """
@@ -37,11 +38,13 @@ import json
 import statistics
 import struct
 from collections import Counter
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from interfaces.contract import EVENTS_TOPIC, JOINT_STATES
+from interfaces.run_records import EpisodeMetrics, EventScores, Metrics, ScopeMetrics
 from twin.recording import RecordingError
 
 TRACKING_NOTE = (
@@ -176,19 +179,62 @@ def is_joint_states(topic: str) -> bool:
     return topic == f"/{name}" or topic.endswith(f"/{name}")
 
 
-def offline_metrics(recording: Path, cell: Path | str | None = None) -> dict[str, Any]:
+@dataclass(frozen=True, kw_only=True)
+class OfflineMetrics:
+    """What a recording holds, and the metrics its events give (the metric table's functions).
+
+    ``scores`` is the line's event scores (as ``summary.json`` ``scores``), ``stations`` each
+    station's (as ``summary.json`` ``stations[name]["scores"]``), ``classes`` each class's
+    metrics (scope class) and ``bins`` each station's bins' (scope bin); :meth:`matches` holds
+    them against the metrics an episode's row was written with.
+    """
+
+    recording: Path
+    complete: bool
+    """The recording was finished cleanly (it ends in a footer)."""
+    message_counts: Mapping[str, int]
+    physics_hz: float
+    steps: int
+    duration_s: float
+    events: Mapping[str, int]
+    """Events by type."""
+    scores: EventScores
+    stations: Mapping[str, EventScores]
+    classes: Mapping[str, Metrics]
+    bins: Mapping[str, Mapping[str, Metrics]]
+    tracking_note: str = TRACKING_NOTE
+    """Why the tracking time is not recomputed."""
+
+    def mismatches(self, row: EpisodeMetrics) -> list[str]:
+        """Where the written row differs from what the recording gives, one line each (empty:
+        every metric the events give is the row's): the line's and each station's event
+        metrics, the drops by reason, the classes and each station's bins."""
+        out = _scope_mismatches("line", self.scores, row.line)
+        for name, block in row.stations.items():
+            out += _scope_mismatches(name, self.stations.get(name, {}), block)
+            if block.bins is not None and block.bins != self.bins.get(name, {}):
+                out.append(f"{name}.bins: written {block.bins}, recorded {self.bins.get(name)}")
+        if dict(row.classes) != dict(self.classes):
+            out.append(f"classes: written {row.classes}, recorded {self.classes}")
+        return out
+
+
+def _scope_mismatches(name: str, scores: EventScores, block: ScopeMetrics) -> list[str]:
+    """The event scores of one scope that its written block holds and states otherwise."""
+    written: dict[str, object] = {**block.values, "dropped_by_reason": block.dropped_by_reason}
+    return [
+        f"{name}.{key}: written {written[key]}, recorded {value}"
+        for key, value in scores.items()
+        if key in written and written[key] != value
+    ]
+
+
+def offline_metrics(recording: Path, cell: Path | str | None = None) -> OfflineMetrics:
     """The twin's scores recomputed from ``recording``, and what the recording holds.
 
     ``cell`` is the cell the episode ran (a run folder's ``cell.yaml``, a shipped name; None:
     the default cell): its most downstream station decides which objects the line missed
     (:func:`interfaces.metrics.count_events`, ``line_exit``).
-
-    Keys: ``recording``, ``complete`` (finished cleanly), ``message_counts`` (per topic),
-    ``physics_hz``, ``steps``, ``duration_s``, ``events`` (count per type), ``scores`` (the
-    line's, as ``summary.json`` ``scores``), ``stations`` (per station the events name, as
-    ``summary.json`` ``stations[name]["scores"]``), ``classes`` (per class, the metrics of
-    scope class), ``bins`` (per station and bin, the metrics of scope bin: purity),
-    ``tracking`` (None) and ``tracking_note`` (why).
     """
     from interfaces.cell import load_cell
     from interfaces.metrics import (
@@ -212,28 +258,27 @@ def offline_metrics(recording: Path, cell: Path | str | None = None) -> dict[str
     clock = episode_clock([] if first is None else joint_stamps[first], recording)
     events = decode_events(recording, clock.physics_hz)
     duration_s = clock.duration_s
-    return {
-        "recording": str(recording),
-        "complete": is_complete(recording),
-        "message_counts": dict(sorted(counts.items())),
-        "physics_hz": clock.physics_hz,
-        "steps": clock.steps,
-        "duration_s": duration_s,
-        "events": dict(sorted(Counter(str(e.type) for e in events).items())),
-        "scores": event_scores(count_events(events, duration_s, line_exit=line_exit)),
-        "stations": {
+    return OfflineMetrics(
+        recording=recording,
+        complete=is_complete(recording),
+        message_counts=dict(sorted(counts.items())),
+        physics_hz=clock.physics_hz,
+        steps=clock.steps,
+        duration_s=duration_s,
+        events=dict(sorted(Counter(str(e.type) for e in events).items())),
+        scores=event_scores(count_events(events, duration_s, line_exit=line_exit)),
+        stations={
             name: event_scores(count_events(events, duration_s, station=name))
             for name in station_names(events)
         },
-        "classes": class_scores(events, duration_s, line_exit=line_exit),
-        "bins": bin_scores(events),
-        "tracking": None,
-        "tracking_note": TRACKING_NOTE,
-    }
+        classes=class_scores(events, duration_s, line_exit=line_exit),
+        bins=bin_scores(events),
+    )
 
 
 __all__ = [
     "EpisodeClock",
+    "OfflineMetrics",
     "decode_events",
     "episode_clock",
     "header_stamp_ns",

@@ -57,6 +57,7 @@ from interfaces.class_colours import class_colour, dataset_colour, rgb_hex
 from interfaces.contract import BELT_STATE, GROUND_TRUTH_TOPIC, PICK_TARGET, TCP_POSE
 from interfaces.errors import CdwTwinError, cut
 from interfaces.fileio import MAX_JSON_BYTES, read_text_capped, write_atomic
+from interfaces.run_folder import EpisodeFolder, RunFolder
 
 MAX_EVENTS_BYTES = 1_000_000_000
 """The largest ``events.jsonl`` read (a day-long episode's is a few hundred MB)."""
@@ -460,7 +461,7 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 
 def _load_cell(run_dir: Path, notes: list[str]) -> Cell | None:
-    path = run_dir / "cell.yaml"
+    path = RunFolder(run_dir).cell
     if not path.is_file():
         notes.append(f"{path}: missing; no belt, bins or stations drawn")
         return None
@@ -529,14 +530,14 @@ def player_data(episode: Path, run_dir: Path | None = None) -> tuple[dict[str, A
     episode = Path(episode)
     run_dir = episode.parent if run_dir is None else Path(run_dir)
     notes: list[str] = []
-    run = _read_json(run_dir / "run.json")
-    summary = _read_json(episode / "twin" / "summary.json")
+    run = _read_json(RunFolder(run_dir).run_json)
+    summary = _read_json(EpisodeFolder(episode).summary)
     dataset = Path(run["dataset"]) if isinstance(run.get("dataset"), str) else None
     if dataset is not None and not dataset.is_dir():
         notes.append(f"dataset {dataset} not found: objects drawn as length x width boxes")
         dataset = None
     cell = _load_cell(run_dir, notes)
-    events = _events(episode / "twin" / "events.jsonl", notes)
+    events = _events(EpisodeFolder(episode).events, notes)
     source_ids = {
         e["id"]: str(e["data"].get("source_id", "")) for e in events if e["type"] == "spawned"
     }
@@ -547,7 +548,7 @@ def player_data(episode: Path, run_dir: Path | None = None) -> tuple[dict[str, A
     tcps: list[dict[str, Any]] = []
     targets: list[list[list[Any]]] = []
     belt: list[int] = []
-    recording = episode / "recording.mcap"
+    recording = EpisodeFolder(episode).recording
     if recording.is_file():
         try:
             times, states = _ground_truth(recording)
@@ -598,6 +599,12 @@ def player_data(episode: Path, run_dir: Path | None = None) -> tuple[dict[str, A
 # -- the page -----------------------------------------------------------------------------------
 ASSETS = Path(__file__).with_name("player_assets")
 """The page's style, body and script (inlined into every page: it must open with no files)."""
+
+
+def page_sources() -> list[Path]:
+    """The files a player's page is made from: this module and every asset (a page older than
+    any of them is stale)."""
+    return [Path(__file__).resolve(), *sorted(p for p in ASSETS.rglob("*") if p.is_file())]
 
 
 def _asset(name: str) -> str:

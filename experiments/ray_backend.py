@@ -52,6 +52,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from interfaces.errors import CdwTwinError
+from interfaces.run_folder import RunFolder
+from interfaces.run_records import EpisodeMetrics
 
 if TYPE_CHECKING:
     from experiments.run import EpisodeSpec
@@ -101,7 +103,7 @@ class EpisodeResult:
     """What a task sends back: the metrics (None when the episode failed, with ``reason``),
     the episode folder as a tar archive, and the CPU seconds the episode's processes used."""
 
-    metrics: dict[str, Any] | None
+    metrics: EpisodeMetrics | None
     reason: str
     archive: bytes
     cpu_s: float
@@ -198,9 +200,11 @@ def run_shipped_episode(shipped: ShippedEpisode, dataset_archive: bytes) -> Epis
             (run_dir / name).write_bytes(data)
         options = worker_options(shipped.options, run_dir, dataset)
         episode = EpisodeSpec(
-            index=shipped.index, seed=shipped.seed, folder=run_dir / f"ep{shipped.index:03d}"
+            index=shipped.index,
+            seed=shipped.seed,
+            folder=RunFolder(run_dir).episode(shipped.index).path,
         )
-        metrics: dict[str, Any] | None
+        metrics: EpisodeMetrics | None
         try:
             metrics, reason = run_episode(options, episode), ""
         except EpisodeFailedError as exc:

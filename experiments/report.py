@@ -37,9 +37,8 @@ The tables give per cell and belt speed and per episode the line's numbers (pick
 recovery, success, miss rate, ...) and, when a run has several stations, per cell, speed and
 station each station's; then recovery against the number of stations, recovery and purity per
 class, and the purity of each bin (runs of different cells at one speed are never pooled).
-Every episode's numbers are
-:func:`experiments.run.episode_metrics` of its folder (the events, the twin's summary and every
-controller's stats), the same as the run's ``episodes.json``.
+Every episode's numbers are its row of the run's ``episodes.json``, written once by the run
+(:func:`experiments.scoring.score_episode`); the report never scores an episode again.
 
 A figure whose data is missing becomes a "not available: <why>" panel. The dataset is
 ``run.json``'s ``dataset`` when present, else the run's ``scenario.yaml`` dataset, else the
@@ -72,6 +71,8 @@ from experiments.report_line import (
 from interfaces.errors import CdwTwinError
 from interfaces.fileio import MAX_JSON_BYTES, read_text_capped, write_atomic
 from interfaces.metrics import BY_NAME, rate
+from interfaces.run_folder import EpisodeFolder, RunFolder
+from interfaces.run_records import EpisodeMetrics, read_rows
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -101,7 +102,7 @@ class Episode:
     summary: dict[str, Any] | None
     telemetry: dict[str, Any] | None
     metrics: dict[str, Any] | None
-    """:func:`experiments.run.episode_metrics` of the folder (None when it cannot be read)."""
+    """The episode's row of the run's ``episodes.json`` (None when there is none)."""
     cell: str = ""
     """The name of the cell the run used (``run.json``'s ``cell``)."""
     stations: tuple[str, ...] = ()
@@ -177,11 +178,11 @@ def find_run_dirs(paths: Sequence[Path]) -> list[Path]:
     """Run folders among ``paths``: each one holding ``run.json``, or a folder of such folders."""
     found: list[Path] = []
     for path in paths:
-        if (path / "run.json").is_file():
+        if RunFolder(path).run_json.is_file():
             found.append(path)
             continue
         children = (
-            sorted(p for p in path.iterdir() if (p / "run.json").is_file())
+            sorted(p for p in path.iterdir() if RunFolder(p).run_json.is_file())
             if (path.is_dir())
             else []
         )
@@ -242,34 +243,39 @@ def _dataset_of(run_dir: Path, run: dict[str, Any], notes: list[str]) -> Path:
     return builtin_dataset()
 
 
-def _metrics(folder: Path, mode: str, notes: list[str]) -> dict[str, Any] | None:
-    """The episode's metrics as ``cdw-twin run`` computes them; None (with a note) when its
-    events, summary or controller stats cannot be read."""
-    from experiments.run import episode_metrics
-
+def _written_metrics(run_dir: Path, notes: list[str]) -> dict[int, EpisodeMetrics]:
+    """The metrics the run wrote for its finished episodes (``episodes.json``), by episode
+    index: the report reads them, it never scores an episode again. Empty (with a note) when
+    the file cannot be read as episode rows."""
     try:
-        return episode_metrics(folder, mode)
-    except (OSError, KeyError, ValueError, TypeError, CdwTwinError) as exc:
-        notes.append(f"{folder}: no metrics ({type(exc).__name__}: {exc})")
-        return None
+        rows = read_rows(RunFolder(run_dir).episodes_json)
+    except (OSError, CdwTwinError) as exc:
+        notes.append(f"{run_dir}: no metrics ({type(exc).__name__}: {exc})")
+        return {}
+    return {row.episode: row for row in rows if isinstance(row, EpisodeMetrics)}
 
 
-def _episode(run_dir: Path, folder: Path, run: dict[str, Any], notes: list[str]) -> Episode:
-    summary = _optional_json(folder / "twin" / "summary.json", notes)
+def _episode(
+    folder: EpisodeFolder, run: dict[str, Any], written: dict[int, EpisodeMetrics], notes: list[str]
+) -> Episode:
+    summary = _optional_json(folder.summary, notes)
     speed = summary.get("belt_speed_mps") if summary else None
     if speed is None:
         speed = run.get("speed_mps")
     seed = summary.get("seed") if summary else None
     complete = summary is not None and summary.get("complete") is not False
-    metrics = _metrics(folder, str(run.get("mode", "")), notes) if complete else None
-    stations = run.get("stations") or list((metrics or {}).get("stations") or {})
+    row = written.get(folder.index if folder.index is not None else -1)
+    if complete and row is None:
+        notes.append(f"{folder.path}: no metrics (no row of episodes.json)")
+    metrics = row.to_data() if complete and row is not None else None
+    stations = run.get("stations") or (list(row.stations) if row is not None else [])
     return Episode(
-        run_dir=run_dir,
-        folder=folder,
+        run_dir=folder.run.path,
+        folder=folder.path,
         speed_mps=None if speed is None else float(speed),
         seed=None if seed is None else int(seed),
         summary=summary,
-        telemetry=_optional_json(folder / "twin" / "telemetry.json", notes),
+        telemetry=_optional_json(folder.telemetry, notes),
         metrics=metrics,
         cell=str(run.get("cell") or "cell"),
         stations=tuple(str(s) for s in stations),
@@ -283,18 +289,20 @@ def load_runs(paths: Sequence[Path]) -> RunData:
     episodes: list[Episode] = []
     datasets: list[Path] = []
     for run_dir in run_dirs:
-        run = _read_json(run_dir / "run.json")
+        run = _read_json(RunFolder(run_dir).run_json)
         if not isinstance(run, dict):
-            msg = f"{run_dir / 'run.json'}: expected a JSON object"
+            msg = f"{RunFolder(run_dir).run_json}: expected a JSON object"
             raise ReportError(msg)
         dataset = _dataset_of(run_dir, run, notes)
         if dataset not in datasets:
             datasets.append(dataset)
-        folders = sorted(p for p in run_dir.glob("ep[0-9]*") if p.is_dir())
-        for folder in folders:
-            episode = _episode(run_dir, folder, run, notes)
+        written = _written_metrics(run_dir, notes)
+        for folder in RunFolder(run_dir).episodes():
+            episode = _episode(folder, run, written, notes)
             if episode.summary is not None and episode.summary.get("complete") is False:
-                notes.append(f"{folder}: the episode did not finish (failed or stopped); left out")
+                notes.append(
+                    f"{folder.path}: the episode did not finish (failed or stopped); left out"
+                )
                 continue
             episodes.append(episode)
     return RunData(tuple(run_dirs), tuple(episodes), tuple(datasets), tuple(notes))
@@ -973,18 +981,19 @@ def _players(
 ) -> list[_Html]:
     """Write (or refresh) each episode's player; a link to it, relative to ``out``.
 
-    A player is rewritten when it is older than its episode's files or than the player code.
+    A player is rewritten when it is older than its episode's files or than the player's code
+    or assets (:func:`experiments.player.page_sources`).
     An episode folder that cannot be written to gets its player in ``out/players/`` (written
     into ``staging``, the folder that becomes ``out``, when given).
     """
-    from experiments.player import PAGE_NAME, write_player
+    from experiments.player import PAGE_NAME, page_sources, write_player
 
-    code = Path(__file__).resolve().parent / "player.py"
+    code = page_sources()
     links = []
     for ep in data.episodes:
         page = ep.folder / PAGE_NAME
-        inputs = [code, ep.run_dir / "cell.yaml", ep.folder / "recording.mcap"]
-        inputs.append(ep.folder / "twin" / "events.jsonl")
+        episode = EpisodeFolder(ep.folder)
+        inputs = [*code, episode.run.cell, episode.recording, episode.events]
         stamp = page.stat().st_mtime if page.is_file() else -1.0
         if any(p.is_file() and p.stat().st_mtime > stamp for p in inputs):
             try:

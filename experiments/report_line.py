@@ -1,11 +1,11 @@
 """The report's line tables and figure: recovery against the number of stations, recovery and
 purity per class, purity per bin.
 
-Every number comes from the episodes' metrics (:func:`experiments.run.episode_metrics`, the
-same as ``episodes.json``): recovery against the number of stations is the mean over the
-episodes (seeds) of each episode's line ``recovery_rate`` with its 95 % Student t interval,
-grouped by the number of stations of the episode's cell and the belt speed (a sweep over
-``stations: [1, 2, 3, 4]`` and speeds gives one group per grid cell); per class and per bin,
+Every number comes from the episodes' metrics (each run's ``episodes.json``): recovery against
+the number of stations is the mean over the episodes (seeds) of each episode's line
+``recovery_rate`` with its 95 % Student t interval, grouped by the number of stations of the
+episode's cell and the belt speed (a sweep over ``stations: [1, 2, 3, 4]`` and speeds gives one
+group per grid cell); per class and per bin,
 rates pool the counts of every episode of a cell at a speed (Wilson 95 % intervals).
 """
 

@@ -96,11 +96,8 @@ purity of each of its bins (the metrics of scope ``bin``).
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import json
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -113,30 +110,35 @@ from pathlib import Path
 from types import FrameType
 from typing import IO, TYPE_CHECKING, Any, Literal
 
-from experiments.stats import mean_of
+from experiments.scoring import failure_text, run_means, score_episode, write_run_tables
 from interfaces.errors import CdwTwinError, cut, cut_message
-from interfaces.fileio import MAX_JSON_BYTES, read_text_capped, write_atomic
+from interfaces.fileio import read_text_capped, write_atomic
 from interfaces.lifecycle import PARENT_PID_VARIABLE
-from interfaces.metrics import in_scope
+from interfaces.run_folder import (
+    CELL_FILE,
+    CONTROLLER_FILE,
+    EpisodeFolder,
+    RunFolder,
+    controller_stem,
+    episode_dir_name,
+    stats_name,
+)
+from interfaces.run_records import (
+    EpisodeMetrics,
+    EpisodeRow,
+    EpisodeSummary,
+    FailedEpisode,
+    RunInfo,
+    RunMeans,
+)
+from interfaces.run_records import succeeded as good_rows
 
 if TYPE_CHECKING:
     from interfaces.cell import Cell
-    from interfaces.events import Event
     from twin.scenario import Scenario
-
-METRIC_KEYS = ("speed_mps", "seed", "mode", "picks", *in_scope("line"))
-"""The metric columns of ``episodes.csv``, in order: the episode's settings, ``picks`` (the
-table's ``picked`` under its older name) and every line metric of the table."""
-
-EPISODE_COLUMNS = (*METRIC_KEYS, "failed", "reason")
-"""The columns of ``episodes.csv``: the metrics, whether the episode failed and why."""
 
 STOP_GRACE_S = 15.0
 POLL_S = 0.1
-CONTROLLER_COPY = "controller.yaml"
-"""Name of the controller parameter file's copy in a run folder, next to ``scenario.yaml``."""
-CELL_COPY = "cell.yaml"
-"""Name of the resolved cell's copy in a run folder, next to ``scenario.yaml``."""
 
 
 class EpisodeFailedError(CdwTwinError):
@@ -295,11 +297,6 @@ Progress = Callable[[float, float], None]
 """Called with (sim seconds, wall seconds) while an episode runs."""
 
 
-def failure_text(index: int, seed: int, reason: str) -> str:
-    """How ``run.json`` and ``sweep.json`` list a failed episode."""
-    return f"episode {index} (seed {seed}) failed: {reason}"
-
-
 def exit_text(returncode: int) -> str:
     """A process's exit status in words: ``code 1`` or ``signal SIGKILL``."""
     if returncode < 0:
@@ -310,16 +307,13 @@ def exit_text(returncode: int) -> str:
     return f"code {returncode}"
 
 
-def failed_row(episode: EpisodeSpec, mode: str, reason: str) -> dict[str, Any]:
+def failed_row(
+    episode: EpisodeSpec, mode: str, reason: str, speed_mps: float | None = None
+) -> FailedEpisode:
     """The ``episodes.json`` row of a failed episode: no metrics, ``failed`` and ``reason``."""
-    return {
-        "episode": episode.index,
-        "seed": episode.seed,
-        "mode": mode,
-        "complete": False,
-        "failed": True,
-        "reason": reason,
-    }
+    return FailedEpisode(
+        episode=episode.index, seed=episode.seed, mode=mode, reason=reason, speed_mps=speed_mps
+    )
 
 
 def controller_params(value: str, scenario_dir: Path | None, cell: Cell) -> Path:
@@ -372,14 +366,15 @@ def write_run_scenario(
     built-in dataset). Returns the paths written.
     """
     folder.mkdir(parents=True, exist_ok=True)
-    params_copy = folder / CONTROLLER_COPY
+    run = RunFolder(folder)
+    params_copy = run.controller
     write_atomic(params_copy, params.read_text(encoding="utf-8"))
-    cell_copy = folder / CELL_COPY
+    cell_copy = run.cell
     cell.save(cell_copy)
-    scenario = replace(scenario, controller=CONTROLLER_COPY, cell=CELL_COPY)
+    scenario = replace(scenario, controller=CONTROLLER_FILE, cell=CELL_FILE)
     if dataset is not None:
         scenario = replace(scenario, dataset=str(dataset.resolve()))
-    scenario_path = folder / "scenario.yaml"
+    scenario_path = run.scenario
     write_atomic(scenario_path, scenario.to_yaml())
     return RunFiles(scenario=scenario_path, controller=params_copy, cell=cell_copy)
 
@@ -435,8 +430,8 @@ def twin_command(options: RunOptions, episode: EpisodeSpec) -> list[str]:
         "--ack-timeout",
         str(options.ack_timeout_s),
         "--out",
-        str(episode.folder / "twin"),
-        *(["--record", str(episode.folder / "recording.mcap")] if options.record else []),
+        str(EpisodeFolder(episode.folder).twin),
+        *(["--record", str(EpisodeFolder(episode.folder).recording)] if options.record else []),
         *view_arguments(options),
     ]
 
@@ -449,17 +444,6 @@ def view_arguments(options: RunOptions) -> list[str]:
     if options.gui:
         args.append("--gui")
     return args
-
-
-def controller_stem(station: str | None, stations: Sequence[str]) -> str:
-    """The stem of a station's controller files: ``controller`` in a one-station cell (or for
-    ``station`` None), ``controller-<station>`` otherwise."""
-    return "controller" if station is None or len(stations) <= 1 else f"controller-{station}"
-
-
-def stats_name(stem: str, instance: int) -> str:
-    """The stats file of controller ``instance`` (0 first, > 0 after restarts)."""
-    return f"{stem}.json" if instance == 0 else f"{stem}_{instance}.json"
 
 
 def controller_command(
@@ -541,11 +525,12 @@ def _stop(procs: Sequence[subprocess.Popen[bytes]]) -> None:
 
 
 def _sim_seconds(summary: Path) -> float | None:
-    """The twin's last sim time from its ``summary.json``, None without one."""
+    """The twin's last sim time from its ``summary.json``, None without a readable one."""
     try:
-        return float(json.loads(summary.read_text(encoding="utf-8"))["sim_seconds"])
-    except (OSError, ValueError, KeyError, TypeError):
+        summary_s: float = EpisodeSummary.read(summary).sim_seconds
+    except (OSError, CdwTwinError):
         return None
+    return summary_s
 
 
 @dataclass(frozen=True)
@@ -664,7 +649,8 @@ def _check_outcome(
     watch_s: float | None,
 ) -> None:
     """Raise :class:`EpisodeFailedError` when a process ended the episode early."""
-    summary = episode.folder / "twin" / "summary.json"
+    folder = EpisodeFolder(episode.folder)
+    summary = folder.summary
     if exited is not None:
         if len(options.stations) <= 1:
             exited = ControllerExit(None, exited.returncode)
@@ -674,7 +660,7 @@ def _check_outcome(
             episode, _controller_reason(exited, watch_s if lost_s is None else lost_s)
         )
     if twin_code != 0 or not summary.is_file():
-        log = (episode.folder / "twin.log").read_text(errors="replace")[-2000:]
+        log = folder.twin_log.read_text(errors="replace")[-2000:]
         reason = f"twin exited with {exit_text(twin_code)}"
         if not summary.is_file():
             reason += ", no summary.json"
@@ -687,7 +673,7 @@ def run_episode(
     *,
     cancel: threading.Event | None = None,
     progress: Progress | None = None,
-) -> dict[str, Any]:
+) -> EpisodeMetrics:
     """Run one closed-loop episode in its own ROS domain; returns its metrics.
 
     Raises :class:`EpisodeFailedError` when a controller exits while the twin still runs
@@ -722,271 +708,20 @@ def run_episode(
         raise EpisodeCancelledError(msg)
     _check_outcome(options, episode, code, exited, None if watch is None else watch.time_s)
     try:
-        metrics = episode_metrics(episode.folder, options.mode)
+        metrics = score_episode(episode.folder, options.mode, episode.index)
     except CdwTwinError as exc:
         raise EpisodeFailedError(episode, f"unreadable episode files: {exc}") from None
-    if not metrics["complete"]:
-        summary = episode.folder / "twin" / "summary.json"
+    if not metrics.complete:
+        summary = EpisodeFolder(episode.folder).summary
         reason = (
             f"the twin stopped before the end, at sim {_sim_seconds(summary) or 0.0:.1f} "
             f"of {options.duration_s:.1f} s"
         )
         raise EpisodeFailedError(episode, reason)
-    return {"episode": episode.index, **metrics}
+    return metrics
 
 
 # -- metrics ------------------------------------------------------------------------------------
-def _instance_of(path: Path, stem: str) -> int | None:
-    match = re.fullmatch(rf"{re.escape(stem)}(?:_(\d+))?\.json", path.name)
-    if match is None:
-        return None
-    return int(match.group(1) or 0)
-
-
-def controller_stats(folder: Path, stations: Sequence[str]) -> dict[str, list[dict[str, Any]]]:
-    """Every controller's stats in an episode folder, per station, in instance order."""
-    out: dict[str, list[dict[str, Any]]] = {}
-    for station in stations:
-        stem = controller_stem(station, stations)
-        found = []
-        for path in folder.glob(f"{stem}*.json"):
-            instance = _instance_of(path, stem)
-            if instance is not None:
-                found.append((instance, read_json(path)))
-        out[station] = [stats for _, stats in sorted(found, key=lambda pair: pair[0])]
-    return out
-
-
-MAX_EVENTS_BYTES = 1_000_000_000
-"""The largest ``events.jsonl`` read (a day-long episode's is a few hundred MB)."""
-
-
-def read_json(path: Path) -> Any:
-    """A JSON result file of an episode (at most :data:`interfaces.fileio.MAX_JSON_BYTES`);
-    :class:`CdwTwinError` naming it when it cannot be read or parsed."""
-    text = read_text_capped(path, max_bytes=MAX_JSON_BYTES, what="JSON file", error=CdwTwinError)
-    try:
-        return json.loads(text)
-    except (ValueError, RecursionError) as exc:
-        msg = f"{path}: not valid JSON: {cut(str(exc), 200)}"
-        raise CdwTwinError(msg) from None
-
-
-def read_events(path: Path) -> list[Event]:
-    """The events of an ``events.jsonl``."""
-    from interfaces.events import Event
-
-    text = read_text_capped(path, max_bytes=MAX_EVENTS_BYTES, what="event log", error=CdwTwinError)
-    return [Event.from_json(line) for line in text.splitlines()]
-
-
-def episode_cell(folder: Path) -> Cell:
-    """The cell an episode folder ran: its run folder's ``cell.yaml``, else the default cell
-    (a run folder written before cells were data)."""
-    from interfaces.cell import load_cell
-
-    copy = folder.parent / CELL_COPY
-    return load_cell(copy if copy.is_file() else None)
-
-
-@dataclass(frozen=True, kw_only=True)
-class EpisodeRecord:
-    """What an episode folder holds that the metrics are computed from."""
-
-    summary: dict[str, Any]
-    events: list[Event]
-    stats: dict[str, list[dict[str, Any]]]
-    line_exit: str | None = None
-    """The station whose window ends the line (:func:`interfaces.metrics.exit_station`)."""
-
-    @property
-    def duration_s(self) -> float:
-        """The episode's simulated seconds."""
-        return float(self.summary["sim_seconds"])
-
-    @property
-    def landing(self) -> list[int]:
-        """Objects still falling into a bin when the episode ended."""
-        return [int(i) for i in self.summary.get("landing_in_bins", [])]
-
-
-def _scope_inputs(
-    record: EpisodeRecord, station: str | None
-) -> tuple[list[dict[str, Any]], int, Any, int]:
-    """The controller stats, landing objects, tracking block and restarts of the line
-    (``station`` None) or of one station."""
-    from interfaces.metrics import landing_by_station
-
-    if station is None:
-        stats = [s for instances in record.stats.values() for s in instances]
-        landing = len(record.landing)
-        tracking = record.summary.get("tracking")
-        restarts = max((len(s) for s in record.stats.values()), default=1) - 1
-        return stats, landing, tracking, restarts
-    stats = record.stats.get(station, [])
-    landing = landing_by_station(record.events, record.landing).get(station, 0)
-    tracking = ((record.summary.get("stations") or {}).get(station) or {}).get("tracking")
-    if tracking is None and len(record.stats) == 1:
-        tracking = record.summary.get("tracking")
-    return stats, landing, tracking, len(stats) - 1
-
-
-def scope_metrics(record: EpisodeRecord, station: str | None) -> dict[str, Any]:
-    """The table's metrics of the line (``station`` None) or of one station, with the
-    controllers' ``untargeted`` objects by reason and the drops by reason
-    (``dropped_by_reason``); a station's block adds each reason's share of the objects its
-    controller decided about (``untargeted_share``) and its bins' scores (``bins``, scope
-    ``bin``)."""
-    from interfaces.metrics import (
-        bin_scores,
-        considered_objects,
-        controller_scores,
-        count_events,
-        event_scores,
-        fault_counts,
-        targeted_objects,
-        tracking_metrics,
-        untargeted_objects,
-        untargeted_scores,
-    )
-
-    counts = count_events(
-        record.events, record.duration_s, station=station, line_exit=record.line_exit
-    )
-    stats, landing, tracking, restarts = _scope_inputs(record, station)
-    targeted = targeted_objects(stats, landing)
-    untargeted = untargeted_objects(stats)
-    allocation = untargeted_scores(untargeted, considered_objects(stats))
-    scores = event_scores(counts)
-    values: dict[str, Any] = {
-        **scores,
-        **controller_scores(counts, targeted),
-        **tracking_metrics(tracking),
-        **fault_counts(record.events, station=station),
-        **allocation,
-        "targeted": targeted,
-        "controller_restarts": max(0, restarts),
-        "real_time_factor": record.summary.get("real_time_factor"),
-    }
-    names = in_scope("line" if station is None else "station")
-    out = {
-        **{name: values[name] for name in names},
-        "untargeted": untargeted,
-        "dropped_by_reason": scores["dropped_by_reason"],
-    }
-    if station is not None:
-        out["untargeted_share"] = allocation["untargeted_share"]
-        out["bins"] = bin_scores(record.events, station=station).get(station, {})
-    return out
-
-
-def episode_metrics(folder: Path, mode: str) -> dict[str, Any]:
-    """The metrics of one finished episode folder: the line's, per station and per class.
-
-    The stations are those of the run folder's ``cell.yaml`` (:func:`episode_cell`).
-    """
-    from interfaces.metrics import class_scores, exit_station
-
-    summary = read_json(folder / "twin" / "summary.json")
-    cell = episode_cell(folder)
-    names = tuple(s.name for s in cell.stations)
-    record = EpisodeRecord(
-        summary=summary,
-        events=read_events(folder / "twin" / "events.jsonl"),
-        stats=controller_stats(folder, names),
-        line_exit=exit_station(cell.stations),
-    )
-    line = scope_metrics(record, None)
-    perception = summary.get("perception")  # the camera's scores (perception.source: camera)
-    scored = (
-        {f"perception_{k}": v for k, v in perception.items() if "/" not in k}
-        if isinstance(perception, dict)
-        else {}
-    )
-    return {
-        **scored,
-        "speed_mps": summary.get("belt_speed_mps"),
-        "seed": summary["seed"],
-        "mode": mode,
-        "picks": line["picked"],
-        **line,
-        "stations": {name: scope_metrics(record, name) for name in names},
-        "classes": class_scores(record.events, record.duration_s, line_exit=record.line_exit),
-        "complete": bool(summary["complete"]),
-        "failed": False,
-    }
-
-
-# -- tables -------------------------------------------------------------------------------------
-def succeeded(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The rows of episodes that did not fail (the ones metrics are aggregated over)."""
-    return [r for r in rows if not r.get("failed")]
-
-
-def failures(rows: list[dict[str, Any]]) -> list[str]:
-    """:func:`failure_text` of every failed row."""
-    return [
-        failure_text(int(r.get("episode", -1)), int(r["seed"]), str(r.get("reason")))
-        for r in rows
-        if r.get("failed")
-    ]
-
-
-def _means(blocks: Sequence[dict[str, Any]], keys: Sequence[str]) -> dict[str, Any]:
-    return {k: mean_of([b.get(k) for b in blocks]) for k in keys}
-
-
-def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Means over the successful episodes of every numeric line metric (failed ones left out)."""
-    keys = [k for k in METRIC_KEYS if k not in ("mode", "seed", "speed_mps")]
-    keys += sorted({k for r in rows for k in r if k.startswith("perception_")})
-    return _means(succeeded(rows), keys)
-
-
-def aggregate_blocks(rows: list[dict[str, Any]], block: str) -> dict[str, dict[str, Any]]:
-    """Means over the successful episodes of each entry of a per-episode ``block``
-    (``stations``: the station metrics; ``classes``: the class metrics)."""
-    keys = in_scope("station" if block == "stations" else "class")
-    names: dict[str, None] = {}
-    for row in succeeded(rows):
-        names.update(dict.fromkeys(row.get(block) or {}))
-    return {
-        name: _means([r[block][name] for r in succeeded(rows) if name in r.get(block, {})], keys)
-        for name in names
-    }
-
-
-def write_tables(
-    out: Path, rows: list[dict[str, Any]], complete: bool, extra: dict[str, Any]
-) -> dict[str, Any]:
-    """``episodes.json``, ``episodes.csv`` and ``run.json`` (atomically).
-
-    ``rows`` may hold failed episodes (:func:`failed_row`): they are listed in the tables, and
-    counted in ``run.json`` as ``failed`` with their ``failures``, never in the means.
-    ``run.json`` gives the line's means (``mean``) and each station's and class's
-    (``mean_by_station``, ``mean_by_class``).
-    """
-    write_atomic(out / "episodes.json", json.dumps(rows, indent=2) + "\n")
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(EPISODE_COLUMNS), extrasaction="ignore")
-    writer.writeheader()
-    writer.writerows(rows)
-    write_atomic(out / "episodes.csv", buffer.getvalue())
-    failed = failures(rows)
-    summary = {
-        "complete": complete,
-        "episodes": len(succeeded(rows)),
-        "failed": len(failed),
-        "failures": failed,
-        **extra,
-        "mean": aggregate(rows),
-        "mean_by_station": aggregate_blocks(rows, "stations"),
-        "mean_by_class": aggregate_blocks(rows, "classes"),
-    }
-    write_atomic(out / "run.json", json.dumps(summary, indent=2) + "\n")
-    return summary
-
-
 # -- the command --------------------------------------------------------------------------------
 def raise_interrupt(signum: int, frame: FrameType | None) -> None:
     """Signal handler: a ``KeyboardInterrupt`` carrying the signal's name."""
@@ -1017,7 +752,7 @@ class PreparedRun:
     scenario: Scenario
     options: RunOptions
     out: Path
-    extra: dict[str, Any]
+    info: RunInfo
 
 
 def prepare_run(args: argparse.Namespace) -> PreparedRun:
@@ -1083,28 +818,28 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
         transport=transport,
         record=getattr(args, "record", True),
     )
-    extra: dict[str, Any] = {
-        "scenario": scenario.name,
-        "scenario_path": str(args.scenario) if args.scenario is not None else None,
-        "dataset": str(options.dataset),
-        "cell": cell.name,
-        "stations": list(options.stations),
-        "mode": args.mode,
-        "transport": transport,
-        "speed_mps": scenario.system.belt_speed_mps,
-        "episodes_planned": args.episodes,
-    }
-    return PreparedRun(scenario=scenario, options=options, out=out, extra=extra)
+    info = RunInfo(
+        scenario=scenario.name,
+        scenario_path=str(args.scenario) if args.scenario is not None else None,
+        dataset=str(options.dataset),
+        cell=cell.name,
+        stations=tuple(options.stations),
+        mode=args.mode,
+        transport=transport,
+        speed_mps=scenario.system.belt_speed_mps,
+        episodes_planned=args.episodes,
+    )
+    return PreparedRun(scenario=scenario, options=options, out=out, info=info)
 
 
 def _run_episodes(
     run: PreparedRun, episodes: int, *, quiet: bool, tty: bool
-) -> tuple[list[dict[str, Any]], str | None, int]:
+) -> tuple[list[EpisodeRow], str | None, int]:
     """Run the episodes one after another; returns the rows, why the run stopped early (None
     when it did not) and the exit status."""
     from experiments.outdir import reason
 
-    rows: list[dict[str, Any]] = []
+    rows: list[EpisodeRow] = []
     speed = run.scenario.system.belt_speed_mps
     # SIGINT too: a process started in the background inherits SIGINT ignored, and Python then
     # installs no KeyboardInterrupt handler of its own
@@ -1112,7 +847,7 @@ def _run_episodes(
     try:
         for i in range(episodes):
             episode = EpisodeSpec(
-                index=i, seed=run.scenario.seed + i, folder=run.out / f"ep{i:03d}"
+                index=i, seed=run.scenario.seed + i, folder=run.out / episode_dir_name(i)
             )
             if not quiet:
                 print(f"episode {i + 1}/{episodes} (seed {episode.seed}) ...", flush=True)
@@ -1130,15 +865,15 @@ def _run_episodes(
                 if tty:
                     print()
             if why is None:
-                rows.append({**metrics, "speed_mps": speed})
+                rows.append(replace(metrics, speed_mps=speed))
                 try:
-                    write_tables(run.out, rows, complete=False, extra=run.extra)
+                    write_run_tables(RunFolder(run.out), rows, complete=False, info=run.info)
                 except OSError as exc:
                     why = f"cannot write the run's tables: {reason(exc)}"
                     print(f"cdw-twin run: {failure_text(i, episode.seed, why)}", file=sys.stderr)
                     rows.pop()
             if why is not None:
-                rows.append({**failed_row(episode, run.options.mode, why), "speed_mps": speed})
+                rows.append(failed_row(episode, run.options.mode, why, speed))
                 return rows, failure_text(i, episode.seed, why), 1
     except KeyboardInterrupt as exc:
         return rows, f"interrupted ({exc.args[0] if exc.args else 'SIGINT'})", 130
@@ -1148,36 +883,22 @@ def _run_episodes(
     return rows, None, 0
 
 
-def note_failure(
-    out: Path, rows: list[dict[str, Any]], extra: dict[str, Any], why: str
-) -> dict[str, Any]:
+def note_failure(out: Path, rows: Sequence[EpisodeRow], info: RunInfo, why: str) -> RunMeans:
     """The run's tables could not be written (``why``: a full disk, a read-only folder): the
     ``run.json`` of the rows, ``complete`` false, with ``why`` among its ``failures``, written
     whole if it can be, else over the old ``run.json``'s own blocks without the means
     (:func:`interfaces.fileio.overwrite_in_place`), else not at all. Returns it."""
     from interfaces.fileio import overwrite_in_place
 
-    failed = failures(rows)
-    note = {
-        "complete": False,
-        "episodes": len(succeeded(rows)),
-        "failed": len(failed),
-        "failures": [*failed, why],
-        **extra,
-    }
-    summary = {
-        **note,
-        "mean": aggregate(rows),
-        "mean_by_station": aggregate_blocks(rows, "stations"),
-        "mean_by_class": aggregate_blocks(rows, "classes"),
-    }
-    path = out / "run.json"
+    means = run_means(rows, complete=False, info=info, also_failed=[why])
+    path = RunFolder(out).run_json
     try:
-        write_atomic(path, json.dumps(summary, indent=2) + "\n")
+        means.write(path)
     except OSError:
+        note = {k: v for k, v in means.to_data().items() if not k.startswith("mean")}
         with suppress(OSError):
             overwrite_in_place(path, json.dumps(note) + "\n")
-    return summary
+    return means
 
 
 def run(args: argparse.Namespace) -> int:
@@ -1187,7 +908,7 @@ def run(args: argparse.Namespace) -> int:
     prepared = prepare_run(args)
     out = prepared.out
     try:
-        write_tables(out, [], complete=False, extra=prepared.extra)
+        write_run_tables(RunFolder(out), [], complete=False, info=prepared.info)
     except OSError as exc:
         msg = f"--out {out}: cannot write the run's tables: {reason(exc)}"
         raise OutputError(msg) from None
@@ -1200,32 +921,32 @@ def run(args: argparse.Namespace) -> int:
             flush=True,
         )
     rows, stopped, code = _run_episodes(prepared, args.episodes, quiet=args.json, tty=tty)
-    extra = prepared.extra if stopped is None else {**prepared.extra, "stopped": stopped}
+    info = replace(prepared.info, stopped=stopped)
     try:
-        summary = write_tables(out, rows, complete=stopped is None, extra=extra)
+        means = write_run_tables(RunFolder(out), rows, complete=stopped is None, info=info)
     except OSError as exc:
         why = f"cannot write the run's tables: {reason(exc)}"
         stopped = why if stopped is None else f"{stopped}; {why}"
         code = code or 1
-        summary = note_failure(out, rows, {**prepared.extra, "stopped": stopped}, why)
-    good = succeeded(rows)
-    result = {
-        **summary["mean"],
+        means = note_failure(out, rows, replace(prepared.info, stopped=stopped), why)
+    good = good_rows(rows)
+    result: dict[str, object] = {
+        **means.mean,
         "speed_mps": prepared.scenario.system.belt_speed_mps,
         "mode": args.mode,
-        "complete": summary["complete"],
-        "episodes": summary["episodes"],
-        "failed": summary["failed"],
+        "complete": means.complete,
+        "episodes": means.episodes,
+        "failed": means.failed,
         "out": str(out),
-        "untargeted": good[-1]["untargeted"] if good else {},
-        "mean_by_station": summary["mean_by_station"],
+        "untargeted": dict(good[-1].line.untargeted) if good else {},
+        "mean_by_station": {k: dict(v) for k, v in means.mean_by_station.items()},
     }
     if stopped is not None:
         result["stopped"] = stopped
-        result["failures"] = summary["failures"]
+        result["failures"] = list(means.failures)
         print(
             f"cdw-twin run: stopped after {len(good)}/{args.episodes} episodes: {stopped}\n"
-            f"cdw-twin run: the finished episodes are in {out / 'episodes.json'} "
+            f"cdw-twin run: the finished episodes are in {RunFolder(out).episodes_json} "
             "(run.json says complete: false)",
             file=sys.stderr,
         )

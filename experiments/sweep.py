@@ -87,6 +87,9 @@ from interfaces.dataclass_io import from_data
 from interfaces.errors import CdwTwinError, ConfigError, cut, cut_message
 from interfaces.fileio import overwrite_in_place, write_atomic
 from interfaces.metrics import BY_NAME, METRICS, RATES, Scope, in_scope
+from interfaces.run_folder import RunFolder
+from interfaces.run_records import EpisodeMetrics, EpisodeRow, RunInfo
+from interfaces.run_records import succeeded as good_rows
 from interfaces.yamlio import load_yaml_file
 
 if TYPE_CHECKING:
@@ -354,10 +357,11 @@ def aggregate_cell(
     per reason, the untargeted objects and the drops (:data:`REASON_BLOCKS`, those the rows
     have).
 
-    ``rows`` are :func:`experiments.run.episode_metrics` dicts (or their ``stations`` or
-    ``classes`` blocks, with ``metrics`` and ``rates`` of that scope); a metric that is None in
-    an episode (e.g. no settled pursuit) leaves that episode out of that metric only. Failed
-    episodes (``"failed": true``) are counted in ``failed`` and left out of everything else.
+    ``rows`` are rows of ``episodes.json`` as written (:meth:`EpisodeMetrics.to_data`; or their
+    ``stations`` or ``classes`` blocks, with ``metrics`` and ``rates`` of that scope); a metric
+    that is None in an episode (e.g. no settled pursuit) leaves that episode out of that metric
+    only. Failed episodes (``"failed": true``) are counted in ``failed`` and left out of
+    everything else.
     """
     rates = WILSON_RATES if rates is None else rates
     failed = sum(1 for r in rows if r.get("failed"))
@@ -572,11 +576,11 @@ class CellRun:
     cell: GridCell
     folder: Path
     options: RunOptions
-    extra: dict[str, Any]
-    rows: dict[int, dict[str, Any]] = field(default_factory=dict)
+    info: RunInfo
+    rows: dict[int, EpisodeRow] = field(default_factory=dict)
     failures: list[str] = field(default_factory=list)
 
-    def ordered_rows(self) -> list[dict[str, Any]]:
+    def ordered_rows(self) -> list[EpisodeRow]:
         """The finished rows in episode order."""
         return [self.rows[k] for k in sorted(self.rows)]
 
@@ -585,13 +589,13 @@ class CellRun:
         from experiments.run import EpisodeSpec
 
         return [
-            EpisodeSpec(index=i, seed=seed, folder=self.folder / f"ep{i:03d}")
+            EpisodeSpec(index=i, seed=seed, folder=RunFolder(self.folder).episode(i).path)
             for i, seed in enumerate(self.cell.seeds)
         ]
 
     def summary(self) -> dict[str, Any]:
         """The cell's entry of ``sweep.json``."""
-        rows = self.ordered_rows()
+        rows = [row.to_data() for row in self.ordered_rows()]  # pooled as written
         agg = aggregate_cell(rows)
         agg["stations"] = aggregate_stations(rows)
         agg["classes"] = aggregate_classes(rows)
@@ -705,7 +709,8 @@ def write_sweep(
     ``cell.yaml``, ``controller.yaml``, empty tables); an ``OSError`` becomes an
     :class:`experiments.outdir.OutputError` naming ``out``."""
     from experiments.outdir import OutputError, reason
-    from experiments.run import run_options, write_run_scenario, write_tables
+    from experiments.run import run_options, write_run_scenario
+    from experiments.scoring import write_run_tables
 
     runs = []
     try:
@@ -719,22 +724,22 @@ def write_sweep(
                 transport=transport,
                 record=record,
             )
-            extra = {
-                "scenario": c.cell.scenario.name,
-                "scenario_path": str(c.cell.scenario_path),
-                "dataset": str(options.dataset),
-                "cell": c.station_cell.name,
-                "stations": list(options.stations),
-                "mode": c.cell.mode,
-                "transport": transport,
-                "record": record,
-                "speed_mps": c.cell.scenario.system.belt_speed_mps,
-                "duration_s": c.cell.scenario.duration_s,
-                "overrides": c.cell.overrides,
-                "episodes_planned": len(c.cell.seeds),
-            }
-            runs.append(CellRun(cell=c.cell, folder=folder, options=options, extra=extra))
-            write_tables(folder, [], complete=False, extra=extra)
+            info = RunInfo(
+                scenario=c.cell.scenario.name,
+                scenario_path=str(c.cell.scenario_path),
+                dataset=str(options.dataset),
+                cell=c.station_cell.name,
+                stations=tuple(options.stations),
+                mode=c.cell.mode,
+                transport=transport,
+                record=record,
+                speed_mps=c.cell.scenario.system.belt_speed_mps,
+                duration_s=c.cell.scenario.duration_s,
+                overrides=c.cell.overrides,
+                episodes_planned=len(c.cell.seeds),
+            )
+            runs.append(CellRun(cell=c.cell, folder=folder, options=options, info=info))
+            write_run_tables(RunFolder(folder), [], complete=False, info=info)
     except OSError as exc:
         msg = f"--out {out}: cannot write the sweep folder: {reason(exc)}"
         raise OutputError(msg) from None
@@ -827,17 +832,17 @@ class Sweep:
     def finish_cell(self, run: CellRun, final: bool) -> None:
         """Write one grid cell's run tables (``stopped`` on the final write of a cell that did
         not finish)."""
-        from experiments.run import write_tables
+        from experiments.scoring import write_run_tables
 
         rows = run.ordered_rows()
-        done = sum(1 for r in rows if not r.get("failed")) == len(run.cell.seeds)
-        extra = dict(run.extra)
+        done = len(good_rows(rows)) == len(run.cell.seeds)
+        info = run.info
         stopped = [*self.stopped, *self.write_errors]
         if not done and final and (run.failures or stopped):
-            extra["stopped"] = "; ".join(run.failures + stopped)
-        write_tables(run.folder, rows, complete=done, extra=extra)
+            info = dataclasses.replace(info, stopped="; ".join(run.failures + stopped))
+        write_run_tables(RunFolder(run.folder), rows, complete=done, info=info)
 
-    def record(self, run: CellRun, index: int, row: dict[str, Any], failure: str = "") -> int:
+    def record(self, run: CellRun, index: int, row: EpisodeRow, failure: str = "") -> int:
         """Keep one finished (or failed) episode's row and write the tables; returns how many
         episodes have finished. A table that cannot be written stops the sweep
         (:meth:`write_failed`)."""
@@ -886,15 +891,16 @@ class Sweep:
         self.finished(run, episode, metrics, "")
 
     def finished(
-        self, run: CellRun, episode: EpisodeSpec, metrics: dict[str, Any] | None, reason: str
+        self, run: CellRun, episode: EpisodeSpec, metrics: EpisodeMetrics | None, reason: str
     ) -> None:
         """Record an episode that ran to its end (``metrics``) or failed (``reason``), whatever
         ran it."""
-        from experiments.run import failed_row, failure_text
+        from experiments.run import failed_row
+        from experiments.scoring import failure_text
 
         speed = run.cell.scenario.system.belt_speed_mps
         if metrics is None:
-            row = {**failed_row(episode, run.options.mode, reason), "speed_mps": speed}
+            row = failed_row(episode, run.options.mode, reason, speed)
             self.record(run, episode.index, row, failure_text(episode.index, episode.seed, reason))
             if not self.quiet:
                 print(
@@ -903,11 +909,12 @@ class Sweep:
                     file=sys.stderr,
                 )
             return
-        done = self.record(run, episode.index, {**metrics, "speed_mps": speed})
+        done = self.record(run, episode.index, dataclasses.replace(metrics, speed_mps=speed))
         if not self.quiet:
             print(
                 f"[{done}/{len(self.jobs)}] {run.cell.name} seed {episode.seed}: "
-                f"placed {metrics['placed_correct']}, rtf {metrics['real_time_factor']:.2f}",
+                f"placed {metrics.line['placed_correct']}, "
+                f"rtf {metrics.line['real_time_factor'] or 0.0:.2f}",
                 flush=True,
             )
 

@@ -12,6 +12,7 @@ import dataclasses
 import math
 import types
 import typing
+from collections.abc import Mapping
 from typing import Any, TypeVar, Union, get_args, get_origin, get_type_hints
 
 from interfaces.errors import ConfigError, cut
@@ -50,7 +51,7 @@ def _convert(tp: Any, value: object, where: str) -> object:
         return _convert_dataclass(tp, value, where)
     if origin is tuple:
         return _convert_tuple(tp, value, where)
-    if origin is dict:
+    if origin is dict or origin is Mapping:
         return _convert_dict(tp, value, where)
     if origin is typing.Literal:
         if value not in get_args(tp):

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from interfaces.events import Event, EventType
+from interfaces.run_records import MetricValue, PickStats, TrackingSummary
 
 Scope = Literal["line", "station", "class", "bin"]
 """Where a metric is given: for the whole line, per station, per object class, per bin."""
@@ -742,16 +743,11 @@ def bin_scores(
     return out
 
 
-def considered_objects(controller_stats: Sequence[Mapping[str, Any]]) -> int:
-    """Objects the controllers decided about, summed over instances: each one's ``pick``
-    counters ``targeted`` (objects it committed to at least once) and ``untargeted`` (objects
-    it never targeted, by reason); the two are disjoint."""
-    total = 0
-    for ctl in controller_stats:
-        pick = ctl.get("pick") or {}
-        total += int(pick.get("targeted", 0))
-        total += sum(int(v) for v in (pick.get("untargeted") or {}).values())
-    return total
+def considered_objects(picks: Sequence[PickStats | None]) -> int:
+    """Objects the controllers decided about, summed over instances: each one's ``targeted``
+    (objects it committed to at least once) and ``untargeted`` (objects it never targeted, by
+    reason); the two are disjoint."""
+    return sum(p.targeted + sum(p.untargeted.values()) for p in picks if p is not None)
 
 
 def untargeted_scores(untargeted: Mapping[str, int], considered: int) -> dict[str, Any]:
@@ -782,25 +778,20 @@ def station_names(events: Iterable[Event]) -> list[str]:
     return list(seen)
 
 
-def targeted_objects(controller_stats: Sequence[Mapping[str, Any]], landing: int) -> int:
+def targeted_objects(picks: Sequence[PickStats | None], landing: int) -> int:
     """Objects the controllers committed to and finished with (completed or aborted), summed
     over controller instances, less the ``landing`` objects still falling into a bin at the end
     (their fate is undecided)."""
-    targeted = 0
-    for ctl in controller_stats:
-        pick = ctl.get("pick") or {}
-        targeted += int(pick.get("completed", 0))
-        targeted += sum(int(v) for v in (pick.get("aborted") or {}).values())
+    targeted = sum(p.completed + sum(p.aborted.values()) for p in picks if p is not None)
     return max(0, targeted - landing)
 
 
-def untargeted_objects(controller_stats: Sequence[Mapping[str, Any]]) -> dict[str, int]:
+def untargeted_objects(picks: Sequence[PickStats | None]) -> dict[str, int]:
     """Objects never targeted, by the controllers' last reason, summed over instances."""
     out: dict[str, int] = {}
-    for ctl in controller_stats:
-        pick = ctl.get("pick") or {}
-        for key, value in (pick.get("untargeted") or {}).items():
-            out[str(key)] = out.get(str(key), 0) + int(value)
+    for pick in picks:
+        for key, value in (pick.untargeted if pick is not None else {}).items():
+            out[key] = out.get(key, 0) + value
     return out
 
 
@@ -836,14 +827,39 @@ def fault_counts(events: Iterable[Event], *, station: str | None = None) -> dict
     return {"faults": len(kinds) - injected, "injected_faults": injected}
 
 
-def tracking_metrics(tracking: Mapping[str, Any] | None) -> dict[str, Any]:
-    """The tracking metrics of a twin ``tracking`` block (None values without one)."""
-    tracking = tracking or {}
+def tracking_summary(times_s: Sequence[float | None]) -> TrackingSummary:
+    """The tracking block of an episode or a station from each pursuit's time to the threshold
+    (None: it never settled): mean and 95th percentile of the settled ones, the unsettled
+    counted apart, the times kept (to the microsecond) for the report's figures."""
+    import numpy as np
+
+    times = [t for t in times_s if t is not None]
+    return TrackingSummary(
+        pursuits=len(times_s),
+        settled=len(times),
+        unsettled=len(times_s) - len(times),
+        tracking_time_4mm_mean_s=float(np.mean(times)) if times else None,
+        tracking_time_4mm_p95_s=float(np.percentile(times, 95)) if times else None,
+        tracking_times_s=tuple(round(t, 6) for t in times),
+    )
+
+
+def tracking_metrics(tracking: TrackingSummary | None) -> dict[str, MetricValue]:
+    """The tracking metrics of a tracking block (None values without one)."""
+    if tracking is None:
+        return dict.fromkeys(
+            (
+                "tracking_time_4mm_mean_s",
+                "tracking_time_4mm_p95_s",
+                "tracking_pursuits",
+                "tracking_unsettled",
+            )
+        )
     return {
-        "tracking_time_4mm_mean_s": tracking.get("tracking_time_4mm_mean_s"),
-        "tracking_time_4mm_p95_s": tracking.get("tracking_time_4mm_p95_s"),
-        "tracking_pursuits": tracking.get("pursuits"),
-        "tracking_unsettled": tracking.get("unsettled"),
+        "tracking_time_4mm_mean_s": tracking.tracking_time_4mm_mean_s,
+        "tracking_time_4mm_p95_s": tracking.tracking_time_4mm_p95_s,
+        "tracking_pursuits": tracking.pursuits,
+        "tracking_unsettled": tracking.unsettled,
     }
 
 

@@ -63,6 +63,7 @@ from interfaces.lifecycle import STOP_SIGNALS, die_with_parent
 if TYPE_CHECKING:
     from interfaces.cell import Cell
     from interfaces.inproc import Bus
+    from interfaces.run_records import TrackingSummary
     from twin.episode_log import EventLog
     from twin.live_view import LiveView
     from twin.recording import McapRecording
@@ -508,13 +509,9 @@ def _serve(
     controllers to start and match is ``match_wall_seconds``."""
     from rclpy.utilities import try_shutdown
 
-    from twin.episode_log import (
-        EpisodeWriteError,
-        tracking_summary,
-        write_episode_file,
-        write_status,
-        write_summary,
-    )
+    from interfaces.run_folder import TELEMETRY_FILE
+    from interfaces.run_records import EpisodeSummary, StationSummary
+    from twin.episode_log import EpisodeWriteError, write_episode_file, write_status, write_summary
 
     scenario = twin.scenario
     gui = getattr(args, "gui", False)
@@ -540,48 +537,48 @@ def _serve(
     if log is not None:
         log.close()
     twin.finish_pursuits()
-    summary = {
-        "scenario": scenario.name,
-        "seed": scenario.seed,
-        "mode": args.mode,
-        "belt_speed_mps": scenario.system.belt_speed_mps,
-        "complete": not interrupted,
-        "sim_seconds": twin.time_s,
-        "wall_seconds": wall,
-        "match_wall_seconds": first - wall0,
-        "transport": "ros" if peers is None else "inproc",
-        "real_time_factor": twin.time_s / wall if wall > 0 else 0.0,
-        "cell": twin.cell.name,
-        "scores": twin.scores(),
-        "stations": {
-            link.name: {
-                "scores": twin.scores(link.name),
-                "tracking": tracking_summary(twin.tracking_results(link.name)),
-                "latency": link.telemetry.summary()["latency"],
-            }
+    perception = twin.perception_summary()
+    summary = EpisodeSummary(
+        scenario=scenario.name,
+        seed=scenario.seed,
+        mode=args.mode,
+        belt_speed_mps=scenario.system.belt_speed_mps,
+        complete=not interrupted,
+        sim_seconds=twin.time_s,
+        wall_seconds=wall,
+        match_wall_seconds=first - wall0,
+        transport="ros" if peers is None else "inproc",
+        real_time_factor=twin.time_s / wall if wall > 0 else 0.0,
+        cell=twin.cell.name,
+        scores=twin.scores(),
+        stations={
+            link.name: StationSummary(
+                scores=twin.scores(link.name),
+                tracking=_tracking(twin, link.name),
+                latency=link.telemetry.latency(),
+            )
             for link in node.links
         },
-        "landing_in_bins": twin.landing_in_bins(),
-        "tracking": tracking_summary(twin.tracking_results()),
-        "published": dict(node.counters.published),
-        "received_commands": node.counters.received_commands,
-        "rejected_commands": dict(node.counters.rejected),
-        "unlogged_rejections": node.counters.unlogged,
-        "lockstep_timeouts": node.counters.lockstep_timeouts,
-        "priorities": list(node.priorities),
-        "final_state": _final_state(twin),
-        **node.telemetry.summary(),
-    }
-    perception = twin.perception_summary()
-    if perception is not None:  # the camera's detections scored against ground truth
-        summary["perception"] = {
-            k: (v if math.isfinite(v) else None) for k, v in sorted(perception.items())
-        }
-    if interrupted:
-        summary["stopped_by"] = signal.Signals(stop[0]).name
+        landing_in_bins=tuple(twin.landing_in_bins()),
+        tracking=_tracking(twin, None),
+        published=dict(node.counters.published),
+        received_commands=node.counters.received_commands,
+        rejected_commands=dict(node.counters.rejected),
+        unlogged_rejections=node.counters.unlogged,
+        lockstep_timeouts=node.counters.lockstep_timeouts,
+        priorities=tuple(node.priorities),
+        final_state=_final_state(twin),
+        latency=node.telemetry.latency(),
+        step_rate_hz_mean=node.telemetry.step_rate_hz_mean(),
+        # the camera's detections scored against ground truth
+        perception=None
+        if perception is None
+        else {k: (v if math.isfinite(v) else None) for k, v in sorted(perception.items())},
+        stopped_by=signal.Signals(stop[0]).name if interrupted else None,
+    )
     out: Path | None = args.out
     if out is not None:
-        write_episode_file(out, "telemetry.json", node.telemetry.to_json())
+        write_episode_file(out, TELEMETRY_FILE, node.telemetry.to_json())
         write_summary(out, summary)
         write_status(
             out,
@@ -594,6 +591,14 @@ def _serve(
     if peers is None:
         try_shutdown()
     return interrupted
+
+
+def _tracking(twin: Twin, station: str | None) -> TrackingSummary:
+    """The tracking block of the line (``station`` None) or a station: the metric table's
+    summary of every finished pursuit's time to 4 mm."""
+    from interfaces.metrics import tracking_summary
+
+    return tracking_summary([r.time_to_threshold_s for r in twin.tracking_results(station)])
 
 
 def _step(

@@ -23,22 +23,20 @@ from __future__ import annotations
 import json
 import os
 import threading
-from collections.abc import Iterable
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-import numpy as np
-
 from interfaces.errors import CdwTwinError
 from interfaces.events import Event
 from interfaces.fileio import overwrite_in_place, write_atomic
-from twin.target_metric import TrackingResult
+from interfaces.run_folder import EVENTS_FILE, STATUS_FILE, SUMMARY_FILE, TELEMETRY_FILE
+from interfaces.run_records import EpisodeSummary
 
 DEFAULT_FLUSH_INTERVAL_S = 0.5
 """Wall seconds between two flushes of :class:`EventLog` (at most)."""
 
-EPISODE_END_FILES = ("summary.json", "telemetry.json")
+EPISODE_END_FILES = (SUMMARY_FILE, TELEMETRY_FILE)
 """Files an episode writes when it ends: removed when a new episode starts in the folder."""
 
 
@@ -48,20 +46,6 @@ class EpisodeWriteError(CdwTwinError):
 
 def _write_error(path: Path, exc: OSError) -> EpisodeWriteError:
     return EpisodeWriteError(f"{path}: cannot write: {exc.strerror or exc}")
-
-
-def tracking_summary(results: Iterable[TrackingResult]) -> dict[str, Any]:
-    """Mean and 95th percentile of the settled pursuits; unsettled ones counted apart."""
-    results = list(results)
-    times = [r.time_to_threshold_s for r in results if r.time_to_threshold_s is not None]
-    return {
-        "pursuits": len(results),
-        "settled": len(times),
-        "unsettled": len(results) - len(times),
-        "tracking_time_4mm_mean_s": float(np.mean(times)) if times else None,
-        "tracking_time_4mm_p95_s": float(np.percentile(times, 95)) if times else None,
-        "tracking_times_s": [round(t, 6) for t in times],
-    }
 
 
 class EventLog:
@@ -156,7 +140,7 @@ def write_status(out: Path, state: str, **fields: Any) -> None:
     its own blocks (:func:`interfaces.fileio.overwrite_in_place`), so a failed episode never
     keeps saying ``running``; :class:`EpisodeWriteError` when even that fails."""
     data = {"state": state, "complete": state == "finished", "pid": os.getpid(), **fields}
-    path = out / "status.json"
+    path = out / STATUS_FILE
     try:
         write_atomic(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
     except OSError as exc:
@@ -184,9 +168,12 @@ def start_episode_folder(out: Path, **fields: Any) -> EventLog:
     except OSError as exc:
         raise _write_error(out, exc) from None
     write_status(out, "running", **fields)
-    return EventLog(out / "events.jsonl")
+    return EventLog(out / EVENTS_FILE)
 
 
-def write_summary(out: Path, summary: dict[str, Any]) -> None:
+def write_summary(out: Path, summary: EpisodeSummary) -> None:
     """Write ``summary.json`` (atomically) into ``out``."""
-    write_episode_file(out, "summary.json", json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    try:
+        summary.write(out / SUMMARY_FILE)
+    except OSError as exc:
+        raise _write_error(out / SUMMARY_FILE, exc) from None

@@ -50,6 +50,7 @@ from interfaces.detections import DetectionFrame
 from interfaces.events import Event, EventType
 from interfaces.materials import dataset_table as dataset_materials
 from interfaces.metrics import Counts, count_events, event_scores, exit_station
+from interfaces.run_records import EventScores
 from twin.belt_drive import BeltDrive, BeltState
 from twin.episode_setup import collision_cache_dir, drive_parameters, entering_classes
 from twin.errors import ConfigError
@@ -532,7 +533,7 @@ class Twin:
             line_exit=exit_station(self.cell.stations),
         )
 
-    def scores(self, station: str | None = None) -> dict[str, object]:
+    def scores(self, station: str | None = None) -> EventScores:
         """The event scores (:func:`interfaces.metrics.event_scores`) of the line or a station."""
         return event_scores(self.counts(station))
 

@@ -18,7 +18,7 @@ unknown (evicted from the ring, or never published) are counted, not measured.
       "rtt": {"wall_s": [...], "sim_s": [...], "rtt_ms": [...]},
       "step_rate": {"wall_s": [...], "steps_per_s": [...], "rtf": [...]},
       "belt": {"sim_s": [...], "setpoint_mps": [...], "speed_mps": [...]},
-      "summary": {... as TelemetryRecorder.summary() ...}
+      "summary": {"latency": {... TelemetryRecorder.latency() ...}, "step_rate_hz_mean": ...}
     }
 
 ``step_rate`` has one row per wall-clock second (``wall_s`` is the window's end; ``rtf`` is sim
@@ -31,9 +31,11 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any
 
 import numpy as np
+
+from interfaces.dataclass_io import to_data
+from interfaces.run_records import LatencySummary
 
 RING_SIZE = 1024
 """Publish times kept for matching (about 4 s of joint states at 240 Hz)."""
@@ -165,20 +167,21 @@ class TelemetryRecorder:
         self.belt_speed_mps.append(speed_mps)
 
     # -- output -----------------------------------------------------------------------------
-    def summary(self) -> dict[str, Any]:
-        """``latency`` block (ms) and mean step rate, for the episode's ``summary.json``."""
+    def latency(self) -> LatencySummary:
+        """The round-trip latency block (ms) of the episode's ``summary.json``."""
         rtt = self.rtt_ms
+        return LatencySummary(
+            rtt_ms_p50=percentile_ms(rtt, 50),
+            rtt_ms_p99=percentile_ms(rtt, 99),
+            rtt_ms_mean=float(np.mean(rtt)) if rtt else None,
+            samples=len(rtt),
+            unmatched_commands=self.unmatched_commands,
+        )
+
+    def step_rate_hz_mean(self) -> float | None:
+        """The mean step rate over the episode's windows (None before the first)."""
         rates = self._rate_rows()[1]
-        return {
-            "latency": {
-                "rtt_ms_p50": percentile_ms(rtt, 50),
-                "rtt_ms_p99": percentile_ms(rtt, 99),
-                "rtt_ms_mean": float(np.mean(rtt)) if rtt else None,
-                "samples": len(rtt),
-                "unmatched_commands": self.unmatched_commands,
-            },
-            "step_rate_hz_mean": float(np.mean(rates)) if rates else None,
-        }
+        return float(np.mean(rates)) if rates else None
 
     def to_json(self) -> str:
         """The whole record as ``telemetry.json`` text (layout in the module docstring)."""
@@ -200,7 +203,10 @@ class TelemetryRecorder:
                 "setpoint_mps": [round(v, 6) for v in self.belt_setpoint_mps],
                 "speed_mps": [round(v, 6) for v in self.belt_speed_mps],
             },
-            "summary": self.summary(),
+            "summary": {
+                "latency": to_data(self.latency()),
+                "step_rate_hz_mean": self.step_rate_hz_mean(),
+            },
         }
         return json.dumps(data, separators=(",", ":")) + "\n"
 

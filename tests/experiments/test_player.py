@@ -419,3 +419,16 @@ def test_without_the_dataset_objects_are_their_recorded_boxes(
         assert max(xs) - min(xs) == pytest.approx(state.length_m, abs=2e-4)
         assert max(ys) - min(ys) == pytest.approx(state.width_m, abs=2e-4)
         assert (o["zspan"][1] - o["zspan"][0]) * 1e-4 == pytest.approx(state.height_m, abs=2e-4)
+
+
+def test_a_page_is_made_from_the_player_module_and_every_asset() -> None:
+    """The report refreshes a player older than any of these files (its assets included: a
+    change to the script or the style alone must reach every page)."""
+    from experiments import player
+    from experiments.player import ASSETS, page_sources
+
+    sources = page_sources()
+    assets = sorted(p for p in ASSETS.rglob("*") if p.is_file())
+    assert {"player.css", "player.js", "player_body.html"} <= {p.name for p in assets}
+    assert set(assets) <= set(sources)
+    assert Path(player.__file__).resolve() in sources

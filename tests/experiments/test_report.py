@@ -180,6 +180,17 @@ def _event(kind: str, oid: int, **data: object) -> str:
     return json.dumps({**raw, "data": data})
 
 
+def _score(run: Path) -> None:
+    """Write the run's ``episodes.json`` as ``cdw-twin run`` does once its episodes finish."""
+    from experiments.scoring import score_episode
+    from interfaces.run_folder import RunFolder
+    from interfaces.run_records import write_rows
+
+    folder = RunFolder(run)
+    rows = [score_episode(e.path, "lockstep") for e in folder.episodes()]
+    write_rows(folder.episodes_json, rows)
+
+
 def _two_station_run(folder: Path) -> Path:
     """A run folder of the two-Panda cell, written by hand: object 4 was released downstream
     and is still falling into its bin at the end; the upstream controller was restarted."""
@@ -206,6 +217,7 @@ def _two_station_run(folder: Path) -> Path:
     for name, completed in (("upstream", 2), ("upstream_1", 1), ("downstream", 1)):
         pick = {"completed": completed, "aborted": {}, "untargeted": {}}
         (episode / f"controller-{name}.json").write_text(json.dumps({"pick": pick}))
+    _score(folder)
     return folder
 
 
@@ -213,15 +225,16 @@ def test_the_report_counts_as_the_run_does_and_adds_a_table_per_station(tmp_path
     """Targeted objects come from every controller of every station, less the objects still
     landing (``interfaces.metrics.targeted_objects``), exactly as in ``episodes.json``."""
     from experiments.report import episode_rows, station_rows
-    from experiments.run import episode_metrics
+    from interfaces.run_records import EpisodeMetrics, read_rows
 
     run = _two_station_run(tmp_path / "run")
     data = load_runs([run])
     (row,) = episode_rows(data)
-    expected = episode_metrics(run / "ep000", "lockstep")
+    (expected,) = read_rows(run / "episodes.json")
+    assert isinstance(expected, EpisodeMetrics)
     assert (row["targeted"], row["picked"], row["missed"]) == (3, 4, 1)
     for key in ("targeted", "picked", "missed", "processed", "placed_correct", "success_rate"):
-        assert row[key] == expected[key], key
+        assert row[key] == expected.metric(key), key
     by_station = {r["station"]: r for r in station_rows(data)}
     assert (by_station["upstream"]["targeted"], by_station["downstream"]["targeted"]) == (3, 0)
     assert by_station["upstream"]["success_rate"] == 1.0
@@ -278,6 +291,7 @@ def _line_sweep(root: Path) -> Path:
                     pick = {"completed": k + seed, "aborted": {}, "untargeted": {}}
                     stem = "controller" if len(names) == 1 else f"controller-{name}"
                     (episode / f"{stem}.json").write_text(json.dumps({"pick": pick}))
+            _score(run)
     return root
 
 

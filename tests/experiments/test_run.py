@@ -132,11 +132,11 @@ def _check_recordings(out: Path, rows: list[dict[str, Any]]) -> None:
         recording = out / f"ep00{i}" / "recording.mcap"
         assert not recording.with_name("recording.mcap.partial").exists()
         offline = offline_metrics(recording, out / "cell.yaml")
-        assert offline["complete"] is True
-        assert offline["scores"] == summary["scores"]
-        assert offline["stations"] == {station: summary["stations"][station]["scores"]}
-        assert offline["scores"]["picked"] == rows[i]["picked"]
-        counts = offline["message_counts"]
+        assert offline.complete is True
+        assert offline.scores == summary["scores"]
+        assert offline.stations == {station: summary["stations"][station]["scores"]}
+        assert offline.scores["picked"] == rows[i]["picked"]
+        counts = offline.message_counts
         for topic, n in summary["published"].items():
             assert counts[topic] == n, topic
         assert counts["/lockstep/tick"] == counts["/clock"] == counts["/joint_states"]
@@ -355,7 +355,7 @@ def test_an_object_still_falling_into_its_bin_at_the_end_is_not_counted_targeted
 ) -> None:
     """The controller counts a pick complete at its release; the twin counts it placed when it
     drops below the bin's top. One released just before the end is in neither tally yet."""
-    from experiments.run import episode_metrics
+    from experiments.scoring import score_episode
 
     events = [_event("spawned", i) for i in range(1, 6)]
     events += [_event("pick_success", oid, station="panda") for oid in range(1, 5)]
@@ -366,7 +366,7 @@ def test_an_object_still_falling_into_its_bin_at_the_end_is_not_counted_targeted
         run = tmp_path / f"run{len(landing)}"
         folder = _episode_folder(run, "default", events, landing)
         (folder / "controller.json").write_text(_stats(4, too_wide=2), encoding="utf-8")
-        rows.append(episode_metrics(folder, "lockstep"))
+        rows.append(score_episode(folder, "lockstep").to_data())
     assert (rows[0]["targeted"], rows[0]["success_rate"]) == (4, 0.75)
     assert (rows[1]["targeted"], rows[1]["success_rate"]) == (3, 1.0)
     assert rows[1]["untargeted"] == {"too_wide": 2}
@@ -377,7 +377,7 @@ def test_an_object_still_falling_into_its_bin_at_the_end_is_not_counted_targeted
 def test_each_station_is_credited_its_own_targets_less_its_own_landing_objects(
     tmp_path: Path,
 ) -> None:
-    from experiments.run import episode_metrics
+    from experiments.scoring import score_episode
 
     up, down = {"station": "upstream"}, {"station": "downstream"}
     events = [_event("spawned", i) for i in range(1, 6)]
@@ -391,7 +391,7 @@ def test_each_station_is_credited_its_own_targets_less_its_own_landing_objects(
     (folder / "controller-upstream.json").write_text(_stats(3, too_wide=1), encoding="utf-8")
     (folder / "controller-upstream_1.json").write_text(_stats(0), encoding="utf-8")
     (folder / "controller-downstream.json").write_text(_stats(1, flat=2), encoding="utf-8")
-    row = episode_metrics(folder, "lockstep")
+    row = score_episode(folder, "lockstep").to_data()
     up_row, down_row = row["stations"]["upstream"], row["stations"]["downstream"]
     assert (up_row["targeted"], up_row["success_rate"]) == (3, 1.0)
     assert (down_row["targeted"], down_row["success_rate"]) == (0, 0.0)
@@ -411,7 +411,7 @@ def test_an_episode_row_gives_bin_purity_drops_and_allocation_per_station(
     """The line scores of a run row: each station's bins and their purity, drops by reason, the
     controllers' untargeted objects by reason (new reasons too) and their share of the window's
     objects, per class purity over the line."""
-    from experiments.run import episode_metrics
+    from experiments.scoring import score_episode
 
     up, down = {"station": "upstream"}, {"station": "downstream"}
     events = [_event("spawned", i) for i in range(1, 5)]
@@ -434,7 +434,7 @@ def test_an_episode_row_gives_bin_purity_drops_and_allocation_per_station(
     (folder / "controller-downstream.json").write_text(
         _stats(1, too_small=1, left_for_downstream=2), encoding="utf-8"
     )
-    row = episode_metrics(folder, "lockstep")
+    row = score_episode(folder, "lockstep").to_data()
     up_row, down_row = row["stations"]["upstream"], row["stations"]["downstream"]
     assert up_row["bins"] == {"brick": {"binned": 1, "placed_correct": 1, "purity": 1.0}}
     assert down_row["bins"] == {"wood": {"binned": 1, "placed_correct": 0, "purity": 0.0}}
@@ -516,10 +516,10 @@ def test_a_cell_of_two_stations_runs_a_controller_per_station_and_scores_each(
     # the line: what the twin, the run and the recording say agree
     offline = offline_metrics(episode / "recording.mcap", out / "cell.yaml")
     for key in ("spawned", "picked", "missed", "processed", "lost", "placed_correct"):
-        assert row[key] == offline["scores"][key] == summary["scores"][key], key
-    assert offline["stations"] == {n: summary["stations"][n]["scores"] for n in stations}
-    assert offline["classes"] == row["classes"]
-    assert offline["bins"] == {n: b["bins"] for n, b in stations.items() if b["bins"]}
+        assert row[key] == offline.scores[key] == summary["scores"][key], key
+    assert offline.stations == {n: summary["stations"][n]["scores"] for n in stations}
+    assert offline.classes == row["classes"]
+    assert offline.bins == {n: b["bins"] for n, b in stations.items() if b["bins"]}
     run = _json(out / "run.json")
     assert run["stations"] == ["upstream", "downstream"]
     assert run["mean_by_station"]["downstream"]["picked"] == stations["downstream"]["picked"]

@@ -26,6 +26,7 @@ from interfaces.metrics import (
     targeted_objects,
     untargeted_objects,
 )
+from interfaces.run_records import PickStats
 
 PAGE = Path(__file__).resolve().parents[2] / "docs" / "metrics.md"
 
@@ -462,8 +463,8 @@ def test_a_stations_cohort_follows_its_own_window_and_fates() -> None:
 def test_targeted_subtracts_the_landing_objects_per_station() -> None:
     events = _two_stations()
     stats = [
-        {"pick": {"completed": 3, "aborted": {"lost_track": 1}, "untargeted": {"too_wide": 2}}},
-        {"pick": {"completed": 1, "aborted": {}, "untargeted": {"too_wide": 1, "flat": 4}}},
+        PickStats(completed=3, aborted={"lost_track": 1}, untargeted={"too_wide": 2}),
+        PickStats(completed=1, untargeted={"too_wide": 1, "flat": 4}),
     ]
     # objects 1 (released upstream) and 4 (last released downstream) are still falling
     assert landing_by_station(events, [1, 4]) == {"upstream": 1, "downstream": 1}
@@ -590,18 +591,12 @@ def test_allocation_decisions_and_the_unfit_share_per_station() -> None:
     from interfaces.metrics import UNFIT_REASONS, considered_objects, untargeted_scores
 
     stats = [
-        {"pick": {"targeted": 4, "untargeted": {"too_wide": 3, "claimed_by_other": 5}}},
-        {
-            "pick": {
-                "untargeted": {
-                    "too_flat": 1,
-                    "too_small": 2,
-                    "too_tilted": 1,
-                    "left_for_downstream": 4,
-                }
-            }
-        },
-        {"pick": {"targeted": 1}},
+        PickStats(targeted=4, untargeted={"too_wide": 3, "claimed_by_other": 5}),
+        PickStats(
+            untargeted={"too_flat": 1, "too_small": 2, "too_tilted": 1, "left_for_downstream": 4}
+        ),
+        PickStats(targeted=1),
+        None,  # a controller that wrote no pick counters
     ]
     untargeted = untargeted_objects(stats)
     assert untargeted == {

@@ -39,8 +39,8 @@ def test_unknown_and_evicted_stamps_are_counted_not_measured() -> None:
     assert rec.on_command(2 * DT_S, 20.0) is None
     assert rec.on_command(6 * DT_S, 6.5) == pytest.approx(500.0)
     assert rec.unmatched_commands == 2
-    assert rec.summary()["latency"]["samples"] == 1
-    assert rec.summary()["latency"]["unmatched_commands"] == 2
+    assert rec.latency().samples == 1
+    assert rec.latency().unmatched_commands == 2
 
 
 def test_ring_holds_exactly_the_newest_stamps() -> None:
@@ -58,21 +58,21 @@ def test_summary_percentiles_match_numpy() -> None:
     for k, rtt in enumerate(rtts):
         rec.on_state_published(k * DT_S, k * 0.01)
         rec.on_command(k * DT_S, k * 0.01 + rtt * 1e-3)
-    latency = rec.summary()["latency"]
-    assert latency["samples"] == 500
-    assert latency["rtt_ms_p50"] == pytest.approx(np.percentile(rtts, 50), rel=1e-9)
-    assert latency["rtt_ms_p99"] == pytest.approx(np.percentile(rtts, 99), rel=1e-9)
-    assert latency["rtt_ms_mean"] == pytest.approx(rtts.mean(), rel=1e-9)
-    assert latency["rtt_ms_p50"] <= latency["rtt_ms_p99"]
+    latency = rec.latency()
+    assert latency.samples == 500
+    assert latency.rtt_ms_p50 == pytest.approx(np.percentile(rtts, 50), rel=1e-9)
+    assert latency.rtt_ms_p99 == pytest.approx(np.percentile(rtts, 99), rel=1e-9)
+    assert latency.rtt_ms_mean == pytest.approx(rtts.mean(), rel=1e-9)
+    assert latency.rtt_ms_p50 <= latency.rtt_ms_p99
 
 
 def test_empty_record_has_empty_summary() -> None:
     rec = TelemetryRecorder()
-    summary = rec.summary()
-    assert summary["latency"]["samples"] == 0
-    assert summary["latency"]["rtt_ms_p50"] is None
-    assert summary["step_rate_hz_mean"] is None
+    assert rec.latency().samples == 0
+    assert rec.latency().rtt_ms_p50 is None
+    assert rec.step_rate_hz_mean() is None
     data = json.loads(rec.to_json())
+    assert data["summary"]["latency"]["samples"] == 0
     assert data["rtt"] == {"wall_s": [], "sim_s": [], "rtt_ms": []}
 
 
@@ -85,7 +85,7 @@ def test_step_rate_rows_per_wall_second() -> None:
     assert rec.rate_steps_per_s == pytest.approx([480.0] * 3)
     assert rec.rate_rtf == pytest.approx([2.0] * 3)
     assert rec.rate_wall_s == pytest.approx([1.0, 2.0, 3.0])
-    assert rec.summary()["step_rate_hz_mean"] == pytest.approx(480.0)
+    assert rec.step_rate_hz_mean() == pytest.approx(480.0)
 
 
 def test_an_episode_shorter_than_a_window_still_has_its_step_rate() -> None:
@@ -94,7 +94,7 @@ def test_an_episode_shorter_than_a_window_still_has_its_step_rate() -> None:
     for k in range(241):
         rec.on_step(k * DT_S, 5.0 + k / 400.0)
     assert rec.rate_wall_s == []
-    assert rec.summary()["step_rate_hz_mean"] == pytest.approx(400.0)
+    assert rec.step_rate_hz_mean() == pytest.approx(400.0)
     rows = json.loads(rec.to_json())["step_rate"]
     assert rows["wall_s"] == pytest.approx([0.6])
     assert rows["rtf"] == pytest.approx([400.0 / 240.0], rel=1e-4)
