@@ -50,15 +50,25 @@ from __future__ import annotations
 import argparse
 import csv
 import html
-import json
 import os
 import tempfile
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from experiments import stats
+from experiments.report_data import (
+    Episode,
+    ReportError,
+    RunData,
+    Unavailable,
+    find_run_dirs,
+    load_runs,
+    percentile,
+    read_json,
+    wilson_interval,
+)
 from experiments.report_line import (
     BIN_COLUMNS,
     CLASS_COLUMNS,
@@ -68,11 +78,11 @@ from experiments.report_line import (
     fig_recovery_stations,
     recovery_by_stations,
 )
+from experiments.report_plot import new_figure, speed_colour
 from interfaces.errors import CdwTwinError
-from interfaces.fileio import MAX_JSON_BYTES, read_text_capped, write_atomic
+from interfaces.fileio import write_atomic
 from interfaces.metrics import BY_NAME, rate
-from interfaces.run_folder import EpisodeFolder, RunFolder
-from interfaces.run_records import EpisodeMetrics, read_rows
+from interfaces.run_folder import EpisodeFolder
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -81,231 +91,6 @@ REFERENCE_MS_PER_IMAGE = 24.0
 REFERENCE_MS_PER_OBJECT = 5.3
 STEP_RATE_WINDOW_S = 60.0
 FOOTPRINT_IMAGES = 4
-
-
-class ReportError(CdwTwinError):
-    """A report input (run folder, its files) is missing or malformed."""
-
-
-class Unavailable(Exception):  # noqa: N818 - reads as "figure unavailable: reason"
-    """A figure's data is missing; the message says why."""
-
-
-@dataclass(frozen=True)
-class Episode:
-    """One episode folder of a run, with whatever files it has (None when missing)."""
-
-    run_dir: Path
-    folder: Path
-    speed_mps: float | None
-    seed: int | None
-    summary: dict[str, Any] | None
-    telemetry: dict[str, Any] | None
-    metrics: dict[str, Any] | None
-    """The episode's row of the run's ``episodes.json`` (None when there is none)."""
-    cell: str = ""
-    """The name of the cell the run used (``run.json``'s ``cell``)."""
-    stations: tuple[str, ...] = ()
-    """The stations of that cell (``run.json``'s ``stations``, else the episode's metrics)."""
-
-    @property
-    def name(self) -> str:
-        """``<run folder>/<episode folder>``."""
-        return f"{self.run_dir.name}/{self.folder.name}"
-
-    @property
-    def n_stations(self) -> int:
-        """How many stations the episode's cell has."""
-        return len(self.stations) or len((self.metrics or {}).get("stations") or {}) or 1
-
-
-@dataclass(frozen=True)
-class RunData:
-    """Everything the report reads: episodes of every run and the datasets they used."""
-
-    run_dirs: tuple[Path, ...]
-    episodes: tuple[Episode, ...]
-    datasets: tuple[Path, ...]
-    notes: tuple[str, ...] = field(default=())
-
-    def speeds(self) -> list[float]:
-        """Distinct belt speeds, ascending (episodes without a speed are left out)."""
-        return sorted({e.speed_mps for e in self.episodes if e.speed_mps is not None})
-
-    def at_speed(self, speed: float) -> list[Episode]:
-        """Episodes at belt speed ``speed``."""
-        return [e for e in self.episodes if e.speed_mps == speed]
-
-    def stations(self, episodes: Sequence[Episode] | None = None) -> list[str]:
-        """Every station some episode (of ``episodes``, default all) has metrics for, in order
-        of first appearance."""
-        seen: dict[str, None] = {}
-        for ep in self.episodes if episodes is None else episodes:
-            seen.update(dict.fromkeys((ep.metrics or {}).get("stations") or {}))
-        return list(seen)
-
-    def groups(self) -> list[tuple[str, float]]:
-        """The distinct (cell, belt speed) of the episodes, by number of stations, cell and
-        speed: the runs the tables pool (episodes without a speed are left out)."""
-        keys: set[tuple[int, str, float]] = set()
-        for e in self.episodes:
-            if e.speed_mps is not None:
-                keys.add((e.n_stations, e.cell, e.speed_mps))
-        return [(cell, speed) for _, cell, speed in sorted(keys)]
-
-    def in_group(self, cell: str, speed: float) -> list[Episode]:
-        """Episodes of cell ``cell`` at belt speed ``speed``."""
-        return [e for e in self.episodes if e.cell == cell and e.speed_mps == speed]
-
-
-# -- statistics -------------------------------------------------------------------------------
-def wilson_interval(successes: int, trials: int) -> tuple[float, float]:
-    """95 % Wilson score interval of a binomial proportion; ``(0, 1)`` when ``trials`` is 0."""
-    low, high = stats.wilson_interval(successes, trials)
-    return (0.0, 1.0) if low is None or high is None else (low, high)
-
-
-def _percentile(values: Sequence[float], q: float) -> float | None:
-    if not values:
-        return None
-    import numpy as np
-
-    return float(np.percentile(values, q))
-
-
-# -- loading ----------------------------------------------------------------------------------
-def find_run_dirs(paths: Sequence[Path]) -> list[Path]:
-    """Run folders among ``paths``: each one holding ``run.json``, or a folder of such folders."""
-    found: list[Path] = []
-    for path in paths:
-        if RunFolder(path).run_json.is_file():
-            found.append(path)
-            continue
-        children = (
-            sorted(p for p in path.iterdir() if RunFolder(p).run_json.is_file())
-            if (path.is_dir())
-            else []
-        )
-        if not children:
-            what = "does not exist" if not path.exists() else "has no run.json"
-            msg = (
-                f"{path}: {what} (expected a folder written by `cdw-twin run`, "
-                "or a folder of such folders)"
-            )
-            raise ReportError(msg)
-        found.extend(children)
-    return found
-
-
-def _read_json(path: Path) -> Any:
-    text = read_text_capped(path, max_bytes=MAX_JSON_BYTES, what="JSON file", error=ReportError)
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        msg = f"{path}: not valid JSON (line {exc.lineno}): {exc.msg}"
-        raise ReportError(msg) from None
-    except RecursionError:
-        msg = f"{path}: not valid JSON: nested too deeply"
-        raise ReportError(msg) from None
-
-
-def _optional_json(path: Path, notes: list[str]) -> dict[str, Any] | None:
-    if not path.is_file():
-        return None
-    try:
-        data = _read_json(path)
-    except ReportError as exc:
-        notes.append(str(exc))
-        return None
-    return data if isinstance(data, dict) else None
-
-
-def _dataset_of(run_dir: Path, run: dict[str, Any], notes: list[str]) -> Path:
-    if isinstance(run.get("dataset"), str):
-        return Path(run["dataset"])
-    scenario = run_dir / "scenario.yaml"
-    if scenario.is_file():
-        from interfaces.errors import ConfigError
-        from interfaces.yamlio import load_yaml_file
-
-        try:
-            data = load_yaml_file(scenario, what="scenario") or {}
-        except ConfigError as exc:
-            notes.append(f"{exc}; the built-in sample used")
-            data = {}
-        name = data.get("dataset") if isinstance(data, dict) else None
-        if isinstance(name, str) and name != "builtin":
-            path = Path(name)
-            return path if path.is_absolute() else (run_dir / path).resolve()
-    from twin.builtin import builtin_dataset
-
-    notes.append(f"{run_dir}: no dataset in run.json or scenario.yaml; the built-in sample used")
-    return builtin_dataset()
-
-
-def _written_metrics(run_dir: Path, notes: list[str]) -> dict[int, EpisodeMetrics]:
-    """The metrics the run wrote for its finished episodes (``episodes.json``), by episode
-    index: the report reads them, it never scores an episode again. Empty (with a note) when
-    the file cannot be read as episode rows."""
-    try:
-        rows = read_rows(RunFolder(run_dir).episodes_json)
-    except (OSError, CdwTwinError) as exc:
-        notes.append(f"{run_dir}: no metrics ({type(exc).__name__}: {exc})")
-        return {}
-    return {row.episode: row for row in rows if isinstance(row, EpisodeMetrics)}
-
-
-def _episode(
-    folder: EpisodeFolder, run: dict[str, Any], written: dict[int, EpisodeMetrics], notes: list[str]
-) -> Episode:
-    summary = _optional_json(folder.summary, notes)
-    speed = summary.get("belt_speed_mps") if summary else None
-    if speed is None:
-        speed = run.get("speed_mps")
-    seed = summary.get("seed") if summary else None
-    complete = summary is not None and summary.get("complete") is not False
-    row = written.get(folder.index if folder.index is not None else -1)
-    if complete and row is None:
-        notes.append(f"{folder.path}: no metrics (no row of episodes.json)")
-    metrics = row.to_data() if complete and row is not None else None
-    stations = run.get("stations") or (list(row.stations) if row is not None else [])
-    return Episode(
-        run_dir=folder.run.path,
-        folder=folder.path,
-        speed_mps=None if speed is None else float(speed),
-        seed=None if seed is None else int(seed),
-        summary=summary,
-        telemetry=_optional_json(folder.telemetry, notes),
-        metrics=metrics,
-        cell=str(run.get("cell") or "cell"),
-        stations=tuple(str(s) for s in stations),
-    )
-
-
-def load_runs(paths: Sequence[Path]) -> RunData:
-    """Read every run folder (see :func:`find_run_dirs`); raises :class:`ReportError`."""
-    run_dirs = find_run_dirs([Path(p) for p in paths])
-    notes: list[str] = []
-    episodes: list[Episode] = []
-    datasets: list[Path] = []
-    for run_dir in run_dirs:
-        run = _read_json(RunFolder(run_dir).run_json)
-        if not isinstance(run, dict):
-            msg = f"{RunFolder(run_dir).run_json}: expected a JSON object"
-            raise ReportError(msg)
-        dataset = _dataset_of(run_dir, run, notes)
-        if dataset not in datasets:
-            datasets.append(dataset)
-        written = _written_metrics(run_dir, notes)
-        for folder in RunFolder(run_dir).episodes():
-            episode = _episode(folder, run, written, notes)
-            if episode.summary is not None and episode.summary.get("complete") is False:
-                notes.append(
-                    f"{folder.path}: the episode did not finish (failed or stopped); left out"
-                )
-                continue
-            episodes.append(episode)
-    return RunData(tuple(run_dirs), tuple(episodes), tuple(datasets), tuple(notes))
 
 
 # -- per-episode numbers ----------------------------------------------------------------------
@@ -387,8 +172,8 @@ def episode_rows(data: RunData) -> list[dict[str, Any]]:
                 "success_rate": _pooled_rate("success_rate", counts),
                 "miss_rate": _pooled_rate("miss_rate", counts),
                 "tracking_time_4mm_mean_s": stats.mean_of(_tracking_times(ep)),
-                "rtt_ms_p50": latency.get("rtt_ms_p50", _percentile(rtt, 50)),
-                "rtt_ms_p99": latency.get("rtt_ms_p99", _percentile(rtt, 99)),
+                "rtt_ms_p50": latency.get("rtt_ms_p50", percentile(rtt, 50)),
+                "rtt_ms_p99": latency.get("rtt_ms_p99", percentile(rtt, 99)),
                 "step_rate_hz_mean": (ep.summary or {}).get("step_rate_hz_mean"),
                 "real_time_factor": (ep.summary or {}).get("real_time_factor"),
             }
@@ -429,8 +214,8 @@ def speed_rows(data: RunData) -> list[dict[str, Any]]:
                 "miss_rate": _pooled_rate("miss_rate", total),
                 "miss_ci95": _wilson("miss_rate", total),
                 "tracking_time_4mm_mean_s": stats.mean_of(times),
-                "rtt_ms_p50": _percentile(rtt, 50) if rtt else stats.mean_of(p50s),
-                "rtt_ms_p99": _percentile(rtt, 99) if rtt else stats.mean_of(p99s),
+                "rtt_ms_p50": percentile(rtt, 50) if rtt else stats.mean_of(p50s),
+                "rtt_ms_p99": percentile(rtt, 99) if rtt else stats.mean_of(p99s),
                 "real_time_factor": stats.mean_of(rtfs),
             }
         )
@@ -474,20 +259,6 @@ def _latency(ep: Episode) -> dict[str, Any]:
 
 
 # -- figures ----------------------------------------------------------------------------------
-def _colour(data: RunData, speed: float | None) -> Any:
-    import matplotlib as mpl
-
-    speeds = data.speeds()
-    index = speeds.index(speed) if speed in speeds else 0
-    return mpl.colormaps["tab10"](index % 10)
-
-
-def _figure(width: float = 7.0, height: float = 4.0) -> Figure:
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=(width, height), dpi=100, layout="constrained")
-
-
 def _with(data: RunData, key: str, what: str) -> list[Episode]:
     eps = [e for e in data.episodes if ((e.telemetry or {}).get(key) or {}).get(what)]
     if not eps:
@@ -503,7 +274,7 @@ def _with(data: RunData, key: str, what: str) -> list[Episode]:
 def fig_step_rate(data: RunData) -> Figure:
     """Steps per wall second over the first 60 s of wall time, per episode, coloured by speed."""
     eps = _with(data, "step_rate", "wall_s")
-    fig = _figure()
+    fig = new_figure()
     ax = fig.add_subplot()
     seen: set[float | None] = set()
     for ep in eps:
@@ -513,7 +284,10 @@ def fig_step_rate(data: RunData) -> Figure:
         label = None if ep.speed_mps in seen else f"{ep.speed_mps} m/s"
         seen.add(ep.speed_mps)
         ax.plot(
-            *zip(*pairs, strict=True), marker=".", color=_colour(data, ep.speed_mps), label=label
+            *zip(*pairs, strict=True),
+            marker=".",
+            color=speed_colour(data, ep.speed_mps),
+            label=label,
         )
     ax.set_xlim(0, STEP_RATE_WINDOW_S)
     ax.set_xlabel("wall time (s)")
@@ -527,7 +301,7 @@ def fig_step_rate(data: RunData) -> Figure:
 def fig_belt(data: RunData) -> Figure:
     """Belt setpoint (dashed) and measured speed (solid) over sim time, one episode per speed."""
     eps = _with(data, "belt", "sim_s")
-    fig = _figure()
+    fig = new_figure()
     ax = fig.add_subplot()
     done: set[float | None] = set()
     for ep in eps:
@@ -535,7 +309,7 @@ def fig_belt(data: RunData) -> Figure:
             continue
         done.add(ep.speed_mps)
         belt = ep.telemetry["belt"]  # type: ignore[index]
-        colour = _colour(data, ep.speed_mps)
+        colour = speed_colour(data, ep.speed_mps)
         ax.plot(
             belt["sim_s"], belt["setpoint_mps"], "--", color=colour, label=f"setpoint {ep.name}"
         )
@@ -551,14 +325,14 @@ def fig_belt(data: RunData) -> Figure:
 def fig_rtt_time(data: RunData) -> Figure:
     """Round-trip latency of every command over wall time, coloured by speed."""
     eps = _with(data, "rtt", "rtt_ms")
-    fig = _figure()
+    fig = new_figure()
     ax = fig.add_subplot()
     seen: set[float | None] = set()
     for ep in eps:
         rtt = ep.telemetry["rtt"]  # type: ignore[index]
         label = None if ep.speed_mps in seen else f"{ep.speed_mps} m/s"
         seen.add(ep.speed_mps)
-        colour = _colour(data, ep.speed_mps)
+        colour = speed_colour(data, ep.speed_mps)
         ax.plot(rtt["wall_s"], rtt["rtt_ms"], ".", ms=2, color=colour, label=label)
     ax.set_yscale("log")
     ax.set_xlabel("wall time (s)")
@@ -574,7 +348,7 @@ def fig_rtt_hist(data: RunData) -> Figure:
     import numpy as np
 
     _with(data, "rtt", "rtt_ms")
-    fig = _figure()
+    fig = new_figure()
     ax = fig.add_subplot()
     everything = [v for ep in data.episodes for v in _rtt(ep)]
     low, high = max(min(everything), 1e-3), max(everything)
@@ -583,7 +357,7 @@ def fig_rtt_hist(data: RunData) -> Figure:
         values = [v for ep in data.at_speed(speed) for v in _rtt(ep)]
         if not values:
             continue
-        colour = _colour(data, speed)
+        colour = speed_colour(data, speed)
         ax.hist(values, bins=bins, histtype="step", color=colour, label=f"{speed} m/s")
         for q, style in ((50, "-"), (99, ":")):
             ax.axvline(float(np.percentile(values, q)), color=colour, ls=style, lw=1)
@@ -610,7 +384,7 @@ def fig_tracking(data: RunData) -> Figure:
     if not any(pursuits.values()):
         msg = "no pursuit was measured in any episode (no twin/summary.json tracking block)"
         raise Unavailable(msg)
-    fig = _figure()
+    fig = new_figure()
     ax = fig.add_subplot()
     rng = np.random.default_rng(0)
     for i, speed in enumerate(speeds):
@@ -618,7 +392,7 @@ def fig_tracking(data: RunData) -> Figure:
         if times:
             ax.boxplot([times], positions=[i], widths=0.5, showfliers=False)
             jitter = rng.uniform(-0.15, 0.15, len(times))
-            ax.plot(i + jitter, times, ".", color=_colour(data, speed), alpha=0.7)
+            ax.plot(i + jitter, times, ".", color=speed_colour(data, speed), alpha=0.7)
         ax.annotate(
             f"{len(times)}/{pursuits[speed]} settled",
             (i, 1.0),
@@ -644,7 +418,7 @@ def fig_rates(data: RunData) -> Figure:
     if not rows:
         msg = "no episode has both twin/summary.json scores and targeted objects or processed ones"
         raise Unavailable(msg)
-    fig = _figure()
+    fig = new_figure()
     ax = fig.add_subplot()
     x = list(range(len(rows)))
     for offset, key, total, label, colour in (
@@ -687,11 +461,11 @@ def fig_meshgen(data: RunData) -> Figure:
         if not path.is_file():
             reasons.append(f"{path} missing")
             continue
-        summary = _read_json(path)
+        summary = read_json(path)
         found.append((dataset, float(summary["ms_per_image"]), float(summary["ms_per_object"])))
     if not found:
         raise Unavailable("; ".join(reasons) or "no dataset")
-    fig = _figure()
+    fig = new_figure()
     ax = fig.add_subplot()
     labels = ["ms / image", "ms / object"]
     width = 0.8 / (len(found) + 1)
@@ -732,7 +506,7 @@ def _source_polygon_px(path: Path, where: str, size: tuple[int, int]) -> list[tu
         values = [float(t) for t in tokens]
         return [(values[i] * size[0], values[i + 1] * size[1]) for i in range(0, len(values), 2)]
     if path.suffix == ".json" and kind == "shape":
-        shape = _read_json(path)["shapes"][index]
+        shape = read_json(path)["shapes"][index]
         return [(float(u), float(v)) for u, v in shape["points"]]
     msg = f"{path}: cannot read {where!r}"
     raise ValueError(msg)
@@ -751,7 +525,7 @@ def _bottom_face(mesh: Path, up: str) -> list[tuple[float, float]]:
 
 def _image_outlines(dataset: Path, stem: str) -> tuple[list[_Outline], str]:
     """Outlines of one meshed image in the belt frame (x travel, y across), and the source used."""
-    scene = _read_json(dataset / stem / "scene.json")
+    scene = read_json(dataset / stem / "scene.json")
     with (dataset / stem / "scene.csv").open(encoding="utf-8", newline="") as handle:
         placed = {row["object_id"]: row for row in csv.DictReader(handle)}
     size = (int(scene["width_px"]), int(scene["height_px"]))
@@ -778,8 +552,6 @@ def fig_footprints(data: RunData) -> Figure:
     footprint in its class's colour (the dataset's class table)."""
     from matplotlib.patches import Polygon
 
-    from interfaces.class_colours import dataset_colour
-
     if not data.datasets:
         raise Unavailable("no dataset")
     dataset = data.datasets[0]
@@ -795,9 +567,11 @@ def fig_footprints(data: RunData) -> Figure:
         raise Unavailable(msg)
     import matplotlib as mpl
 
-    fig = _figure(9.0, 8.0)
+    fig = new_figure(9.0, 8.0)
     axes = fig.subplots(2, 2, squeeze=False).ravel()
     colours: dict[str, Any] = {}
+    from interfaces.class_colours import dataset_colour
+
     colour_of = dataset_colour(dataset)
     used = ""
     for ax, stem in zip(axes, stems, strict=False):

@@ -20,7 +20,7 @@ from interfaces.metrics import rate
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from experiments.report import Episode, RunData
+    from experiments.report_data import Episode, RunData
 
 
 def _wilson(successes: int, trials: int) -> tuple[float, float] | None:
@@ -141,13 +141,14 @@ def bin_rows(data: RunData) -> list[dict[str, Any]]:
 def fig_recovery_stations(data: RunData) -> Figure:
     """Line recovery against the number of stations, one line per belt speed: the mean over
     the episodes (seeds) with its 95 % Student t interval."""
-    from experiments.report import Unavailable, _colour, _figure
+    from experiments.report_data import Unavailable
+    from experiments.report_plot import new_figure, speed_colour
 
     rows = [r for r in recovery_by_stations(data) if r["recovery_mean"] is not None]
     if not rows:
         msg = "no episode has metrics (events, summary and controller stats)"
         raise Unavailable(msg)
-    fig = _figure()
+    fig = new_figure()
     ax = fig.add_subplot()
     speeds = sorted({r["speed_mps"] for r in rows})
     for i, speed in enumerate(speeds):
@@ -158,7 +159,7 @@ def fig_recovery_stations(data: RunData) -> Figure:
         spans = [r["recovery_ci95"] or (r["recovery_mean"], r["recovery_mean"]) for r in line]
         lo = [y - a for y, (a, _) in zip(ys, spans, strict=True)]
         hi = [b - y for y, (_, b) in zip(ys, spans, strict=True)]
-        colour = _colour(data, speed)
+        colour = speed_colour(data, speed)
         ax.errorbar(xs, ys, yerr=[lo, hi], fmt="o-", capsize=4, color=colour, label=f"{speed} m/s")
         for x, y, r in zip(xs, ys, line, strict=True):
             ax.annotate(

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from experiments.report import FIGURES, ReportError, load_runs, wilson_interval, write_report
+from experiments.report import FIGURES, write_report
+from experiments.report_data import ReportError, load_runs, wilson_interval
 
 CHROMIUM = Path("/usr/bin/chromium")
 PROBE_SCRIPT = (
