@@ -54,7 +54,7 @@ from interfaces.fileio import write_atomic
 from twin.scenario import Scenario
 
 if TYPE_CHECKING:
-    from experiments.run import Transport
+    from experiments.run_types import Transport
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -128,7 +128,7 @@ def machine_speedup(workers: int, repeats: int = 3) -> float:
 
 
 def _transports(value: str) -> tuple[Transport, ...]:
-    from experiments.run import TRANSPORTS
+    from experiments.run_types import TRANSPORTS
 
     names = tuple(v.strip() for v in value.split(",") if v.strip())
     bad = [n for n in names if n not in TRANSPORTS]

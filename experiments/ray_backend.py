@@ -1,8 +1,9 @@
 """Sweeps on Ray: ``cdw-twin sweep GRID --backend ray [--address ADDR]``.
 
-Every episode of the grid is one Ray task that runs :func:`experiments.run.run_episode` on the
-worker's machine exactly as the local backend does on this one: its own ROS domain (claimed
-from the worker machine's lock folder), its own twin and controller processes, its own run
+Every episode of the grid is one Ray task that runs
+:func:`experiments.episode_processes.run_episode` on the worker's machine exactly as the
+local backend does on this one: its own ROS domain (claimed from the worker machine's lock
+folder), its own twin and controller processes, its own run
 folder (a temporary copy of the grid cell's). Nothing relies on a shared file system: the grid
 cell's small files (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``) travel in the task's
 arguments, the dataset travels once per sweep through Ray's object store as a tar archive
@@ -56,7 +57,7 @@ from interfaces.run_folder import RunFolder
 from interfaces.run_records import EpisodeMetrics
 
 if TYPE_CHECKING:
-    from experiments.run import EpisodeSpec
+    from experiments.run_types import EpisodeSpec
     from experiments.sweep import CellRun, Sweep
 
 EPISODE_CPUS = 1.0
@@ -189,7 +190,8 @@ def _children_cpu_s() -> float:
 
 def run_shipped_episode(shipped: ShippedEpisode, dataset_archive: bytes) -> EpisodeResult:
     """The Ray task: run one episode in a temporary run folder; return its result."""
-    from experiments.run import EpisodeFailedError, EpisodeSpec, run_episode
+    from experiments.episode_processes import EpisodeFailedError, run_episode
+    from experiments.run_types import EpisodeSpec
 
     dataset = local_dataset(shipped.dataset_key, dataset_archive)
     cpu0 = _children_cpu_s()

@@ -18,11 +18,11 @@ of ``cdw-twin run`` (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``, ``ep
 ``episodes.json``, ``run.json``): its scenario's cell (or the ``cell`` override; with
 ``stations: k`` its first k stations, in the cell file's order) runs one controller per station,
 and ``cell.yaml`` is the cell it ran. Every grid cell x seed is one episode through
-:func:`experiments.run.run_episode` on its own ROS domain; ``N`` run at once, each driven by a
-thread. ``sweep.json`` and ``sweep.csv`` hold per grid cell the means with 95 % confidence
-intervals, for the line and (``sweep.json`` ``aggregate.stations``; ``sweep.csv`` rows with a
-``station``, for a cell of several stations) per station, and in ``sweep.json`` per object
-class (``aggregate.classes``):
+:func:`experiments.episode_processes.run_episode` on its own ROS domain; ``N`` run at once,
+each driven by a thread. ``sweep.json`` and ``sweep.csv`` hold per grid cell the means with
+95 % confidence intervals, for the line and (``sweep.json`` ``aggregate.stations``;
+``sweep.csv`` rows with a ``station``, for a cell of several stations) per station, and in
+``sweep.json`` per object class (``aggregate.classes``):
 
 - every metric of the table (``docs/metrics.md``): Student t interval over the cell's
   episodes, ``mean +- t(0.975, n-1) * s / sqrt(n)`` (none for n < 2);
@@ -93,7 +93,7 @@ from interfaces.run_records import succeeded as good_rows
 from interfaces.yamlio import load_yaml_file
 
 if TYPE_CHECKING:
-    from experiments.run import EpisodeSpec, RunOptions, Transport
+    from experiments.run_types import EpisodeSpec, RunOptions, Transport
     from interfaces.cell import Cell
     from twin.scenario import Scenario
 
@@ -586,7 +586,7 @@ class CellRun:
 
     def episodes(self) -> list[EpisodeSpec]:
         """One episode per seed of the grid cell."""
-        from experiments.run import EpisodeSpec
+        from experiments.run_types import EpisodeSpec
 
         return [
             EpisodeSpec(index=i, seed=seed, folder=RunFolder(self.folder).episode(i).path)
@@ -871,8 +871,12 @@ class Sweep:
 
     def job(self, run: CellRun, episode: EpisodeSpec) -> None:
         """Run one episode (a worker thread's task) and record its row."""
+        from experiments.episode_processes import (
+            EpisodeCancelledError,
+            EpisodeFailedError,
+            run_episode,
+        )
         from experiments.outdir import reason
-        from experiments.run import EpisodeCancelledError, EpisodeFailedError, run_episode
 
         if self.cancel.is_set():
             return

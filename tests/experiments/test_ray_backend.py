@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 
 from experiments.ray_backend import local_head, pack, unpack, worker_options
-from experiments.run import RunOptions
+from experiments.run_types import RunOptions
 from experiments.sweep import run_sweep
 
 pytest.importorskip("ray")
