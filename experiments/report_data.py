@@ -244,3 +244,15 @@ def load_runs(paths: Sequence[Path]) -> RunData:
                 continue
             episodes.append(episode)
     return RunData(tuple(run_dirs), tuple(episodes), tuple(datasets), tuple(notes))
+
+
+def episode_rtt_ms(ep: Episode) -> list[float]:
+    return [float(v) for v in ((ep.telemetry or {}).get("rtt") or {}).get("rtt_ms", [])]
+
+
+def episode_tracking_times(ep: Episode) -> list[float]:
+    tracking = (ep.summary or {}).get("tracking") or {}
+    times = tracking.get("tracking_times_s")
+    if times is None and tracking.get("tracking_time_4mm_mean_s") is not None:
+        times = [tracking["tracking_time_4mm_mean_s"]]
+    return [float(t) for t in times or []]
