@@ -25,10 +25,10 @@ import pytest
 from experiments.player import (
     HIGHLIGHT_HEX,
     STATION_HEX,
-    footprint_outline,
     player_data,
     write_player,
 )
+from experiments.player_footprints import footprint_outline
 from experiments.report import write_report
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or "chromium"
