@@ -47,7 +47,6 @@ import contextlib
 import ctypes
 import ctypes.util
 import dataclasses
-import math
 import os
 import signal
 import time
@@ -63,10 +62,8 @@ from interfaces.lifecycle import STOP_SIGNALS, die_with_parent
 if TYPE_CHECKING:
     from interfaces.cell import Cell
     from interfaces.inproc import Bus
-    from interfaces.run_records import TrackingSummary
     from twin.episode_log import EventLog
     from twin.live_view import LiveView
-    from twin.recording import McapRecording
     from twin.ros_node import Tap, TwinEndpoint
     from twin.scenario import Scenario
     from twin.sim import Twin
@@ -318,34 +315,6 @@ def spawn_judge(args: argparse.Namespace, scenario: Scenario, cell: Cell) -> Pie
     return judge
 
 
-def _final_state(twin: Twin) -> dict[str, object]:
-    """Exact end state (for determinism checks): every station's arm joints (in station order)
-    and every object's pose."""
-    obs = twin.observe()
-    return {
-        "step": obs.step,
-        "joint_positions": [q for arm in obs.arms for q in arm.joint_positions],
-        "belt_position_m": obs.belt.belt_position_m,
-        "objects": {str(o.id): [*o.position_m, *o.orientation_xyzw] for o in obs.objects},
-    }
-
-
-def _open_recording(out: Path | None, cell: Cell) -> McapRecording | None:
-    """The episode's MCAP of every topic of the cell (every station's under its namespace),
-    written as ``OUT.partial`` until it is closed.
-
-    Chunks are flushed every 0.5 s, so a killed twin leaves a readable ``OUT.partial`` (see
-    :mod:`twin.recording`).
-    """
-    if out is None:
-        return None
-    from interfaces.contract import resolved_topics
-    from twin.recording import DEFAULT_FLUSH_INTERVAL_S, McapRecording
-
-    topics = resolved_topics(tuple(s.namespace for s in cell.stations))
-    return McapRecording(out, topics, flush_interval_s=DEFAULT_FLUSH_INTERVAL_S)
-
-
 def _open_live_view(args: argparse.Namespace, cell: Cell) -> LiveView | None:
     """The live view of every topic of the cell on ``--foxglove``'s port, if asked for."""
     port: int | None = getattr(args, "foxglove", None)
@@ -510,8 +479,9 @@ def _serve(
     from rclpy.utilities import try_shutdown
 
     from interfaces.run_folder import TELEMETRY_FILE
-    from interfaces.run_records import EpisodeSummary, StationSummary
     from twin.episode_log import EpisodeWriteError, write_episode_file, write_status, write_summary
+    from twin.episode_summary import episode_summary
+    from twin.recording import open_cell_recording
 
     scenario = twin.scenario
     gui = getattr(args, "gui", False)
@@ -520,7 +490,7 @@ def _serve(
     twin.reset()
     if gui:
         _window_on(twin)
-    recording = _open_recording(args.record, twin.cell)
+    recording = open_cell_recording(args.record, twin.cell)
     writers = [sink.write for sink in (recording, view) if sink is not None]
     # a recording takes everything; the live view alone only what a client subscribed to
     wants = view.wants if recording is None and view is not None else None
@@ -537,43 +507,13 @@ def _serve(
     if log is not None:
         log.close()
     twin.finish_pursuits()
-    perception = twin.perception_summary()
-    summary = EpisodeSummary(
-        scenario=scenario.name,
-        seed=scenario.seed,
+    summary = episode_summary(
+        twin,
+        node,
         mode=args.mode,
-        belt_speed_mps=scenario.system.belt_speed_mps,
-        complete=not interrupted,
-        sim_seconds=twin.time_s,
-        wall_seconds=wall,
-        match_wall_seconds=first - wall0,
         transport="ros" if peers is None else "inproc",
-        real_time_factor=twin.time_s / wall if wall > 0 else 0.0,
-        cell=twin.cell.name,
-        scores=twin.scores(),
-        stations={
-            link.name: StationSummary(
-                scores=twin.scores(link.name),
-                tracking=_tracking(twin, link.name),
-                latency=link.telemetry.latency(),
-            )
-            for link in node.links
-        },
-        landing_in_bins=tuple(twin.landing_in_bins()),
-        tracking=_tracking(twin, None),
-        published=dict(node.counters.published),
-        received_commands=node.counters.received_commands,
-        rejected_commands=dict(node.counters.rejected),
-        unlogged_rejections=node.counters.unlogged,
-        lockstep_timeouts=node.counters.lockstep_timeouts,
-        priorities=tuple(node.priorities),
-        final_state=_final_state(twin),
-        latency=node.telemetry.latency(),
-        step_rate_hz_mean=node.telemetry.step_rate_hz_mean(),
-        # the camera's detections scored against ground truth
-        perception=None
-        if perception is None
-        else {k: (v if math.isfinite(v) else None) for k, v in sorted(perception.items())},
+        wall_s=wall,
+        match_wall_s=first - wall0,
         stopped_by=signal.Signals(stop[0]).name if interrupted else None,
     )
     out: Path | None = args.out
@@ -591,14 +531,6 @@ def _serve(
     if peers is None:
         try_shutdown()
     return interrupted
-
-
-def _tracking(twin: Twin, station: str | None) -> TrackingSummary:
-    """The tracking block of the line (``station`` None) or a station: the metric table's
-    summary of every finished pursuit's time to 4 mm."""
-    from interfaces.metrics import tracking_summary
-
-    return tracking_summary([r.time_to_threshold_s for r in twin.tracking_results(station)])
 
 
 def _step(

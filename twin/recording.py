@@ -38,12 +38,15 @@ import sys
 import time
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import yaml
 
 from interfaces.contract import Qos, Topic
 from interfaces.errors import CdwTwinError
+
+if TYPE_CHECKING:
+    from interfaces.cell import Cell
 
 PARTIAL_SUFFIX = ".partial"
 """Suffix of a recording being written (or left by a crash)."""
@@ -252,6 +255,20 @@ class McapRecording:
         return self.out
 
 
+def open_cell_recording(out: Path | None, cell: Cell) -> McapRecording | None:
+    """The episode's MCAP of every topic of the cell (every station's under its namespace),
+    written as ``OUT.partial`` until it is closed.
+
+    Chunks are flushed every 0.5 s, so a killed twin leaves a readable ``OUT.partial``.
+    """
+    if out is None:
+        return None
+    from interfaces.contract import resolved_topics
+
+    topics = resolved_topics(tuple(s.namespace for s in cell.stations))
+    return McapRecording(out, topics, flush_interval_s=DEFAULT_FLUSH_INTERVAL_S)
+
+
 __all__ = [
     "DEFAULT_FLUSH_INTERVAL_S",
     "PARTIAL_SUFFIX",
@@ -259,6 +276,7 @@ __all__ = [
     "RecordingError",
     "message_definition",
     "offered_qos_yaml",
+    "open_cell_recording",
     "partial_path",
     "share_dirs",
     "split_type",
