@@ -252,7 +252,7 @@ def _line_sweep(root: Path) -> Path:
     missed by it, and the wood comes to rest in the first station's brick bin; a 12th object, a
     brick, is still on the belt at the end: undecided, out of the complete cohort (recovery
     (k + seed) / 11)."""
-    from experiments.sweep import first_stations
+    from experiments.sweep_grid import first_stations
     from interfaces.cell import load_cell
 
     line = load_cell(Path(__file__).resolve().parent / "cells" / "line_standin.yaml")

@@ -167,7 +167,7 @@ def test_the_line_scenario_is_valid_on_a_line_of_several_stations(builtin_meshes
 def test_every_benchmark_grid_runs_seeds_1_to_5_in_lockstep_for_60_s(path: Path) -> None:
     """The issue's targets: mean and 95 % interval over seeds 1-5, lockstep, 60 s episodes;
     each grid names the figure it measures (``headline``) and says its command."""
-    from experiments.sweep import Grid, expand
+    from experiments.sweep_grid import Grid, expand
 
     grid = Grid.load(path)
     assert grid.headline

@@ -10,17 +10,15 @@ from pathlib import Path
 import pytest
 import yaml
 
-from experiments.sweep import (
+from experiments.stats import student_t_interval, wilson_interval
+from experiments.sweep import prepare_sweep
+from experiments.sweep_grid import Grid, expand
+from experiments.sweep_pooling import (
     CI_METRICS,
     WILSON_RATES,
-    Grid,
     aggregate_cell,
     aggregate_stations,
-    expand,
-    prepare_sweep,
-    student_t_interval,
     sweep_csv,
-    wilson_interval,
 )
 from interfaces.errors import ConfigError
 from interfaces.metrics import METRICS
@@ -394,7 +392,7 @@ def _reason_row(untargeted: dict, drops: dict, spawned: int) -> dict:
 def test_the_sweep_gives_each_reason_and_each_class_a_mean_and_interval() -> None:
     """The untargeted objects and drops by reason (a reason an episode lacks counts 0 there),
     each reason's share of a station's window, and the class scores (recovery, purity)."""
-    from experiments.sweep import aggregate_classes, aggregate_reasons
+    from experiments.sweep_pooling import aggregate_classes, aggregate_reasons
 
     rows = [
         _reason_row({"too_wide": 2, "claimed_by_other": 4}, {"slipped": 1}, 10),
@@ -428,7 +426,7 @@ def test_the_sweep_gives_each_reason_and_each_class_a_mean_and_interval() -> Non
 def test_the_headline_lists_the_grids_figures_first(tmp_path: Path) -> None:
     """A grid names the metrics it exists to measure; ``sweep.json`` lists them per grid cell
     with their intervals: the line's, or each station's for a per-station metric."""
-    from experiments.sweep import headline
+    from experiments.sweep_pooling import headline
 
     rows = [_row(4, 5, 1, 6), _row(3, 5, 2, 6), _row(5, 5, 0, 6)]
     for row, share in zip(rows, (0.1, 0.2, 0.3), strict=True):
