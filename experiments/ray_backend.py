@@ -50,15 +50,52 @@ import threading
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
 from interfaces.errors import CdwTwinError
 from interfaces.run_folder import RunFolder
 from interfaces.run_records import EpisodeMetrics
 
 if TYPE_CHECKING:
-    from experiments.run_types import EpisodeSpec
-    from experiments.sweep import CellRun, Sweep
+    from experiments.run_types import EpisodeSpec, RunOptions
+
+
+class _Named(Protocol):
+    @property
+    def name(self) -> str: ...
+
+
+class GridRun(Protocol):
+    """A grid cell being run, as the backend ships its episodes
+    (:class:`experiments.sweep.CellRun`): its run folder, options and grid cell's name."""
+
+    @property
+    def folder(self) -> Path: ...
+
+    @property
+    def options(self) -> RunOptions: ...
+
+    @property
+    def cell(self) -> _Named: ...
+
+
+RunT = TypeVar("RunT", bound=GridRun)
+
+
+class EpisodeBoard(Protocol[RunT]):
+    """What runs a sweep's episodes and records them (:class:`experiments.sweep.Sweep`): the
+    jobs, the stop signal, the notes and :meth:`finished`, which writes every table."""
+
+    jobs: list[tuple[RunT, EpisodeSpec]]
+    cancel: threading.Event
+    stopped: list[str]
+    retried: list[str]
+    backend: dict[str, Any]
+
+    def finished(
+        self, run: RunT, episode: EpisodeSpec, metrics: EpisodeMetrics | None, reason: str
+    ) -> None: ...
+
 
 EPISODE_CPUS = 1.0
 """CPUs one lockstep episode keeps busy (twin and controllers take turns)."""
@@ -343,25 +380,25 @@ def worker_died(ray: Any, exc: BaseException) -> bool:
 
 
 @dataclass
-class _Attempt:
+class _Attempt(Generic[RunT]):
     """One submitted task: which episode of which grid cell, and how often it has been tried."""
 
-    run: CellRun
+    run: RunT
     episode: EpisodeSpec
     tries: int
 
 
-class RaySweep:
+class RaySweep(Generic[RunT]):
     """Runs a :class:`experiments.sweep.Sweep`'s episodes as Ray tasks and hands each result
     to the sweep, which writes every table as the local backend does."""
 
-    def __init__(self, sweep: Sweep, ray: Any, cpus_per_episode: float) -> None:
+    def __init__(self, sweep: EpisodeBoard[RunT], ray: Any, cpus_per_episode: float) -> None:
         self.sweep = sweep
         self.ray = ray
         self.cpus_per_episode = cpus_per_episode
         self.task = ray.remote(num_cpus=cpus_per_episode, max_retries=0)(run_shipped_episode)
         self.datasets: dict[Path, tuple[str, Any]] = {}
-        self.pending: dict[Any, _Attempt] = {}
+        self.pending: dict[Any, _Attempt[RunT]] = {}
         self.cpu_s = 0.0
         self.nodes: set[str] = set()
 
@@ -371,7 +408,7 @@ class RaySweep:
             self.datasets[folder] = (dataset_key(archive), self.ray.put(archive))
         return self.datasets[folder]
 
-    def submit(self, run: CellRun, episode: EpisodeSpec, tries: int = 0) -> None:
+    def submit(self, run: RunT, episode: EpisodeSpec, tries: int = 0) -> None:
         """Send one episode to the cluster."""
         key, ref = self._dataset(run.options.dataset)
         names = sorted(p.name for p in run.folder.iterdir() if p.is_file())
@@ -457,7 +494,7 @@ class RaySession:
     address: str | None
     cpus_per_episode: float
 
-    def execute(self, sweep: Sweep) -> None:
+    def execute(self, sweep: EpisodeBoard[Any]) -> None:
         """Run every episode of ``sweep`` as a Ray task."""
         with contextlib.redirect_stdout(sys.stderr):
             RaySweep(sweep, self.ray, self.cpus_per_episode).execute()
@@ -487,7 +524,7 @@ def connect(
 
 
 def execute_on_ray(
-    sweep: Sweep,
+    sweep: EpisodeBoard[Any],
     address: str | None,
     workers: int,
     cpus_per_episode: float | None,
