@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gc
 import signal
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -37,13 +36,6 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         terminalreporter.write_line(
             "stop-signal handlers changed (and reset) by: " + ", ".join(CHANGED_HANDLERS[:5])
         )
-
-
-def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
-    """Collect what the tests left in reference cycles (in-process twins hold a Ruckig joint
-    limiter per station): alive at the interpreter's exit, nanobind lists them as leaks."""
-    del session, exitstatus
-    gc.collect()
 
 
 Polygon = tuple[int, Sequence[tuple[float, float]]]
