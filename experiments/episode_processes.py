@@ -25,7 +25,7 @@ from experiments.run_types import EpisodeSpec, Progress, RunOptions
 from experiments.scoring import failure_text, score_episode
 from interfaces.errors import CdwTwinError
 from interfaces.lifecycle import PARENT_PID_VARIABLE
-from interfaces.run_folder import EpisodeFolder, controller_stem, stats_name
+from interfaces.run_folder import SUMMARY_FILE, EpisodeFolder
 from interfaces.run_records import EpisodeMetrics, EpisodeSummary
 
 STOP_GRACE_S = 15.0
@@ -77,8 +77,8 @@ def twin_command(options: RunOptions, episode: EpisodeSpec) -> list[str]:
         extra += ["--params-file", str(options.controller_params)]
     if options.transport == "inproc":
         for station in options.stations:
-            name = stats_name(controller_stem(station, options.stations), 0)
-            extra += ["--controller-stats", f"{station}={episode.folder / name}"]
+            stats = EpisodeFolder(episode.folder).controller_stats(station, options.stations, 0)
+            extra += ["--controller-stats", f"{station}={stats}"]
     return [
         *_cli(),
         "twin-node" if options.transport == "ros" else "episode",
@@ -115,8 +115,8 @@ def controller_command(
 ) -> list[str]:
     """The command line of ``station``'s controller (None: the cell's first station);
     ``instance`` > 0 for a restarted controller."""
-    name = stats_name(controller_stem(station, options.stations), instance)
-    cmd = [*_cli(), "controller", "--stats-out", str(episode.folder / name)]
+    stats = EpisodeFolder(episode.folder).controller_stats(station, options.stations, instance)
+    cmd = [*_cli(), "controller", "--stats-out", str(stats)]
     if options.cell_path is not None:
         cmd += ["--cell", str(options.cell_path)]
     if station is not None:
@@ -224,15 +224,14 @@ class EpisodeProcesses:
     def start(self) -> subprocess.Popen[bytes]:
         """Start the twin, then every station's controller (in the twin's process with the
         in-process transport); returns the twin."""
-        self.twin = self._start("twin", twin_command(self.options, self.episode))
+        log = EpisodeFolder(self.episode.folder).twin_log
+        self.twin = self._start(log, twin_command(self.options, self.episode))
         if self.options.transport == "ros":
             self._start_controllers()
         return self.twin
 
-    def _start(self, log_name: str, cmd: list[str]) -> subprocess.Popen[bytes]:
-        log: IO[bytes] = self._stack.enter_context(
-            (self.episode.folder / f"{log_name}.log").open("ab")
-        )
+    def _start(self, log_path: Path, cmd: list[str]) -> subprocess.Popen[bytes]:
+        log: IO[bytes] = self._stack.enter_context(log_path.open("ab"))
         proc = subprocess.Popen(cmd, env=self._env, stdout=log, stderr=subprocess.STDOUT)
         self.started.append(proc)
         return proc
@@ -240,9 +239,9 @@ class EpisodeProcesses:
     def _start_controllers(self) -> None:
         stations: Sequence[str | None] = self.options.stations or (None,)
         for station in stations:
-            stem = controller_stem(station, self.options.stations)
+            log = EpisodeFolder(self.episode.folder).controller_log(station, self.options.stations)
             cmd = controller_command(self.options, self.episode, station, self.instance)
-            self.controllers[station] = self._start(stem, cmd)
+            self.controllers[station] = self._start(log, cmd)
 
     def restart_controllers(self) -> None:
         """Stop every station's controller (SIGTERM: each saves its stats) and start new ones."""
@@ -327,7 +326,7 @@ def _check_outcome(
         log = folder.twin_log.read_text(errors="replace")[-2000:]
         reason = f"twin exited with {exit_text(twin_code)}"
         if not summary.is_file():
-            reason += ", no summary.json"
+            reason += f", no {SUMMARY_FILE}"
         raise EpisodeFailedError(episode, reason, log)
 
 

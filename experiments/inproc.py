@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from interfaces.errors import CdwTwinError
+from interfaces.run_folder import EpisodeFolder
 
 if TYPE_CHECKING:
     from control.node import InprocController
@@ -66,8 +67,7 @@ def stats_paths(values: list[str], cell: Cell, out: Path | None) -> dict[str, Pa
     for name in names:
         default = None
         if out is not None:
-            stem = "controller" if len(names) == 1 else f"controller-{name}"
-            default = out.parent / f"{stem}.json"
+            default = EpisodeFolder(out.parent).controller_stats(name, names, 0)
         paths[name] = given.get(name, default)
     return paths
 

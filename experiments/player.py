@@ -36,6 +36,10 @@ top left of the page: travel to the right, y up; rewritten on every zoom or pan,
 a drag on the canvas); and the ground-truth frame it shows as
 ``data-frame`` (index) and ``data-frame-t`` (stamp, s) on ``#scene``.
 
+The recording is read into the page's frames by :mod:`experiments.player_frames`; this module
+reads the rest of the episode (its events, the run's cell and ``run.json``, the twin's summary)
+and writes the page.
+
 Size: positions in mm, quaternions in 1e-4, velocities in mm/s, each stored as differences
 from the previous frame: a 30 s episode of the reference cell at 0.4 m/s (73 objects, about
 14 000 object-frames) makes a 0.45 MB page, about 25 bytes per object and frame.
@@ -46,24 +50,34 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 from experiments.player_footprints import (
-    Footprint,
     MeshFinder,
     PlayerError,
     box_outline,
     footprint_outline,
 )
+from experiments.player_frames import (
+    ABSENT_BIT,
+    FLAG_BITS,
+    ObjectData,
+    Target,
+    TcpPath,
+    belt_positions,
+    ground_truth,
+    objects,
+    targets,
+    tcp_path,
+)
 from interfaces.cell import Cell, CellError, load_cell
 from interfaces.class_colours import class_colour, dataset_colour, rgb_hex
-from interfaces.contract import BELT_STATE, GROUND_TRUTH_TOPIC, PICK_TARGET, TCP_POSE
 from interfaces.errors import cut
-from interfaces.fileio import MAX_JSON_BYTES, read_text_capped, write_atomic
+from interfaces.fileio import read_text_capped, write_atomic
 from interfaces.run_folder import EpisodeFolder, RunFolder
+from interfaces.run_records import EpisodeSummary, RecordError, RunMeans
 
 MAX_EVENTS_BYTES = 1_000_000_000
 """The largest ``events.jsonl`` read (a day-long episode's is a few hundred MB)."""
@@ -78,14 +92,6 @@ STATION_HEX = ("#1f5fd1", "#d1661f", "#1fa34a", "#a31fa3", "#1fa3a3", "#a3a31f")
 """Each station's colour for its TCP, target and pick window, in the cell's station order
 (repeating after six)."""
 
-SAMPLE_HZ = 30.0
-"""Rate at which TCP poses are kept (ground truth is recorded at this rate already)."""
-
-FLAG_BITS = ("on_belt", "in_workspace", "held", "in_bin")
-"""The ground truth's flags, bit 0 upwards, in the per-frame flag words."""
-ABSENT_BIT = 16
-"""Flag bit of a frame in which the object is missing from the ground truth."""
-
 
 @dataclass(frozen=True)
 class PlayerPage:
@@ -96,131 +102,85 @@ class PlayerPage:
     notes: tuple[str, ...]
 
 
+# -- what the page draws ------------------------------------------------------------------------
+class EventData(TypedDict):
+    """An event of ``events.jsonl`` on the timeline: sim time (s), type, object id (0: none),
+    class and its data (floats to 4 decimals)."""
+
+    t: float
+    type: str
+    id: int
+    cls: str
+    data: dict[str, object]
+
+
+class BeltView(TypedDict):
+    """The belt's extent along x, its infeed, centre line and width (m)."""
+
+    start: float
+    end: float
+    infeed: float
+    y: float
+    width: float
+
+
+class BinView(TypedDict):
+    """A bin: its class, centre and size (m)."""
+
+    cls: str
+    x: float
+    y: float
+    size: float
+
+
+class StationView(TypedDict):
+    """A station: name, ROS namespace, base xy and pick window along x (m), bins."""
+
+    name: str
+    ns: str
+    base: list[float]
+    window: list[float]
+    bins: list[BinView]
+
+
+class CellView(TypedDict):
+    """The cell from above: belt, camera field along x, stations and the view's
+    ``[x_min, x_max, y_min, y_max]`` (m)."""
+
+    name: str
+    belt: BeltView
+    camera: list[float]
+    stations: list[StationView]
+    view: list[float]
+
+
+class PlayerData(TypedDict):
+    """Everything a page draws (the JSON block inside it, read by ``player_assets/player.js``):
+    the frames' stamps (s), the belt per frame, the objects, each station's TCP path and
+    targets (:mod:`experiments.player_frames`), the events and the notes on what is missing."""
+
+    episode: str
+    seed: int | None
+    speed_mps: float | None
+    duration_s: float
+    dataset: str | None
+    cell: CellView | None
+    classes: dict[str, str]
+    highlight: str
+    station_colours: list[str]
+    flag_bits: list[str]
+    absent_bit: int
+    frames: list[float]
+    belt_mm: list[int]
+    objects: list[ObjectData]
+    tcp: list[TcpPath]
+    targets: list[list[Target]]
+    events: list[EventData]
+    notes: list[str]
+
+
 # -- reading an episode -------------------------------------------------------------------------
-def _stamp_s(header: Any) -> float:
-    return float(header.stamp.sec) + 1e-9 * float(header.stamp.nanosec)
-
-
-def _mm(value: float) -> int:
-    return round(value * 1000.0)
-
-
-def _deltas(values: Iterable[int]) -> list[int]:
-    """``values`` as differences from the previous one (the first from 0)."""
-    out, last = [], 0
-    for v in values:
-        out.append(v - last)
-        last = v
-    return out
-
-
-def _read(recording: Path, topic: str) -> Iterable[Any]:
-    from experiments.offline import read_topic
-
-    for _, msg in read_topic(recording, topic):
-        yield msg
-
-
-def _flags(obj: Any) -> int:
-    return sum(1 << i for i, name in enumerate(FLAG_BITS) if getattr(obj, name))
-
-
-def _ground_truth(recording: Path) -> tuple[list[float], dict[int, dict[int, Any]]]:
-    """Frame stamps (s, ascending, distinct) and, per object id, its state per frame index."""
-    by_stamp: dict[float, Any] = {}
-    for msg in _read(recording, GROUND_TRUTH_TOPIC.name):
-        by_stamp[round(_stamp_s(msg.header), 6)] = msg
-    times = sorted(by_stamp)
-    states: dict[int, dict[int, Any]] = {}
-    for k, t in enumerate(times):
-        for obj in by_stamp[t].objects:
-            states.setdefault(int(obj.id), {})[k] = obj
-    return times, states
-
-
-def _track(states: dict[int, Any]) -> dict[str, Any]:
-    """One object's per-frame arrays: from its first frame to its last, difference-coded."""
-    first, last = min(states), max(states)
-    cols: dict[str, list[int]] = {k: [] for k in ("x", "y", "z", "qx", "qy", "qz", "qw")}
-    cols |= {"vx": [], "vy": [], "vz": []}
-    flags: list[list[int]] = []
-    prev: Any = None
-    prev_flags = -1
-    for k in range(first, last + 1):
-        obj = states.get(k)
-        word = ABSENT_BIT if obj is None else _flags(obj)
-        obj = obj if obj is not None else prev
-        p, q, v = obj.pose.position, obj.pose.orientation, obj.twist.linear
-        for key, value in (("x", p.x), ("y", p.y), ("z", p.z), ("vx", v.x), ("vy", v.y)):
-            cols[key].append(_mm(value))
-        cols["vz"].append(_mm(v.z))
-        sign = -1.0 if q.w < 0 else 1.0  # q and -q are one rotation: keep w >= 0
-        for key, value in (("qx", q.x), ("qy", q.y), ("qz", q.z), ("qw", q.w)):
-            cols[key].append(round(sign * value * 1e4))
-        if word != prev_flags:
-            flags.append([k - first, word])
-            prev_flags = word
-        prev = obj
-    return {"first": first, "n": last - first + 1, "flags": flags} | {
-        key: _deltas(values) for key, values in cols.items()
-    }
-
-
-def _sampled(recording: Path, topic: str, hz: float) -> list[Any]:
-    """Messages of ``topic`` at most ``hz`` per second of their stamps (the first of each
-    period), with their stamps."""
-    out: list[Any] = []
-    period = 1.0 / hz
-    next_t = -math.inf
-    for msg in _read(recording, topic):
-        t = _stamp_s(msg.header)
-        if t + 1e-9 >= next_t:
-            out.append((t, msg))
-            next_t = (math.floor(t / period + 1e-6) + 1) * period
-    return out
-
-
-def _tcp(recording: Path, namespace: str) -> dict[str, Any]:
-    samples = _sampled(recording, TCP_POSE.resolve(namespace), SAMPLE_HZ)
-    pos = [m.pose.position for _, m in samples]
-    return {
-        "t": [round(t, 4) for t, _ in samples],
-        "x": _deltas(_mm(p.x) for p in pos),
-        "y": _deltas(_mm(p.y) for p in pos),
-        "z": _deltas(_mm(p.z) for p in pos),
-    }
-
-
-def _targets(recording: Path, namespace: str) -> list[list[Any]]:
-    """``[t, track_id, phase, class, x, y, z, vx, vy]`` (mm, mm/s) of every target sent."""
-    out = []
-    for msg in _read(recording, PICK_TARGET.resolve(namespace)):
-        g, v = msg.grasp_point, msg.velocity
-        out.append(
-            [
-                round(_stamp_s(msg.header), 4),
-                int(msg.track_id),
-                str(msg.phase),
-                str(msg.class_name),
-                *(_mm(c) for c in (g.x, g.y, g.z, v.x, v.y)),
-            ]
-        )
-    return out
-
-
-def _belt_positions(recording: Path, times: Sequence[float]) -> list[int]:
-    """The belt's travelled distance (mm) at each frame, difference-coded."""
-    states = [(_stamp_s(m.header), m.position_m) for m in _read(recording, BELT_STATE.name)]
-    out, j, pos = [], 0, 0.0
-    for t in times:
-        while j < len(states) and states[j][0] <= t + 1e-6:
-            pos = states[j][1]
-            j += 1
-        out.append(_mm(pos))
-    return _deltas(out)
-
-
-def _round(value: Any) -> Any:
+def _round(value: object) -> object:
     """Floats to 4 decimals (non-finite ones to None: JSON has no NaN), through lists and
     mappings."""
     if isinstance(value, float):
@@ -232,7 +192,7 @@ def _round(value: Any) -> Any:
     return value
 
 
-def _events(path: Path, notes: list[str]) -> list[dict[str, Any]]:
+def _events(path: Path, notes: list[str]) -> list[EventData]:
     """Every readable line of ``events.jsonl`` (a bad line is noted and skipped)."""
     if not path.is_file():
         notes.append(f"{path}: missing; no events shown")
@@ -250,14 +210,15 @@ def _events(path: Path, notes: list[str]) -> list[dict[str, Any]]:
             continue
         try:
             raw = json.loads(line)
+            data = raw["data"] if isinstance(raw.get("data"), dict) else {}
             events.append(
-                {
-                    "t": round(float(raw["time_s"]), 4),
-                    "type": str(raw["type"]),
-                    "id": int(raw.get("object_id") or 0),
-                    "cls": str(raw.get("class_name") or ""),
-                    "data": _round(raw["data"] if isinstance(raw.get("data"), dict) else {}),
-                }
+                EventData(
+                    t=round(float(raw["time_s"]), 4),
+                    type=str(raw["type"]),
+                    id=int(raw.get("object_id") or 0),
+                    cls=str(raw.get("class_name") or ""),
+                    data={str(k): _round(v) for k, v in data.items()},
+                )
             )
         except (ValueError, KeyError, TypeError, RecursionError) as exc:
             what = cut(str(exc), 200)
@@ -265,22 +226,21 @@ def _events(path: Path, notes: list[str]) -> list[dict[str, Any]]:
     return events
 
 
-def _cell_data(cell: Cell) -> dict[str, Any]:
+def _cell_view(cell: Cell) -> CellView:
     belt = cell.belt
     stations = []
     for s in cell.stations:
         bins = [
-            {"cls": b.class_name, "x": b.centre_x_m, "y": b.centre_y_m, "size": b.size_m}
-            for b in s.bins
+            BinView(cls=b.class_name, x=b.centre_x_m, y=b.centre_y_m, size=b.size_m) for b in s.bins
         ]
         stations.append(
-            {
-                "name": s.name,
-                "ns": s.namespace,
-                "base": list(s.base_position_m[:2]),
-                "window": list(s.pick_window_x_m),
-                "bins": bins,
-            }
+            StationView(
+                name=s.name,
+                ns=s.namespace,
+                base=list(s.base_position_m[:2]),
+                window=list(s.pick_window_x_m),
+                bins=bins,
+            )
         )
     xs = [belt.start_x_m, belt.end_x_m]
     ys = [belt.centre_y_m - 0.5 * belt.width_m, belt.centre_y_m + 0.5 * belt.width_m]
@@ -291,28 +251,40 @@ def _cell_data(cell: Cell) -> dict[str, Any]:
             xs += [b.centre_x_m - b.size_m / 2, b.centre_x_m + b.size_m / 2]
             ys += [b.centre_y_m - b.size_m / 2, b.centre_y_m + b.size_m / 2]
     margin = 0.08
-    return {
-        "name": cell.name,
-        "belt": {
-            "start": belt.start_x_m,
-            "end": belt.end_x_m,
-            "infeed": belt.infeed_x_m,
-            "y": belt.centre_y_m,
-            "width": belt.width_m,
-        },
-        "camera": [cell.camera.fov_min_x_m, cell.camera.fov_max_x_m],
-        "stations": stations,
-        "view": [min(xs) - margin, max(xs) + margin, min(ys) - margin, max(ys) + margin],
-    }
+    return CellView(
+        name=cell.name,
+        belt=BeltView(
+            start=belt.start_x_m,
+            end=belt.end_x_m,
+            infeed=belt.infeed_x_m,
+            y=belt.centre_y_m,
+            width=belt.width_m,
+        ),
+        camera=[cell.camera.fov_min_x_m, cell.camera.fov_max_x_m],
+        stations=stations,
+        view=[min(xs) - margin, max(xs) + margin, min(ys) - margin, max(ys) + margin],
+    )
 
 
-def _read_json(path: Path) -> dict[str, Any]:
+def _run_means(path: Path, notes: list[str]) -> RunMeans | None:
+    """The run's ``run.json`` (its dataset and speed), None when there is none (a bare
+    episode folder) or it cannot be read (noted)."""
+    if not path.is_file():
+        return None
     try:
-        text = read_text_capped(path, max_bytes=MAX_JSON_BYTES, what="JSON file", error=PlayerError)
-        data = json.loads(text)
-    except (PlayerError, ValueError, RecursionError):
-        return {}
-    return data if isinstance(data, dict) else {}
+        return RunMeans.read(path)
+    except RecordError as exc:
+        notes.append(f"{exc}; no dataset: objects drawn as length x width boxes")
+        return None
+
+
+def _summary(path: Path) -> EpisodeSummary | None:
+    """The twin's ``summary.json`` (seed, speed, duration), None without a readable one (a
+    crashed twin writes none: the duration is then the last thing recorded)."""
+    try:
+        return EpisodeSummary.read(path)
+    except RecordError:
+        return None
 
 
 def _load_cell(run_dir: Path, notes: list[str]) -> Cell | None:
@@ -327,52 +299,7 @@ def _load_cell(run_dir: Path, notes: list[str]) -> Cell | None:
         return None
 
 
-def _objects(
-    states: dict[int, dict[int, Any]], source_ids: dict[int, str], meshes: MeshFinder
-) -> tuple[list[dict[str, Any]], dict[str, int]]:
-    """Every object's static data, outline (1e-4 m) and track; how many outlines each source."""
-    objects = []
-    counts = {"mesh": 0, "box": 0}
-    for oid in sorted(states):
-        per_frame = states[oid]
-        first = per_frame[min(per_frame)]
-        source = source_ids.get(oid, "")
-        mesh = meshes.find(source)
-        outline: Footprint | None = None
-        kind = "box"
-        if mesh is not None:
-            try:
-                outline, kind = footprint_outline(mesh).scaled_z(first.height_m), "mesh"
-            except (PlayerError, OSError):
-                outline = None
-        if outline is None:
-            outline = box_outline(first.length_m, first.width_m, first.height_m)
-        counts[kind] += 1
-        objects.append(
-            {
-                "id": oid,
-                "cls": str(first.class_name),
-                "src": source,
-                "outline_from": kind,
-                "outline": [[round(x * 1e4), round(y * 1e4)] for x, y in outline.ring],
-                "zspan": [round(outline.z_low_m * 1e4), round(outline.z_high_m * 1e4)],
-                "dims": _round(
-                    {
-                        "length_m": first.length_m,
-                        "width_m": first.width_m,
-                        "height_m": first.height_m,
-                        "area_m2": first.area_m2,
-                        "volume_m3": first.volume_m3,
-                        "mass_kg": first.mass_kg,
-                    }
-                ),
-            }
-            | _track(per_frame)
-        )
-    return objects, counts
-
-
-def player_data(episode: Path, run_dir: Path | None = None) -> tuple[dict[str, Any], list[str]]:
+def player_data(episode: Path, run_dir: Path | None = None) -> tuple[PlayerData, list[str]]:
     """Everything the page draws, as JSON-ready data, and notes on what is missing.
 
     ``run_dir`` (default: the episode's parent) holds ``cell.yaml`` and ``run.json``.
@@ -382,72 +309,73 @@ def player_data(episode: Path, run_dir: Path | None = None) -> tuple[dict[str, A
 
     from twin.recording import RecordingError
 
-    episode = Path(episode)
-    run_dir = episode.parent if run_dir is None else Path(run_dir)
+    folder = EpisodeFolder(Path(episode))
+    run_dir = folder.path.parent if run_dir is None else Path(run_dir)
     notes: list[str] = []
-    run = _read_json(RunFolder(run_dir).run_json)
-    summary = _read_json(EpisodeFolder(episode).summary)
-    dataset = Path(run["dataset"]) if isinstance(run.get("dataset"), str) else None
+    run = _run_means(RunFolder(run_dir).run_json, notes)
+    summary = _summary(folder.summary)
+    dataset = Path(run.info.dataset) if run is not None else None
     if dataset is not None and not dataset.is_dir():
         notes.append(f"dataset {dataset} not found: objects drawn as length x width boxes")
         dataset = None
     cell = _load_cell(run_dir, notes)
-    events = _events(EpisodeFolder(episode).events, notes)
+    events = _events(folder.events, notes)
     source_ids = {
         e["id"]: str(e["data"].get("source_id", "")) for e in events if e["type"] == "spawned"
     }
     classes = dict.fromkeys(cell.classes if cell else ())
     namespaces = [s.namespace for s in cell.stations] if cell else [""]
     times: list[float] = []
-    objects: list[dict[str, Any]] = []
-    tcps: list[dict[str, Any]] = []
-    targets: list[list[list[Any]]] = []
+    shown: list[ObjectData] = []
+    tcps: list[TcpPath] = []
+    sent: list[list[Target]] = []
     belt: list[int] = []
-    recording = EpisodeFolder(episode).recording
+    recording = folder.recording
     if recording.is_file():
         try:
-            times, states = _ground_truth(recording)
+            times, states = ground_truth(recording)
             if not times:
                 notes.append(f"{recording}: no ground truth recorded; no objects drawn")
-            objects, counts = _objects(states, source_ids, MeshFinder(dataset))
+            shown, counts = objects(states, source_ids, MeshFinder(dataset))
             if counts["box"] and dataset is not None:
                 notes.append(f"{counts['box']} object(s) without a mesh in {dataset}: boxes")
-            tcps = [_tcp(recording, ns) for ns in namespaces]
-            targets = [_targets(recording, ns) for ns in namespaces]
-            belt = _belt_positions(recording, times)
+            tcps = [tcp_path(recording, ns) for ns in namespaces]
+            sent = [targets(recording, ns) for ns in namespaces]
+            belt = belt_positions(recording, times)
         except (RecordingError, McapError, OSError, ValueError, KeyError, AttributeError) as exc:
             notes.append(f"{recording}: unreadable ({type(exc).__name__}: {exc})")
-            times, objects, tcps, targets, belt = [], [], [], [], []
+            times, shown, tcps, sent, belt = [], [], [], [], []
     else:
         notes.append(f"{recording}: missing; no objects, TCPs or targets drawn")
-    classes.update(dict.fromkeys(o["cls"] for o in objects))
+    classes.update(dict.fromkeys(o["cls"] for o in shown))
     classes.update(dict.fromkeys(e["cls"] for e in events if e["cls"]))
     colour = class_colour(cell.materials) if cell is not None else dataset_colour(dataset)
     ends = [*times[-1:], *(e["t"] for e in events)]
     ends += [tcp["t"][-1] for tcp in tcps if tcp["t"]]
-    duration = summary.get("sim_seconds")
-    if not isinstance(duration, (int, float)):
-        duration = max(ends, default=0.0)
-    data = {
-        "episode": f"{run_dir.name}/{episode.name}",
-        "seed": summary.get("seed"),
-        "speed_mps": summary.get("belt_speed_mps", run.get("speed_mps")),
-        "duration_s": round(float(duration), 4),
-        "dataset": str(dataset) if dataset else None,
-        "cell": _cell_data(cell) if cell else None,
-        "classes": {c: rgb_hex(colour(c)) for c in classes},
-        "highlight": HIGHLIGHT_HEX,
-        "station_colours": list(STATION_HEX),
-        "flag_bits": list(FLAG_BITS),
-        "absent_bit": ABSENT_BIT,
-        "frames": [round(t, 4) for t in times],
-        "belt_mm": belt,
-        "objects": objects,
-        "tcp": tcps,
-        "targets": targets,
-        "events": events,
-        "notes": notes,
-    }
+    duration = summary.sim_seconds if summary is not None else max(ends, default=0.0)
+    speed_mps = summary.belt_speed_mps if summary is not None else None
+    if speed_mps is None and run is not None:
+        speed_mps = run.info.speed_mps
+    data = PlayerData(
+        episode=f"{run_dir.name}/{folder.path.name}",
+        seed=summary.seed if summary is not None else None,
+        speed_mps=speed_mps,
+        duration_s=round(float(duration), 4),
+        dataset=str(dataset) if dataset else None,
+        cell=_cell_view(cell) if cell else None,
+        classes={c: rgb_hex(colour(c)) for c in classes},
+        highlight=HIGHLIGHT_HEX,
+        station_colours=list(STATION_HEX),
+        flag_bits=list(FLAG_BITS),
+        absent_bit=ABSENT_BIT,
+        frames=[round(t, 4) for t in times],
+        belt_mm=belt,
+        objects=shown,
+        tcp=tcps,
+        targets=sent,
+        events=events,
+        notes=notes,
+    )
     return data, notes
 
 
@@ -456,17 +384,23 @@ ASSETS = Path(__file__).with_name("player_assets")
 """The page's style, body and script (inlined into every page: it must open with no files)."""
 
 
+MODULES = ("player.py", "player_frames.py", "player_footprints.py")
+"""The modules that make a page: this one, its frames and the objects' footprints."""
+
+
 def page_sources() -> list[Path]:
-    """The files a player's page is made from: this module and every asset (a page older than
-    any of them is stale)."""
-    return [Path(__file__).resolve(), *sorted(p for p in ASSETS.rglob("*") if p.is_file())]
+    """The files a player's page is made from: its modules (:data:`MODULES`) and every asset (a
+    page older than any of them is stale)."""
+    here = Path(__file__).resolve().parent
+    modules = [here / name for name in MODULES]
+    return [*modules, *sorted(p for p in ASSETS.rglob("*") if p.is_file())]
 
 
 def _asset(name: str) -> str:
     return (ASSETS / name).read_text(encoding="utf-8")
 
 
-def render_page(data: dict[str, Any]) -> str:
+def render_page(data: PlayerData) -> str:
     """The self-contained HTML page of a player's ``data`` (see :func:`player_data`)."""
     import html
 

@@ -1,8 +1,8 @@
 """The report's figures: step rate, belt speed, round-trip latency, tracking time, rates with
-their intervals, meshgen timing and footprints against the source photos. Each takes the
-report's data (:class:`experiments.report_data.RunData`) and gives a matplotlib figure, or raises
-:class:`experiments.report_data.Unavailable` saying what is missing; :data:`FIGURES` lists them
-in the page's order.
+their intervals, recovery against the number of stations, meshgen timing and footprints against
+the source photos. Each takes the report's data (:class:`experiments.report_data.RunData`) and
+gives a matplotlib figure, or raises :class:`experiments.report_data.Unavailable` saying what is
+missing; :data:`FIGURES` lists them in the page's order.
 """
 
 from __future__ import annotations
@@ -10,19 +10,15 @@ from __future__ import annotations
 import csv
 import os
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from experiments.report_data import (
-    Episode,
-    RunData,
-    Unavailable,
-    episode_rtt_ms,
-    episode_tracking_times,
-    read_json,
-)
+from experiments.report_data import Episode, RunData, Telemetry, Unavailable, read_json
+from experiments.report_line import recovery_by_stations
 from experiments.report_plot import new_figure, speed_colour
+from experiments.report_tables import speed_rows
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -39,8 +35,12 @@ STEP_RATE_WINDOW_S = 60.0
 FOOTPRINT_IMAGES = 4
 
 
-def _with(data: RunData, key: str, what: str) -> list[Episode]:
-    eps = [e for e in data.episodes if ((e.telemetry or {}).get(key) or {}).get(what)]
+def _with(
+    data: RunData, key: str, has: Callable[[Telemetry], bool]
+) -> list[tuple[Episode, Telemetry]]:
+    """The episodes whose telemetry has series ``key`` (``has`` says whether it has), each
+    with its telemetry; :class:`Unavailable` when none has."""
+    eps = [(e, e.telemetry) for e in data.episodes if e.telemetry is not None and has(e.telemetry)]
     if not eps:
         missing = sum(1 for e in data.episodes if e.telemetry is None)
         msg = (
@@ -53,13 +53,13 @@ def _with(data: RunData, key: str, what: str) -> list[Episode]:
 
 def fig_step_rate(data: RunData) -> Figure:
     """Steps per wall second over the first 60 s of wall time, per episode, coloured by speed."""
-    eps = _with(data, "step_rate", "wall_s")
+    eps = _with(data, "step_rate", lambda t: bool(t.step_rate.wall_s))
     fig = new_figure()
     ax = fig.add_subplot()
     seen: set[float | None] = set()
-    for ep in eps:
-        rate = ep.telemetry["step_rate"]  # type: ignore[index]
-        pairs = [(t, r) for t, r in zip(rate["wall_s"], rate["steps_per_s"], strict=True)]
+    for ep, telemetry in eps:
+        rate = telemetry.step_rate
+        pairs = [(t, r) for t, r in zip(rate.wall_s, rate.steps_per_s, strict=True)]
         pairs = [(t, r) for t, r in pairs if t <= STEP_RATE_WINDOW_S]
         label = None if ep.speed_mps in seen else f"{ep.speed_mps} m/s"
         seen.add(ep.speed_mps)
@@ -80,20 +80,18 @@ def fig_step_rate(data: RunData) -> Figure:
 
 def fig_belt(data: RunData) -> Figure:
     """Belt setpoint (dashed) and measured speed (solid) over sim time, one episode per speed."""
-    eps = _with(data, "belt", "sim_s")
+    eps = _with(data, "belt", lambda t: bool(t.belt.sim_s))
     fig = new_figure()
     ax = fig.add_subplot()
     done: set[float | None] = set()
-    for ep in eps:
+    for ep, telemetry in eps:
         if ep.speed_mps in done:
             continue
         done.add(ep.speed_mps)
-        belt = ep.telemetry["belt"]  # type: ignore[index]
+        belt = telemetry.belt
         colour = speed_colour(data, ep.speed_mps)
-        ax.plot(
-            belt["sim_s"], belt["setpoint_mps"], "--", color=colour, label=f"setpoint {ep.name}"
-        )
-        ax.plot(belt["sim_s"], belt["speed_mps"], "-", color=colour, label=f"actual {ep.name}")
+        ax.plot(belt.sim_s, belt.setpoint_mps, "--", color=colour, label=f"setpoint {ep.name}")
+        ax.plot(belt.sim_s, belt.speed_mps, "-", color=colour, label=f"actual {ep.name}")
     ax.set_xlabel("sim time (s)")
     ax.set_ylabel("belt speed (m/s)")
     ax.set_title("Belt velocity: setpoint against actual")
@@ -104,16 +102,16 @@ def fig_belt(data: RunData) -> Figure:
 
 def fig_rtt_time(data: RunData) -> Figure:
     """Round-trip latency of every command over wall time, coloured by speed."""
-    eps = _with(data, "rtt", "rtt_ms")
+    eps = _with(data, "rtt", lambda t: bool(t.rtt.rtt_ms))
     fig = new_figure()
     ax = fig.add_subplot()
     seen: set[float | None] = set()
-    for ep in eps:
-        rtt = ep.telemetry["rtt"]  # type: ignore[index]
+    for ep, telemetry in eps:
+        rtt = telemetry.rtt
         label = None if ep.speed_mps in seen else f"{ep.speed_mps} m/s"
         seen.add(ep.speed_mps)
         colour = speed_colour(data, ep.speed_mps)
-        ax.plot(rtt["wall_s"], rtt["rtt_ms"], ".", ms=2, color=colour, label=label)
+        ax.plot(rtt.wall_s, rtt.rtt_ms, ".", ms=2, color=colour, label=label)
     ax.set_yscale("log")
     ax.set_xlabel("wall time (s)")
     ax.set_ylabel("round-trip latency (ms)")
@@ -127,14 +125,14 @@ def fig_rtt_hist(data: RunData) -> Figure:
     """Histogram of the pooled round-trip latency per speed, p50 and p99 marked."""
     import numpy as np
 
-    _with(data, "rtt", "rtt_ms")
+    _with(data, "rtt", lambda t: bool(t.rtt.rtt_ms))
     fig = new_figure()
     ax = fig.add_subplot()
-    everything = [v for ep in data.episodes for v in episode_rtt_ms(ep)]
+    everything = [v for ep in data.episodes for v in ep.rtt_ms]
     low, high = max(min(everything), 1e-3), max(everything)
     bins: list[float] | int = np.geomspace(low, high * 1.0001, 50).tolist() if high > low else 10
     for speed in data.speeds():
-        values = [v for ep in data.at_speed(speed) for v in episode_rtt_ms(ep)]
+        values = [v for ep in data.at_speed(speed) for v in ep.rtt_ms]
         if not values:
             continue
         colour = speed_colour(data, speed)
@@ -149,18 +147,17 @@ def fig_rtt_hist(data: RunData) -> Figure:
     return fig
 
 
+def _pursuits(ep: Episode) -> int:
+    tracking = ep.summary.tracking if ep.summary is not None else None
+    return tracking.pursuits if tracking is not None else 0
+
+
 def fig_tracking(data: RunData) -> Figure:
     """Tracking time to 4 mm per speed: one dot per settled pursuit, box over them."""
     import numpy as np
 
     speeds = data.speeds()
-    pursuits = {
-        s: sum(
-            int(((e.summary or {}).get("tracking") or {}).get("pursuits", 0))
-            for e in data.at_speed(s)
-        )
-        for s in speeds
-    }
+    pursuits = {s: sum(_pursuits(e) for e in data.at_speed(s)) for s in speeds}
     if not any(pursuits.values()):
         msg = "no pursuit was measured in any episode (no twin/summary.json tracking block)"
         raise Unavailable(msg)
@@ -168,7 +165,7 @@ def fig_tracking(data: RunData) -> Figure:
     ax = fig.add_subplot()
     rng = np.random.default_rng(0)
     for i, speed in enumerate(speeds):
-        times = [t for ep in data.at_speed(speed) for t in episode_tracking_times(ep)]
+        times = [t for ep in data.at_speed(speed) for t in ep.tracking_times_s]
         if times:
             ax.boxplot([times], positions=[i], widths=0.5, showfliers=False)
             jitter = rng.uniform(-0.15, 0.15, len(times))
@@ -187,6 +184,86 @@ def fig_tracking(data: RunData) -> Figure:
     ax.set_xlabel("belt speed")
     ax.set_title("Tracking time to 4 mm (ground truth), per pursuit")
     ax.grid(alpha=0.3, axis="y")
+    return fig
+
+
+def fig_rates(data: RunData) -> Figure:
+    """Success and miss rate per speed with 95 % Wilson intervals over pooled counts."""
+    rows = [r for r in speed_rows(data) if r.success_rate is not None or r.miss_rate is not None]
+    if not rows:
+        msg = "no episode has both twin/summary.json scores and targeted objects or processed ones"
+        raise Unavailable(msg)
+    fig = new_figure()
+    ax = fig.add_subplot()
+    x = list(range(len(rows)))
+    for offset, key, total, label, colour in (
+        (-0.15, "success", "targeted", "success (correct bin / targeted)", "tab:green"),
+        (0.15, "miss", "processed", "miss (missed / processed)", "tab:red"),
+    ):
+        xs, ys, lo, hi = [], [], [], []
+        for i, row in enumerate(rows):
+            rate, (a, b) = (
+                (row.success_rate, row.success_ci95)
+                if key == "success"
+                else (row.miss_rate, row.miss_ci95)
+            )
+            if rate is None:
+                continue
+            xs.append(i + offset)
+            ys.append(rate)
+            lo.append(rate - a)
+            hi.append(b - rate)
+            n = row.totals.get(total)
+            ax.annotate(f"n={n}", (i + offset, b), ha="center", va="bottom", fontsize=7)
+        ax.errorbar(xs, ys, yerr=[lo, hi], fmt="o", capsize=4, color=colour, label=label)
+    several = len({r.cell for r in rows}) > 1
+    labels = [f"{r.cell}\n{r.speed_mps} m/s" if several else f"{r.speed_mps} m/s" for r in rows]
+    ax.set_xticks(x, labels)
+    ax.set_xlim(-0.6, len(rows) - 0.4)
+    ax.set_ylim(-0.02, 1.1)
+    ax.set_ylabel("rate (95 % Wilson interval, pooled episodes)")
+    ax.set_xlabel("cell and belt speed" if several else "belt speed")
+    ax.set_title("Success and miss rate per belt speed")
+    ax.legend(fontsize="small")
+    ax.grid(alpha=0.3, axis="y")
+    return fig
+
+
+def fig_recovery_stations(data: RunData) -> Figure:
+    """Line recovery against the number of stations, one line per belt speed: the mean over
+    the episodes (seeds) with its 95 % Student t interval."""
+    rows = [r for r in recovery_by_stations(data) if r.recovery_mean is not None]
+    if not rows:
+        msg = "no episode has metrics (events, summary and controller stats)"
+        raise Unavailable(msg)
+    fig = new_figure()
+    ax = fig.add_subplot()
+    speeds = sorted({r.speed_mps for r in rows})
+    for i, speed in enumerate(speeds):
+        line = [r for r in rows if r.speed_mps == speed]
+        dx = 0.04 * (i - (len(speeds) - 1) / 2)  # side by side, so equal values stay apart
+        xs = [r.stations + dx for r in line]
+        ys = [r.recovery_mean or 0.0 for r in line]
+        spans = [r.recovery_ci95 or (y, y) for r, y in zip(line, ys, strict=True)]
+        lo = [y - a for y, (a, _) in zip(ys, spans, strict=True)]
+        hi = [b - y for y, (_, b) in zip(ys, spans, strict=True)]
+        colour = speed_colour(data, speed)
+        ax.errorbar(xs, ys, yerr=[lo, hi], fmt="o-", capsize=4, color=colour, label=f"{speed} m/s")
+        for x, y, r in zip(xs, ys, line, strict=True):
+            ax.annotate(
+                f"n={r.episodes}",
+                (x, y),
+                textcoords="offset points",
+                xytext=(5, -10),
+                fontsize=7,
+            )
+    ax.set_xticks(sorted({r.stations for r in rows}))
+    ax.set_ylim(-0.02, 1.05)
+    ax.set_xlabel("stations along the belt")
+    ax.set_ylabel("recovery (mean, 95 % t interval over seeds)")
+    ax.set_title("Recovery against the number of stations")
+    ax.legend(title="belt speed", fontsize="small")
+    ax.grid(alpha=0.3)
     return fig
 
 
@@ -307,8 +384,9 @@ def fig_footprints(data: RunData) -> Figure:
 
     fig = new_figure(9.0, 8.0)
     axes = fig.subplots(2, 2, squeeze=False).ravel()
-    colours: dict[str, Any] = {}
-    from interfaces.class_colours import dataset_colour
+    from interfaces.class_colours import RGB, dataset_colour
+
+    colours: dict[str, RGB] = {}
 
     colour_of = dataset_colour(dataset)
     used = ""
@@ -338,7 +416,22 @@ def fig_footprints(data: RunData) -> Figure:
     return fig
 
 
+FIGURES: tuple[tuple[str, str, Callable[[RunData], Figure]], ...] = (
+    ("step_rate", "Step rate over 60 s per belt speed", fig_step_rate),
+    ("belt", "Belt velocity setpoint against actual", fig_belt),
+    ("rtt_time", "Round-trip latency over time", fig_rtt_time),
+    ("rtt_hist", "Round-trip latency histogram", fig_rtt_hist),
+    ("tracking", "Tracking time to 4 mm per speed", fig_tracking),
+    ("rates", "Success and miss rate per speed (95 % Wilson intervals)", fig_rates),
+    ("recovery_stations", "Recovery against the number of stations", fig_recovery_stations),
+    ("meshgen", "Mesh-generation timing", fig_meshgen),
+    ("footprints", "Source polygons over generated footprints", fig_footprints),
+)
+"""``(file stem, heading, figure function)`` in page order."""
+
+
 def save_png(fig: Figure, path: Path) -> None:
+    """Write ``fig`` as the PNG ``path``, whole (a temporary file renamed in place)."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as handle:

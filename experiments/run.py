@@ -100,12 +100,12 @@ import json
 import signal
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from contextlib import suppress
 from dataclasses import dataclass, replace
 from pathlib import Path
 from types import FrameType
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 from experiments.episode_processes import (
     EpisodeFailedError,
@@ -124,6 +124,7 @@ from interfaces.run_folder import (
 from interfaces.run_records import (
     EpisodeRow,
     FailedEpisode,
+    Metrics,
     RunInfo,
     RunMeans,
 )
@@ -312,7 +313,6 @@ def run_options(
     )
 
 
-# -- metrics ------------------------------------------------------------------------------------
 # -- the command --------------------------------------------------------------------------------
 def raise_interrupt(signum: int, frame: FrameType | None) -> None:
     """Signal handler: a ``KeyboardInterrupt`` carrying the signal's name."""
@@ -544,15 +544,15 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
     elif stopped is None:
-        _print_result(result)
+        _print_result(result, means.mean_by_station)
     return code
 
 
-def _print_result(result: dict[str, Any]) -> None:
+def _print_result(result: Mapping[str, object], by_station: Mapping[str, Metrics]) -> None:
+    """The result a line a key (each station's means too, with several stations)."""
     for key, value in result.items():
         if key != "mean_by_station":
             print(f"{key:>28}: {value}")
-    stations = result["mean_by_station"]
-    if len(stations) > 1:
-        for name, means in stations.items():
+    if len(by_station) > 1:
+        for name, means in by_station.items():
             print(f"{'station ' + name:>28}: " + ", ".join(f"{k} {v}" for k, v in means.items()))

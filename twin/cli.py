@@ -40,7 +40,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("fmu", "build"), "fmus.build", "compile the belt-drive FMUs (FMI 3.0 and 2.0) with gcc"),
     (("bench", "fmu"), "twin.bench_fmu", "benchmark one FMU co-simulation step"),
     (("bench", "twin"), "twin.bench_twin", "benchmark the twin's real-time factor"),
-    (("bench", "render"), "twin.camera.bench", "benchmark the camera's renderers per frame"),
+    (("bench", "render"), "twin.bench_render", "benchmark the camera's renderers per frame"),
     (("bench", "control"), "control.bench", "benchmark the controller on an ideal arm"),
     (("bench", "bound"), "control.bound", "the shortest pursuit the arm's joint limits allow"),
     (("bench", "guard"), "experiments.bench_guard", "headline figures vs the baseline"),

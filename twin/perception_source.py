@@ -2,7 +2,9 @@
 
 :class:`PerceptionStepper` is owned by :class:`twin.sim.Twin` for its whole life; every
 ``reset`` starts the scenario's source (``perception.source``) for the episode and every step
-lets it capture when a frame is due and release the frames whose latency has passed:
+lets it capture when a frame is due and release the frames whose latency has passed. It reads
+the twin through :class:`twin.sim_view.PerceptionSim` (what it needs of it), not the sim itself:
+the sim steps the perception, the perception does not reach back into the sim.
 
 - ``oracle`` (default): :class:`twin.perception.Perception`, the ground truth through the
   scenario's error model (unchanged);
@@ -10,15 +12,15 @@ lets it capture when a frame is due and release the frames whose latency has pas
   frame_due`: integer steps, nothing accumulated) every camera of the cell (``cameras:``) is
   rendered from one snapshot of the scene (:class:`twin.camera.rig.CameraRig`, depth noise from
   the episode's own child of the seed tree, :func:`camera_seed`), each frame goes through the
-  cell's fixed filters (a robot self-filter: the arms' links and what their tools hold, known
-  from their poses; and the belt's region of interest: pixels whose ray meets the belt plane off
-  the belt, 2 cm margin) and its camera's detector (:mod:`twin.camera.detectors`), the cameras'
-  detections are merged (each camera keeps the pieces whose centroid lies in its own stretch of
-  the belt, split half-way through its overlap with the next, and whose mask does not touch its
-  image's border), and the frame is released ``perception.latency_s`` after its exposure, stamped
-  with it, exactly as the oracle's. A frame exposed inside a detection-dropout window is never
-  released. Every frame is scored against the render's instance ids
-  (:class:`twin.perception_score.EpisodeScorer`).
+  cell's fixed filters (:mod:`twin.camera.filters`: a robot self-filter, the arms' links and
+  what their tools hold, known from their poses; and the belt's region of interest, pixels whose
+  ray meets the belt plane off the belt, 2 cm margin) and its camera's detector
+  (:mod:`twin.camera.detectors`), the cameras' detections are merged (each camera keeps the
+  pieces whose centroid lies in its own stretch of the belt, split half-way through its overlap
+  with the next, and whose mask does not touch its image's border), and the frame is released
+  ``perception.latency_s`` after its exposure, stamped with it, exactly as the oracle's. A frame
+  exposed inside a detection-dropout window is never released. Every frame is scored against the
+  render's instance ids (:class:`twin.perception_score.EpisodeScorer`).
 
 The step that takes a frame (only steps where one is due) reads the scene and renders every
 camera; filtering, detection, merging and scoring run on a worker thread meanwhile (numpy and
@@ -35,7 +37,7 @@ import math
 import time
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -43,34 +45,29 @@ import numpy as np
 from interfaces.camera import RgbdCameraSpec, RgbdFrame, belt_view_x_m
 from interfaces.cell import BeltSpec
 from interfaces.detections import Detection, DetectionFrame
+from twin.camera.filters import belt_plane_depth, filtered_frame
 from twin.errors import ConfigError
 from twin.perception import Perception
+from twin.sim_view import PerceptionSim
 from twin.suction_point import SuctionPoints
 
 if TYPE_CHECKING:
     from detector.detector import Detector, DetectorOutput
     from twin.camera.rig import CameraRig
-    from twin.monitor import GroundTruth
+    from twin.ground_truth import GroundTruth
     from twin.perception_score import EpisodeScorer
-    from twin.sim import Twin
 
 __all__ = [
     "CAMERA_SEED_KEY",
-    "ROI_MARGIN_M",
     "CameraSource",
     "PerceptionStepper",
-    "belt_plane_depth",
     "camera_seed",
     "camera_stretches",
-    "filtered_frame",
 ]
 
 CAMERA_SEED_KEY = 5
 """The camera's child of the episode's ``SeedSequence(seed)``: children 0-4 are
 :func:`twin.scenario.seed_tree`'s, so the camera's noise perturbs none of their streams."""
-
-ROI_MARGIN_M = 0.02
-"""How far beyond the belt's edges the region of interest reaches (a piece overhanging them)."""
 
 
 def camera_seed(seed: int) -> np.random.SeedSequence:
@@ -102,47 +99,6 @@ def camera_stretches(
     return tuple(out)
 
 
-def belt_plane_depth(spec: RgbdCameraSpec, belt: BeltSpec) -> tuple[np.ndarray, np.ndarray]:
-    """Where each pixel's ray meets the belt plane: the depth ``(H, W) float32`` (NaN where it
-    never does) and whether that point lies off the belt, ``(H, W) bool`` (beyond
-    :data:`ROI_MARGIN_M` of its edges)."""
-    k = spec.intrinsics
-    v, u = np.mgrid[0 : k.height_px, 0 : k.width_px]
-    rays = np.stack(((u - k.cx_px) / k.fx_px, (v - k.cy_px) / k.fy_px, np.ones(u.shape)), axis=-1)
-    worldMoptical = spec.worldMoptical()  # noqa: N806 (a pose name, aMb)
-    direction = rays @ worldMoptical[:3, :3].T
-    origin = worldMoptical[:3, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        depth = (belt.surface_z_m - origin[2]) / direction[..., 2]
-    depth = np.where(depth > 0, depth, np.nan)
-    x = origin[0] + depth * direction[..., 0]
-    y = origin[1] + depth * direction[..., 1]
-    half = 0.5 * belt.width_m + ROI_MARGIN_M
-    with np.errstate(invalid="ignore"):
-        off = ~(
-            (np.abs(y - belt.centre_y_m) <= half)
-            & (x >= belt.start_x_m - ROI_MARGIN_M)
-            & (x <= belt.end_x_m + ROI_MARGIN_M)
-        )
-    return depth.astype(np.float32), off
-
-
-def filtered_frame(
-    frame: RgbdFrame,
-    mask: np.ndarray,
-    *,
-    held_ids: list[int],
-    belt_depth_m: np.ndarray,
-) -> RgbdFrame:
-    """The frame as the detector gets it: the pixels of ``mask`` ``(H, W) bool`` (the robots,
-    off the belt) and of the objects ``held_ids`` set to the belt plane's depth ``belt_depth_m``
-    ``(H, W)`` (nothing stands there), without the truth (``instance_ids`` None)."""
-    if held_ids and frame.instance_ids is not None:
-        mask = mask | np.isin(frame.instance_ids, held_ids)
-    depth = np.where(mask, belt_depth_m, frame.depth_m).astype(np.float32)
-    return replace(frame, depth_m=depth, instance_ids=None)
-
-
 @dataclass(frozen=True, kw_only=True, eq=False)
 class _Camera:
     """One camera as the source runs it: its spec, detector, depth-noise generator, stretch of
@@ -161,7 +117,7 @@ class CameraSource:
 
     def __init__(
         self,
-        twin: Twin,
+        twin: PerceptionSim,
         rig: CameraRig,
         detectors: tuple[Detector, ...],
         *,
@@ -283,7 +239,7 @@ class PerceptionStepper:
     """The twin's perception over its life: the episode's source, its released frames, its
     scores, and the camera rig and detectors kept across episodes (see the module)."""
 
-    def __init__(self, twin: Twin) -> None:
+    def __init__(self, twin: PerceptionSim) -> None:
         self.twin = twin
         self.oracle: Perception | None = None
         self.camera: CameraSource | None = None

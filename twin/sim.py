@@ -22,7 +22,9 @@ the belt), calls ``doStep`` and reads the belt speed that drives the kinematic b
 The camera model is the scenario's ``perception`` unless a :class:`PerceptionConfig` is passed:
 the oracle (ground truth through its error model) or, with ``source: camera``, the cell's
 rendered RGB-D cameras through a detector, scored against ground truth
-(:mod:`twin.perception_source`, :meth:`Twin.perception_summary`, ``docs/camera.md``).
+(:mod:`twin.perception_source`, :meth:`Twin.perception_summary`, ``docs/camera.md``). The twin
+steps its perception; the perception and its cameras read the twin back through
+:class:`twin.sim_view.PerceptionSim`, which ``Twin`` satisfies, and never import this module.
 Injected faults (the scenario's ``faults``): inside a ``belt_stall`` window the FMU receives a
 setpoint of 0 whatever was commanded (``setpoint_mps`` keeps the commanded value); inside a
 ``detection_dropout`` window no detection frame is released. Each window's start and end is

@@ -387,6 +387,7 @@ def test_every_episode_row_of_the_report_links_an_existing_player(
     assert "recording.mcap: missing" in html
     data, _ = player_data(run / "ep001")
     assert data["objects"] == []
+    assert data["cell"] is not None
     assert data["cell"]["stations"][0]["bins"]
     assert len(data["events"]) == len(
         (run / "ep001" / "twin" / "events.jsonl").read_text(encoding="utf-8").splitlines()
@@ -421,14 +422,16 @@ def test_without_the_dataset_objects_are_their_recorded_boxes(
         assert (o["zspan"][1] - o["zspan"][0]) * 1e-4 == pytest.approx(state.height_m, abs=2e-4)
 
 
-def test_a_page_is_made_from_the_player_module_and_every_asset() -> None:
-    """The report refreshes a player older than any of these files (its assets included: a
-    change to the script or the style alone must reach every page)."""
-    from experiments import player
+def test_a_page_is_made_from_the_player_modules_and_every_asset() -> None:
+    """The report refreshes a player older than any of these files (its frames, footprints and
+    assets included: a change to the script or the style alone must reach every page)."""
+    from experiments import player, player_footprints, player_frames
     from experiments.player import ASSETS, page_sources
 
     sources = page_sources()
     assets = sorted(p for p in ASSETS.rglob("*") if p.is_file())
     assert {"player.css", "player.js", "player_body.html"} <= {p.name for p in assets}
     assert set(assets) <= set(sources)
-    assert Path(player.__file__).resolve() in sources
+    for module in (player, player_frames, player_footprints):
+        assert Path(str(module.__file__)).resolve() in sources
+    assert all(path.is_file() for path in sources)

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from experiments.report import FIGURES, write_report
-from experiments.report_data import ReportError, load_runs, wilson_interval
+from experiments.report_data import ReportError, load_runs
 
 CHROMIUM = Path("/usr/bin/chromium")
 PROBE_SCRIPT = (
@@ -147,19 +147,6 @@ def test_cli_reports_a_bad_folder_and_exits_2(tmp_path: Path) -> None:
     assert f"{tmp_path}: has no run.json" in result.stderr
 
 
-@pytest.mark.parametrize(("k", "n"), [(0, 1), (1, 1), (3, 10), (50, 100), (0, 0)])
-def test_wilson_interval_contains_the_estimate_and_stays_in_unit_range(k: int, n: int) -> None:
-    low, high = wilson_interval(k, n)
-    assert 0.0 <= low <= high <= 1.0
-    if n:
-        assert low <= k / n <= high
-
-
-def test_wilson_interval_known_value() -> None:
-    # 50 of 100 at 95 %: 0.5 +- 0.0962 (Wilson)
-    assert wilson_interval(50, 100) == pytest.approx((0.4038, 0.5962), abs=1e-4)
-
-
 def test_an_episode_that_did_not_finish_is_left_out_with_a_note(
     run_dir: Path, tmp_path: Path
 ) -> None:
@@ -211,7 +198,8 @@ def _two_station_run(folder: Path) -> Path:
     (folder / "run.json").write_text(json.dumps({"dataset": str(folder / "none")}))
     episode = folder / "ep000"
     (episode / "twin").mkdir(parents=True)
-    summary = {"belt_speed_mps": 0.3, "seed": 1, "sim_seconds": 60.0, "complete": True}
+    summary: dict[str, object] = {"belt_speed_mps": 0.3, "seed": 1, "sim_seconds": 60.0}
+    summary["complete"] = True
     summary |= {"real_time_factor": 1.0, "landing_in_bins": [4]}
     (episode / "twin" / "summary.json").write_text(json.dumps(summary))
     (episode / "twin" / "events.jsonl").write_text("\n".join(events) + "\n")
@@ -233,13 +221,13 @@ def test_the_report_counts_as_the_run_does_and_adds_a_table_per_station(tmp_path
     (row,) = episode_rows(data)
     (expected,) = read_rows(run / "episodes.json")
     assert isinstance(expected, EpisodeMetrics)
-    assert (row["targeted"], row["picked"], row["missed"]) == (3, 4, 1)
+    assert (row.targeted, row.picked, row.missed) == (3, 4, 1)
     for key in ("targeted", "picked", "missed", "processed", "placed_correct", "success_rate"):
-        assert row[key] == expected.metric(key), key
-    by_station = {r["station"]: r for r in station_rows(data)}
-    assert (by_station["upstream"]["targeted"], by_station["downstream"]["targeted"]) == (3, 0)
-    assert by_station["upstream"]["success_rate"] == 1.0
-    assert by_station["downstream"]["miss_rate"] == 0.5
+        assert getattr(row, key) == expected.metric(key), key
+    by_station = {r.station: r for r in station_rows(data)}
+    assert (by_station["upstream"].targeted, by_station["downstream"].targeted) == (3, 0)
+    assert by_station["upstream"].success_rate == 1.0
+    assert by_station["downstream"].miss_rate == 0.5
     page = write_report([run], tmp_path / "report").read_text(encoding="utf-8")
     assert 'id="per-station"' in page
     assert "<td>downstream</td>" in page
@@ -284,7 +272,8 @@ def _line_sweep(root: Path) -> Path:
                 events.append(_event("spawned", 12))
                 episode = run / f"ep{seed - 1:03d}"
                 (episode / "twin").mkdir(parents=True)
-                summary = {"belt_speed_mps": speed, "seed": seed, "sim_seconds": 60.0}
+                summary: dict[str, object] = {"belt_speed_mps": speed, "seed": seed}
+                summary["sim_seconds"] = 60.0
                 summary |= {"complete": True, "real_time_factor": 0.5, "landing_in_bins": []}
                 (episode / "twin" / "summary.json").write_text(json.dumps(summary))
                 (episode / "twin" / "events.jsonl").write_text("\n".join(events) + "\n")
@@ -309,43 +298,43 @@ def test_the_report_of_a_line_sweep_draws_recovery_against_stations_and_purity_t
     sweep = _line_sweep(tmp_path / "sweep")
     data = load_runs([sweep])
     rows = recovery_by_stations(data)
-    assert [(r["stations"], r["speed_mps"], r["episodes"]) for r in rows] == [
+    assert [(r.stations, r.speed_mps, r.episodes) for r in rows] == [
         (1, 0.2, 2),
         (1, 0.4, 2),
         (2, 0.2, 2),
         (2, 0.4, 2),
     ]
     for row in rows:
-        k = row["stations"]
+        k = row.stations
         values = [(k + 1) / 11, (k + 2) / 11]
         half = scipy_stats.t.ppf(0.975, 1) * scipy_stats.tstd(values) / 2**0.5
-        assert row["recovery_mean"] == pytest.approx((2 * k + 3) / 22)
-        assert row["recovery_ci95"] == pytest.approx(
-            (row["recovery_mean"] - half, row["recovery_mean"] + half)
+        assert row.recovery_mean == pytest.approx((2 * k + 3) / 22)
+        assert row.recovery_ci95 == pytest.approx(
+            (row.recovery_mean - half, row.recovery_mean + half)
         )
-        assert row["recovery_pooled"] == pytest.approx((2 * k + 3) / 22)
+        assert row.recovery_pooled == pytest.approx((2 * k + 3) / 22)
     speeds = speed_rows(data)
-    assert [(r["cell"], r["stations"]) for r in speeds] == [
+    assert [(r.cell, r.stations) for r in speeds] == [
         ("line_standin_first1", 1),
         ("line_standin_first1", 1),
         ("line_standin_first2", 2),
         ("line_standin_first2", 2),
     ]
     # two episodes of 12 spawned objects, 11 of each in the complete cohort, 3 + 4 recovered
-    assert (speeds[-1]["spawned_total"], speeds[-1]["entered_total"]) == (24, 22)
-    assert speeds[-1]["recovery_rate"] == pytest.approx(7 / 22)
-    by_class = {(r["cell"], r["speed_mps"], r["class"]): r for r in class_rows(data)}
+    assert (speeds[-1].totals["spawned"], speeds[-1].totals["entered"]) == (24, 22)
+    assert speeds[-1].recovery_rate == pytest.approx(7 / 22)
+    by_class = {(r.cell, r.speed_mps, r.class_name): r for r in class_rows(data)}
     brick = by_class[("line_standin_first2", 0.4, "brick")]
-    assert (brick["entered"], brick["recovered"]) == (20, 7)
-    assert (brick["placed_correct"], brick["binned"]) == (7, 9)
-    assert brick["recovery_rate"] == pytest.approx(7 / 20)
-    assert brick["purity"] == pytest.approx(7 / 9)
-    assert by_class[("line_standin_first2", 0.4, "wood")]["recovery_rate"] == 0.0
-    bins = {(r["cell"], r["speed_mps"], r["station"], r["bin"]): r for r in bin_rows(data)}
+    assert (brick.entered, brick.recovered) == (20, 7)
+    assert (brick.placed_correct, brick.binned) == (7, 9)
+    assert brick.recovery_rate == pytest.approx(7 / 20)
+    assert brick.purity == pytest.approx(7 / 9)
+    assert by_class[("line_standin_first2", 0.4, "wood")].recovery_rate == 0.0
+    bins = {(r.cell, r.speed_mps, r.station, r.bin): r for r in bin_rows(data)}
     first = bins[("line_standin_first2", 0.4, "first", "brick")]
     second = bins[("line_standin_first2", 0.4, "second", "brick")]
-    assert (first["binned"], first["placed_correct"], first["purity"]) == (2, 0, 0.0)
-    assert (second["binned"], second["purity"]) == (7, 1.0)
+    assert (first.binned, first.placed_correct, first.purity) == (2, 0, 0.0)
+    assert (second.binned, second.purity) == (7, 1.0)
     out = tmp_path / "report"
     page = write_report([sweep], out).read_text(encoding="utf-8")
     assert 'id="fig-recovery_stations"' in page
@@ -353,3 +342,89 @@ def test_the_report_of_a_line_sweep_draws_recovery_against_stations_and_purity_t
     for anchor in ("recovery-stations", "per-class", "per-bin", "per-station"):
         assert f'id="{anchor}"' in page
     assert "<td>line_standin_first2</td>" in page
+
+
+def test_a_run_without_its_rows_is_a_note_and_its_episodes_have_no_numbers(
+    tmp_path: Path,
+) -> None:
+    """The report reads the rows the run wrote and scores nothing itself: without
+    ``episodes.json``, or with a row that is not a record, the episode is listed without
+    numbers and the notes say why."""
+    from experiments.report import episode_rows
+
+    missing = _two_station_run(tmp_path / "missing")
+    (missing / "episodes.json").unlink()
+    broken = _two_station_run(tmp_path / "broken")
+    (broken / "episodes.json").write_text(json.dumps([{"episode": 0, "seed": "one"}]))
+    for run, why in ((missing, "No such file"), (broken, "episodes.json[0].seed")):
+        data = load_runs([run])
+        (row,) = episode_rows(data)
+        assert (row.picked, row.targeted, row.success_rate) == (None, None, None)
+        assert data.episodes[0].metrics is None
+        assert any(note.startswith(f"{run}: no metrics") and why in note for note in data.notes)
+        assert any("ep000: no metrics (no row of episodes.json)" in note for note in data.notes)
+        page = write_report([run], tmp_path / f"report_{run.name}").read_text(encoding="utf-8")
+        assert f"{run}: no metrics" in page
+
+
+def test_the_rows_the_run_wrote_are_the_numbers_even_when_the_events_say_otherwise(
+    tmp_path: Path,
+) -> None:
+    """Scored once: the report's numbers are the written row's, not a new scoring of the
+    episode's events (here the events are changed after the run wrote its row)."""
+    from experiments.report import episode_rows
+
+    run = _two_station_run(tmp_path / "run")
+    events = run / "ep000" / "twin" / "events.jsonl"
+    events.write_text(events.read_text() + _event("pick_success", 5, station="downstream") + "\n")
+    (row,) = episode_rows(load_runs([run]))
+    assert row.picked == 4
+
+
+def test_a_player_is_rewritten_when_its_code_or_any_asset_is_newer(
+    run_dir: Path, tmp_path: Path
+) -> None:
+    """The report refreshes an episode's player when the player's module or any file of
+    ``experiments/player_assets/`` is newer than the page (a change to the script or the style
+    alone must reach every page), and leaves an up-to-date page alone."""
+    import os
+
+    from experiments import player
+    from experiments.report_players import is_stale, player_inputs
+
+    copy = tmp_path / "run"
+    shutil.copytree(run_dir, copy)
+    inputs = player_inputs(copy / "ep000")
+    assets = sorted(p for p in player.ASSETS.rglob("*") if p.is_file())
+    assert {"player.css", "player.js", "player_body.html"} <= {p.name for p in assets}
+    assert set(assets) <= set(inputs)
+    assert Path(player.__file__).resolve() in inputs
+    page = copy / "ep000" / player.PAGE_NAME
+    write_report([copy], tmp_path / "first")
+    assert page.is_file()
+    assert not is_stale(page, inputs)
+    newest = max(p.stat().st_mtime for p in inputs if p.is_file())
+    os.utime(page, (newest + 10, newest + 10))
+    write_report([copy], tmp_path / "second")
+    assert page.stat().st_mtime == newest + 10  # up to date: left alone
+    for asset in assets:
+        os.utime(page, (asset.stat().st_mtime - 1, asset.stat().st_mtime - 1))
+        assert is_stale(page, inputs), asset
+    write_report([copy], tmp_path / "third")
+    assert page.stat().st_mtime > newest  # older than an asset: rewritten
+
+
+def test_a_page_is_stale_when_missing_or_older_than_an_input_that_exists(tmp_path: Path) -> None:
+    import os
+
+    from experiments.report_players import is_stale
+
+    page, source, gone = tmp_path / "player.html", tmp_path / "player.js", tmp_path / "gone.css"
+    source.write_text("script")
+    assert is_stale(page, [source, gone])
+    page.write_text("page")
+    os.utime(source, (100.0, 100.0))
+    os.utime(page, (200.0, 200.0))
+    assert not is_stale(page, [source, gone])
+    os.utime(source, (300.0, 300.0))
+    assert is_stale(page, [source, gone])

@@ -327,10 +327,12 @@ def _event(kind: str, oid: int, **data: Any) -> str:
 
 def _episode_folder(run: Path, cell: str, events: list[str], landing: list[int]) -> Path:
     from interfaces.cell import load_cell
+    from interfaces.run_folder import RunFolder
 
-    load_cell(cell).save(run / "cell.yaml")
-    folder = run / "ep000"
-    (folder / "twin").mkdir(parents=True)
+    run.mkdir(parents=True)
+    load_cell(cell).save(RunFolder(run).cell)
+    episode = RunFolder(run).episode(0)
+    episode.twin.mkdir(parents=True)
     summary = {
         "belt_speed_mps": 0.3,
         "seed": 1,
@@ -340,9 +342,9 @@ def _episode_folder(run: Path, cell: str, events: list[str], landing: list[int])
         "tracking": {"tracking_time_4mm_mean_s": 0.7, "pursuits": 4, "unsettled": 0},
         "landing_in_bins": landing,
     }
-    (folder / "twin" / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
-    (folder / "twin" / "events.jsonl").write_text("\n".join(events) + "\n", encoding="utf-8")
-    return folder
+    episode.summary.write_text(json.dumps(summary), encoding="utf-8")
+    episode.events.write_text("\n".join(events) + "\n", encoding="utf-8")
+    return episode.path
 
 
 def _stats(completed: int, **untargeted: int) -> str:
@@ -366,12 +368,12 @@ def test_an_object_still_falling_into_its_bin_at_the_end_is_not_counted_targeted
         run = tmp_path / f"run{len(landing)}"
         folder = _episode_folder(run, "default", events, landing)
         (folder / "controller.json").write_text(_stats(4, too_wide=2), encoding="utf-8")
-        rows.append(score_episode(folder, "lockstep").to_data())
-    assert (rows[0]["targeted"], rows[0]["success_rate"]) == (4, 0.75)
-    assert (rows[1]["targeted"], rows[1]["success_rate"]) == (3, 1.0)
-    assert rows[1]["untargeted"] == {"too_wide": 2}
-    assert rows[1]["stations"]["panda"]["targeted"] == 3
-    assert (rows[1]["picked"], rows[1]["missed"], rows[1]["processed"]) == (4, 1, 5)
+        rows.append(score_episode(folder, "lockstep"))
+    assert (rows[0].metric("targeted"), rows[0].metric("success_rate")) == (4, 0.75)
+    assert (rows[1].metric("targeted"), rows[1].metric("success_rate")) == (3, 1.0)
+    assert rows[1].line.untargeted == {"too_wide": 2}
+    assert rows[1].stations["panda"]["targeted"] == 3
+    assert [rows[1].metric(k) for k in ("picked", "missed", "processed")] == [4, 1, 5]
 
 
 def test_each_station_is_credited_its_own_targets_less_its_own_landing_objects(
@@ -391,16 +393,16 @@ def test_each_station_is_credited_its_own_targets_less_its_own_landing_objects(
     (folder / "controller-upstream.json").write_text(_stats(3, too_wide=1), encoding="utf-8")
     (folder / "controller-upstream_1.json").write_text(_stats(0), encoding="utf-8")
     (folder / "controller-downstream.json").write_text(_stats(1, flat=2), encoding="utf-8")
-    row = score_episode(folder, "lockstep").to_data()
-    up_row, down_row = row["stations"]["upstream"], row["stations"]["downstream"]
+    row = score_episode(folder, "lockstep")
+    up_row, down_row = row.stations["upstream"], row.stations["downstream"]
     assert (up_row["targeted"], up_row["success_rate"]) == (3, 1.0)
     assert (down_row["targeted"], down_row["success_rate"]) == (0, 0.0)
-    assert (row["targeted"], row["success_rate"]) == (3, 1.0)
-    assert row["untargeted"] == {"too_wide": 1, "flat": 2}
+    assert (row.metric("targeted"), row.metric("success_rate")) == (3, 1.0)
+    assert row.line.untargeted == {"too_wide": 1, "flat": 2}
     assert (up_row["controller_restarts"], down_row["controller_restarts"]) == (1, 0)
-    assert row["controller_restarts"] == 1
+    assert row.metric("controller_restarts") == 1
     # object 5, missed upstream only, is undecided for the line
-    assert (row["missed"], row["processed"], row["picked"]) == (0, 4, 4)
+    assert [row.metric(k) for k in ("missed", "processed", "picks")] == [0, 4, 4]
     assert (up_row["missed"], up_row["processed"]) == (2, 5)
     assert down_row["picked"] == 1
 
@@ -434,25 +436,26 @@ def test_an_episode_row_gives_bin_purity_drops_and_allocation_per_station(
     (folder / "controller-downstream.json").write_text(
         _stats(1, too_small=1, left_for_downstream=2), encoding="utf-8"
     )
-    row = score_episode(folder, "lockstep").to_data()
-    up_row, down_row = row["stations"]["upstream"], row["stations"]["downstream"]
-    assert up_row["bins"] == {"brick": {"binned": 1, "placed_correct": 1, "purity": 1.0}}
-    assert down_row["bins"] == {"wood": {"binned": 1, "placed_correct": 0, "purity": 0.0}}
-    assert row["dropped_by_reason"] == {"seal_lost": 1, "suction_overload": 1}
-    assert (row["dropped"], up_row["dropped"], down_row["dropped"]) == (2, 2, 0)
+    row = score_episode(folder, "lockstep")
+    up_row, down_row = row.stations["upstream"], row.stations["downstream"]
+    assert up_row.bins == {"brick": {"binned": 1, "placed_correct": 1, "purity": 1.0}}
+    assert down_row.bins == {"wood": {"binned": 1, "placed_correct": 0, "purity": 0.0}}
+    assert row.line.dropped_by_reason == {"seal_lost": 1, "suction_overload": 1}
+    assert (row.metric("dropped"), up_row["dropped"], down_row["dropped"]) == (2, 2, 0)
     # the upstream controller targeted 3 objects and left 2; the downstream one 1 and 3
-    assert up_row["untargeted"] == {"too_wide": 1, "claimed_by_other": 1}
+    assert up_row.untargeted == {"too_wide": 1, "claimed_by_other": 1}
     assert up_row["considered"] == 5
-    assert up_row["untargeted_share"] == {"claimed_by_other": 0.2, "too_wide": 0.2}
+    assert up_row.untargeted_share == {"claimed_by_other": 0.2, "too_wide": 0.2}
     assert (up_row["untargeted_unfit"], up_row["unfit_share"]) == (1, 0.2)
     assert (down_row["untargeted_unfit"], down_row["unfit_share"]) == (1, 0.25)
-    assert row["untargeted"]["left_for_downstream"] == 2
-    assert "unfit_share" not in row  # a station's figure: a line counts an object per station
-    assert (row["binned"], row["purity"]) == (2, 0.5)
-    assert row["classes"]["brick"]["purity"] == 1.0
+    assert row.line.untargeted["left_for_downstream"] == 2
+    # a station's figure: a line counts an object per station
+    assert "unfit_share" not in row.line.values
+    assert (row.metric("binned"), row.metric("purity")) == (2, 0.5)
+    assert row.classes["brick"]["purity"] == 1.0
     # 4 entered the upstream window with no fate at the end: the cohort is 1-3, 1 recovered
-    assert (row["entered"], row["recovered"], row["spawned"]) == (3, 1, 4)
-    assert row["classes"]["brick"]["recovery_rate"] == pytest.approx(1 / 3)
+    assert [row.metric(k) for k in ("entered", "recovered", "spawned")] == [3, 1, 4]
+    assert row.classes["brick"]["recovery_rate"] == pytest.approx(1 / 3)
 
 
 TWO_STATIONS = """\

@@ -24,7 +24,7 @@ from twin.camera.errors import RenderError
 
 if TYPE_CHECKING:
     from detector.detector import DetectorOutput
-    from twin.sim import Twin
+    from twin.sim_view import PerceptionSim
 
 __all__ = ["overlay_image", "write_overlay", "write_twin_overlays"]
 
@@ -105,15 +105,15 @@ def write_overlay(
     return path
 
 
-def write_twin_overlays(twin: Twin, folder: Path, *, renderer: str = "auto") -> list[Path]:
+def write_twin_overlays(twin: PerceptionSim, folder: Path, *, renderer: str = "auto") -> list[Path]:
     """Render every camera of ``twin``'s cell now (after its ``reset``), run its detector
     (:func:`twin.camera.detectors.detectors_for`) on the frame as the camera source filters it
-    (:func:`twin.perception_source.filtered_frame`) and write ``folder/NAME.png`` per camera
+    (:func:`twin.camera.filters.filtered_frame`) and write ``folder/NAME.png`` per camera
     with its detections drawn in their classes' colours; returns the files written."""
     from interfaces.class_colours import class_colour
     from twin.camera.detectors import detectors_for
+    from twin.camera.filters import belt_plane_depth, filtered_frame
     from twin.camera.rig import CameraRig
-    from twin.perception_source import belt_plane_depth, filtered_frame
 
     cameras = twin.cell.cameras
     if not cameras:

@@ -1,5 +1,8 @@
 """The camera rig: renders a running twin's cameras into :class:`interfaces.camera.RgbdFrame`.
 
+The twin is read through :class:`twin.sim_view.CameraSim` (what the rig needs of it; a
+:class:`twin.sim.Twin` is one), so the cameras do not depend on the sim that steps them.
+
 Usage (the twin's stepping loop captures each camera at its rate)::
 
     rig = CameraRig(twin)                      # after twin.reset(); renderer "auto"
@@ -56,10 +59,10 @@ from twin.camera.twin_scene import (
     world_bodies,
 )
 from twin.objects import read_mesh
+from twin.sim_view import CameraSim
 
 if TYPE_CHECKING:
     from twin.robot import Robot
-    from twin.sim import Twin
 
 __all__ = ["BELT_RGB", "FLOOR_RGB", "ROBOT_ID", "CameraRig", "Snapshot"]
 
@@ -102,13 +105,14 @@ class Snapshot:
 
 
 class CameraRig:
-    """Renders the cameras of one :class:`twin.sim.Twin` (after its ``reset``).
+    """Renders the cameras of one running twin (a :class:`twin.sim_view.CameraSim`, after its
+    ``reset``).
 
     ``renderer`` is ``auto`` (OpenGL when an EGL context can be created, else PyBullet's
     TinyRenderer, said once per process), ``gl`` or ``tiny``.
     """
 
-    def __init__(self, twin: Twin, *, renderer: str = "auto") -> None:
+    def __init__(self, twin: CameraSim, *, renderer: str = "auto") -> None:
         self.twin = twin
         self.renderer: Renderer = choose_renderer(renderer)
         self._gl: GlRenderer | None = GlRenderer() if self.renderer == "gl" else None

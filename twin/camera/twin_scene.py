@@ -7,8 +7,9 @@ forward kinematics (as :meth:`twin.robot.Robot.link_poses`). Quaternions become 
 vectorised step for all bodies.
 
 :class:`TwinObjects` is the one place that reads the twin's object table (which PyBullet body
-and which meshgen spec and sampled height each object id has), through the twin's read-only
-accessors :meth:`twin.sim.Twin.object_shape` and :meth:`twin.sim.Twin.body_of`.
+and which meshgen spec and sampled height each object id has), through the read-only accessors
+``object_shape`` and ``body_of`` of :class:`twin.sim_view.CameraSim` (the running twin as the
+camera sees it).
 """
 
 from __future__ import annotations
@@ -22,10 +23,10 @@ import pybullet as pb
 from interfaces.cell import Cell
 from twin.objects import ObjectSpec, inertia_of
 from twin.scene import LinkVisual, bin_triangles, box_triangles
+from twin.sim_view import CameraSim
 
 if TYPE_CHECKING:
     from twin.robot import Robot
-    from twin.sim import Twin
 
 __all__ = [
     "RobotLinks",
@@ -91,7 +92,7 @@ class TwinObjects:
     off, not in a bin), in id order. Object ids count up from 1 in spawn order and never come
     back once an object is gone, so each call looks only at the new ids and the live ones."""
 
-    def __init__(self, twin: Twin) -> None:
+    def __init__(self, twin: CameraSim) -> None:
         self.twin = twin
         self._live: dict[int, SceneObject] = {}
         self._next_id = 1
@@ -189,7 +190,7 @@ class WorldBodies:
     bins: tuple[tuple[int, str], ...]
 
 
-def world_bodies(twin: Twin) -> WorldBodies | None:
+def world_bodies(twin: CameraSim) -> WorldBodies | None:
     """The static bodies of the twin's current episode (None before its first reset)."""
     world = twin.world
     if world is None:
