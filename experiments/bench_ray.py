@@ -21,11 +21,11 @@ import shutil
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
 from experiments.bench_sweep import bench_grid
 from interfaces.errors import CdwTwinError
 from interfaces.run_folder import RunFolder
+from interfaces.run_records import read_rows
 from twin.scenario import Scenario
 
 TIMING = frozenset({"real_time_factor"})
@@ -49,15 +49,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
 
 
-def _episodes(out: Path) -> list[tuple[dict[str, Any], bytes]]:
-    """Every episode of a sweep folder: its row less the timing figures, and its events."""
+def _episodes(out: Path) -> list[tuple[dict[str, object], bytes]]:
+    """Every episode of a sweep folder: its row as written less the timing figures, and its
+    events."""
     found = []
     for cell in sorted(p for p in out.iterdir() if p.is_dir()):
         run = RunFolder(cell)
-        rows = json.loads(run.episodes_json.read_text(encoding="utf-8"))
-        for row in rows:
-            events = run.episode(int(row["episode"])).events
-            kept = {k: v for k, v in row.items() if k not in TIMING}
+        for row in read_rows(run.episodes_json):
+            events = run.episode(row.episode).events
+            kept = {k: v for k, v in row.to_data().items() if k not in TIMING}
             found.append((kept, events.read_bytes()))
     return found
 
@@ -97,10 +97,10 @@ def run(args: argparse.Namespace) -> int:
                     c1 = os.times()
                     cpu = c1.children_user - c0.children_user
                     cpu += c1.children_system - c0.children_system
-                    cpu += data["backend"].get("episode_cpu_s", 0.0)
+                    cpu += data.backend.episode_cpu_s or 0.0
                     cpus[name].append(round(cpu, 2))
                     if code != 0:
-                        print(json.dumps({"error": data.get("stopped"), "backend": name}))
+                        print(json.dumps({"error": data.stopped, "backend": name}))
                         return code
                     seen[name] = _episodes(out)
                     shutil.rmtree(out)

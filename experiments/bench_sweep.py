@@ -179,11 +179,18 @@ class PassLog:
 
 
 def _episode_rtfs(out: Path) -> list[float]:
-    """The closed-loop real-time factor of every episode of a finished sweep folder."""
-    return [
-        round(float(json.loads(path.read_text(encoding="utf-8"))["real_time_factor"]), 3)
-        for path in sorted(out.glob("*/ep*/twin/summary.json"))
+    """The closed-loop real-time factor of every episode of a finished sweep folder (from each
+    twin's summary; one that states none has none to give)."""
+    from interfaces.run_folder import RunFolder
+    from interfaces.run_records import EpisodeSummary
+
+    summaries = [
+        EpisodeSummary.read(episode.summary)
+        for cell in sorted(p for p in out.iterdir() if p.is_dir())
+        for episode in RunFolder(cell).episodes()
+        if episode.summary.is_file()
     ]
+    return [round(s.real_time_factor, 3) for s in summaries if s.real_time_factor is not None]
 
 
 def _cpu_s(before: os.times_result, after: os.times_result) -> float:
@@ -228,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
                     wall = time.perf_counter() - t0
                     logs[transport].add(workers, wall, _cpu_s(c0, os.times()), load)
                     if code != 0:
-                        print(json.dumps({"error": data.get("stopped"), "transport": transport}))
+                        print(json.dumps({"error": data.stopped, "transport": transport}))
                         return code
                     if workers == 1:
                         logs[transport].rtfs.extend(_episode_rtfs(out))

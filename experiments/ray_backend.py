@@ -8,9 +8,10 @@ folder (a temporary copy of the grid cell's). Nothing relies on a shared file sy
 cell's small files (``scenario.yaml``, ``cell.yaml``, ``controller.yaml``) travel in the task's
 arguments, the dataset travels once per sweep through Ray's object store as a tar archive
 (unpacked once per worker machine, keyed by its SHA-256), and the finished episode folder comes
-back as a tar archive with the metrics. The driver unpacks it where the local backend would have
-written it, so ``sweep.json``, ``sweep.csv``, the cells' tables and intervals are written by the
-same code (:class:`experiments.sweep.Sweep`) for both backends.
+back as a tar archive with the metrics (:mod:`experiments.sweep_shipping`). The driver unpacks
+it where the local backend would have written it, so ``sweep.json``, ``sweep.csv``, the cells'
+tables and intervals are written by the same code (:class:`experiments.sweep.Sweep`) for both
+backends.
 
 Resources: each task declares :data:`EPISODE_CPUS` CPUs (``--cpus-per-episode``), the measured
 load of one lockstep episode (twin and controllers alternate, one core busy; see
@@ -35,25 +36,30 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import hashlib
-import io
 import logging
 import os
-import resource
 import shutil
 import signal
 import socket
 import sys
-import tarfile
 import tempfile
 import threading
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
+from experiments.sweep_shipping import (
+    EpisodeResult,
+    ShippedEpisode,
+    dataset_key,
+    pack,
+    run_files,
+    run_shipped_episode,
+    unpack,
+)
+from experiments.sweep_summary import BackendNote
 from interfaces.errors import CdwTwinError
-from interfaces.run_folder import RunFolder
 from interfaces.run_records import EpisodeMetrics
 
 if TYPE_CHECKING:
@@ -90,7 +96,7 @@ class EpisodeBoard(Protocol[RunT]):
     cancel: threading.Event
     stopped: list[str]
     retried: list[str]
-    backend: dict[str, Any]
+    backend: BackendNote
 
     def finished(
         self, run: RunT, episode: EpisodeSpec, metrics: EpisodeMetrics | None, reason: str
@@ -109,7 +115,10 @@ CONNECT_TIMEOUT_S = 120.0
 PROBE_TIMEOUT_S = 10.0
 """Longest the TCP probe of an ``--address`` waits for the port to answer."""
 
-RAY_INIT_OPTIONS: dict[str, Any] = {
+RayInitOption = bool | int | str
+"""The value of a ``ray.init`` keyword the sweep passes."""
+
+RAY_INIT_OPTIONS: dict[str, RayInitOption] = {
     "include_dashboard": False,
     "log_to_driver": False,
     "configure_logging": False,
@@ -119,148 +128,6 @@ RAY_INIT_OPTIONS: dict[str, Any] = {
 
 class RayBackendError(CdwTwinError):
     """Ray cannot be used (not installed, no cluster at the address)."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class ShippedEpisode:
-    """Everything a worker needs to run one episode, by value.
-
-    ``files`` are the grid cell's run-folder files by name; ``options`` the driver's run
-    options, whose paths the worker maps onto its own copy (:func:`worker_options`).
-    """
-
-    files: dict[str, bytes]
-    options: Any
-    index: int
-    seed: int
-    dataset_key: str
-
-
-@dataclass(frozen=True, kw_only=True)
-class EpisodeResult:
-    """What a task sends back: the metrics (None when the episode failed, with ``reason``),
-    the episode folder as a tar archive, and the CPU seconds the episode's processes used."""
-
-    metrics: EpisodeMetrics | None
-    reason: str
-    archive: bytes
-    cpu_s: float
-    node: str
-
-
-def pack(folder: Path) -> bytes:
-    """``folder``'s content as an uncompressed tar archive, names relative to it, in sorted
-    order (the same folder gives the same bytes)."""
-    buffer = io.BytesIO()
-    with tarfile.open(fileobj=buffer, mode="w") as tar:
-        for path in sorted(folder.rglob("*")):
-            info = tar.gettarinfo(str(path), arcname=str(path.relative_to(folder)))
-            info.mtime = 0
-            info.uid = info.gid = 0
-            info.uname = info.gname = ""
-            if info.isfile():
-                with path.open("rb") as handle:
-                    tar.addfile(info, handle)
-            elif info.isdir():
-                tar.addfile(info)
-    return buffer.getvalue()
-
-
-def unpack(archive: bytes, folder: Path) -> None:
-    """Unpack ``archive`` as ``folder`` whole: into a temporary sibling renamed into place,
-    so a folder of that name is never half-written. An existing ``folder`` is replaced."""
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-    try:
-        with tarfile.open(fileobj=io.BytesIO(archive), mode="r") as tar:
-            tar.extractall(staging, filter="data")
-        if folder.exists():
-            shutil.rmtree(folder)
-        staging.rename(folder)
-    finally:
-        if staging.exists():
-            shutil.rmtree(staging)
-
-
-def dataset_key(archive: bytes) -> str:
-    """The key a worker caches an unpacked dataset under: the archive's SHA-256."""
-    return hashlib.sha256(archive).hexdigest()
-
-
-def worker_cache() -> Path:
-    """Where a worker machine keeps the datasets it has unpacked."""
-    return Path(tempfile.gettempdir()) / "cdw-twin-ray" / "datasets"
-
-
-def local_dataset(key: str, archive: bytes) -> Path:
-    """The dataset of ``key`` on this machine, unpacked from ``archive`` the first time."""
-    folder = worker_cache() / key
-    if not folder.is_dir():
-        try:
-            unpack(archive, folder)
-        except OSError:
-            if not folder.is_dir():  # another task unpacked it first: theirs is as good
-                raise
-    return folder
-
-
-def worker_options(options: Any, run_dir: Path, dataset: Path) -> Any:
-    """``options`` with every path of the driver's run folder moved to ``run_dir`` (its copy
-    on the worker) and the dataset to ``dataset``."""
-
-    def moved(path: Path | None) -> Path | None:
-        return None if path is None else run_dir / path.name
-
-    return dataclasses.replace(
-        options,
-        scenario_path=moved(options.scenario_path),
-        cell_path=moved(options.cell_path),
-        controller_params=moved(options.controller_params),
-        dataset=dataset,
-    )
-
-
-def _children_cpu_s() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
-
-
-def run_shipped_episode(shipped: ShippedEpisode, dataset_archive: bytes) -> EpisodeResult:
-    """The Ray task: run one episode in a temporary run folder; return its result."""
-    from experiments.episode_processes import EpisodeFailedError, run_episode
-    from experiments.run_types import EpisodeSpec
-
-    dataset = local_dataset(shipped.dataset_key, dataset_archive)
-    cpu0 = _children_cpu_s()
-    with tempfile.TemporaryDirectory(prefix="cdw-ray-run-") as tmp:
-        run_dir = Path(tmp) / "run"
-        run_dir.mkdir()
-        for name, data in shipped.files.items():
-            (run_dir / name).write_bytes(data)
-        options = worker_options(shipped.options, run_dir, dataset)
-        episode = EpisodeSpec(
-            index=shipped.index,
-            seed=shipped.seed,
-            folder=RunFolder(run_dir).episode(shipped.index).path,
-        )
-        metrics: EpisodeMetrics | None
-        try:
-            metrics, reason = run_episode(options, episode), ""
-        except EpisodeFailedError as exc:
-            metrics, reason = None, exc.reason
-        archive = pack(episode.folder) if episode.folder.is_dir() else b""
-    return EpisodeResult(
-        metrics=metrics,
-        reason=reason,
-        archive=archive,
-        cpu_s=_children_cpu_s() - cpu0,
-        node=socket.gethostname(),
-    )
-
-
-def run_files(folder: Path, names: Iterable[str]) -> dict[str, bytes]:
-    """The named files of a run folder, by name (what a worker needs of it)."""
-    return {name: (folder / name).read_bytes() for name in names}
 
 
 def import_ray() -> Any:
@@ -312,7 +179,9 @@ class _DropSigtermNotice(logging.Filter):
         return not str(record.msg).startswith("SIGTERM handler is not set")
 
 
-def init_bounded(ray: Any, options: dict[str, Any], doing: str, timeout_s: float) -> None:
+def init_bounded(
+    ray: Any, options: Mapping[str, RayInitOption], doing: str, timeout_s: float
+) -> None:
     """``ray.init(**options)`` in a thread, waited for at most ``timeout_s``: a
     :class:`RayBackendError` ``cannot <doing>: <why>`` when it fails or does not return in
     time (the thread is left behind; the process is about to end). Ctrl-C and SIGTERM act
@@ -467,12 +336,12 @@ class RaySweep(Generic[RunT]):
         finally:
             for signum, handler in previous.items():
                 signal.signal(signum, handler)
-        self.sweep.backend = {
-            "name": "ray",
-            "cpus_per_episode": self.cpus_per_episode,
-            "nodes": sorted(self.nodes),
-            "episode_cpu_s": round(self.cpu_s, 3),
-        }
+        self.sweep.backend = BackendNote(
+            name="ray",
+            cpus_per_episode=self.cpus_per_episode,
+            nodes=tuple(sorted(self.nodes)),
+            episode_cpu_s=round(self.cpu_s, 3),
+        )
 
 
 def episode_cpus(cpus_per_episode: float | None) -> float:
@@ -498,7 +367,7 @@ class RaySession:
         """Run every episode of ``sweep`` as a Ray task."""
         with contextlib.redirect_stdout(sys.stderr):
             RaySweep(sweep, self.ray, self.cpus_per_episode).execute()
-        sweep.backend["address"] = self.address or "local"
+        sweep.backend = dataclasses.replace(sweep.backend, address=self.address or "local")
 
     def close(self) -> None:
         """Shut the connection down (and a Ray instance started here)."""

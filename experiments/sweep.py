@@ -75,17 +75,18 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 from experiments.sweep_grid import (
     CheckedCell,
     GridCell,
     check_sweep,
 )
-from experiments.sweep_pooling import (
-    aggregate_cell,
-    aggregate_classes,
-    aggregate_stations,
+from experiments.sweep_pooling import CellPool
+from experiments.sweep_summary import (
+    BackendNote,
+    CellSummary,
+    SweepSummary,
     headline,
     sweep_csv,
 )
@@ -185,27 +186,23 @@ class CellRun:
             for i, seed in enumerate(self.cell.seeds)
         ]
 
-    def summary(self) -> dict[str, Any]:
-        """The cell's entry of ``sweep.json``."""
-        rows = [row.to_data() for row in self.ordered_rows()]  # pooled as written
-        agg = aggregate_cell(rows)
-        agg["stations"] = aggregate_stations(rows)
-        agg["classes"] = aggregate_classes(rows)
+    def summary(self) -> CellSummary:
+        """The cell's entry of ``sweep.json``, pooled from its rows as written."""
+        agg = CellPool.of(self.ordered_rows())
         scenario = self.cell.scenario
-        return {
-            "cell": self.cell.name,
-            "folder": str(self.folder),
-            "scenario": scenario.name,
-            "stations": list(self.options.stations),
-            "mode": self.cell.mode,
-            "speed_mps": scenario.system.belt_speed_mps,
-            "duration_s": scenario.duration_s,
-            "overrides": self.cell.overrides,
-            "complete": agg["episodes"] == len(self.cell.seeds),
-            "failed": agg["failed"],
-            "failures": self.failures,
-            "aggregate": agg,
-        }
+        return CellSummary(
+            cell=self.cell.name,
+            folder=str(self.folder),
+            scenario=scenario.name,
+            stations=tuple(self.options.stations),
+            mode=self.cell.mode,
+            speed_mps=scenario.system.belt_speed_mps,
+            duration_s=scenario.duration_s,
+            overrides=self.cell.overrides,
+            complete=agg.episodes == len(self.cell.seeds),
+            failures=tuple(self.failures),
+            aggregate=agg,
+        )
 
 
 def write_sweep(
@@ -300,39 +297,34 @@ class Sweep:
         self.stopped: list[str] = []
         self.write_errors: list[str] = []
         self.retried: list[str] = []
-        self.backend: dict[str, Any] = {"name": "local"}
+        self.backend = BackendNote()
         self.quiet = quiet
         self._wall0 = time.monotonic()
 
-    def summary(self, complete: bool) -> dict[str, Any]:
-        """The content of ``sweep.json``."""
-        cells = [r.summary() for r in self.runs]
-        data: dict[str, Any] = {
-            "complete": complete,
-            "grid": str(self.grid_path),
-            "workers": self.workers,
-            "episodes_planned": len(self.jobs),
-            "episodes": sum(c["aggregate"]["episodes"] for c in cells),
-            "failed": sum(c["failed"] for c in cells),
-            "wall_s": time.monotonic() - self._wall0,
-            "headline": [row for c in cells for row in headline(c, self.headline)],
-            "cells": cells,
-        }
-        data["backend"] = self.backend
-        if self.retried:
-            data["retried"] = list(self.retried)
+    def summary(self, complete: bool) -> SweepSummary:
+        """The content of ``sweep.json`` (never complete once a table could not be written)."""
+        cells = tuple(r.summary() for r in self.runs)
         stopped = [*self.stopped, *self.write_errors]
-        if stopped:
-            data["stopped"] = "; ".join(stopped)
-        if self.write_errors:
-            data["complete"] = False
-        return data
+        return SweepSummary(
+            complete=complete and not self.write_errors,
+            grid=str(self.grid_path),
+            workers=self.workers,
+            episodes_planned=len(self.jobs),
+            episodes=sum(c.aggregate.episodes for c in cells),
+            failed=sum(c.failed for c in cells),
+            wall_s=time.monotonic() - self._wall0,
+            headline=tuple(row for c in cells for row in headline(c, self.headline)),
+            cells=cells,
+            backend=self.backend,
+            retried=tuple(self.retried),
+            stopped="; ".join(stopped) if stopped else None,
+        )
 
-    def write_all(self, complete: bool) -> dict[str, Any]:
+    def write_all(self, complete: bool) -> SweepSummary:
         """Write ``sweep.json`` and ``sweep.csv``; returns the summary."""
         data = self.summary(complete)
-        write_atomic(self.out / "sweep.json", json.dumps(data, indent=2) + "\n")
-        write_atomic(self.out / "sweep.csv", sweep_csv(data["cells"]))
+        write_atomic(self.out / "sweep.json", json.dumps(data.to_data(), indent=2) + "\n")
+        write_atomic(self.out / "sweep.csv", sweep_csv(data.cells))
         return data
 
     def finish_cell(self, run: CellRun, final: bool) -> None:
@@ -451,7 +443,7 @@ class Sweep:
             for signum, handler in previous.items():
                 signal.signal(signum, handler)
 
-    def finish(self) -> tuple[dict[str, Any], int]:
+    def finish(self) -> tuple[SweepSummary, int]:
         """The final tables; returns the ``sweep.json`` content and the exit status (1 when
         an episode failed or a table could not be written, 130 when interrupted). When the
         tables cannot be written, ``sweep.json`` is rewritten in place saying so, if even
@@ -467,10 +459,10 @@ class Sweep:
             except OSError as exc:
                 self.write_failed(exc)
                 data = self.summary(False)
-                note = {k: data[k] for k in ("complete", "grid", "episodes", "failed", "stopped")}
+                note = json.dumps(data.stop_note()) + "\n"
                 with contextlib.suppress(OSError):
-                    overwrite_in_place(self.out / "sweep.json", json.dumps(note) + "\n")
-        if data["complete"]:
+                    overwrite_in_place(self.out / "sweep.json", note)
+        if data.complete:
             return data, 0
         interrupted = self.cancel.is_set() and not self.write_errors
         return data, 130 if interrupted else 1
@@ -500,7 +492,7 @@ def run_sweep(
     backend: Backend | None = None,
     replace: bool = False,
     connect_timeout_s: float | None = None,
-) -> tuple[dict[str, Any], int]:
+) -> tuple[SweepSummary, int]:
     """Run a grid (its dataset replaced by ``dataset`` when given) on ``backend`` (default: the
     local pool) into ``out``; returns the ``sweep.json`` content and the exit status.
 
@@ -527,7 +519,7 @@ def run_sweep(
         runs = write_sweep(checked, out, transport=backend.transport, record=backend.record)
         sweep = Sweep(grid_path, out, workers, runs, quiet=quiet, headline=grid.headline)
         if session is not None:
-            sweep.backend = {"name": "ray", "address": backend.address or "local"}
+            sweep.backend = BackendNote(name="ray", address=backend.address or "local")
         try:
             sweep.write_all(False)
         except OSError as exc:
@@ -568,25 +560,26 @@ def run(args: argparse.Namespace) -> int:
         connect_timeout_s=connect_timeout_s,
     )
     if args.json:
-        print(json.dumps(data))
+        print(json.dumps(data.to_data()))
     else:
-        for row in data["headline"]:
+        for row in data.headline:
+            i = row.interval
             print(
-                f"{row['cell']:>32}: {row['scope']} {row['metric']} {_fmt(row['mean'])} "
-                f"[{_fmt(row['ci95_low'])}, {_fmt(row['ci95_high'])}] over {row['n']} seeds"
+                f"{row.cell:>32}: {row.scope} {row.metric} {_fmt(i.mean)} "
+                f"[{_fmt(i.ci95_low)}, {_fmt(i.ci95_high)}] over {i.n} seeds"
             )
-        for cell in data["cells"]:
-            agg = cell["aggregate"]
-            sr = agg["metrics"]["success_rate"]
-            w = agg["wilson"]["success_rate"]
+        for cell in data.cells:
+            line = cell.aggregate.line
+            sr = line.metrics["success_rate"]
+            w = line.wilson["success_rate"]
             print(
-                f"{cell['cell']:>32}: {agg['episodes']} ep, success "
-                f"{_fmt(sr['mean'])} [{_fmt(sr['ci95_low'])}, {_fmt(sr['ci95_high'])}] "
-                f"(Wilson [{_fmt(w['ci95_low'])}, {_fmt(w['ci95_high'])}])"
+                f"{cell.cell:>32}: {line.episodes} ep, success "
+                f"{_fmt(sr.mean)} [{_fmt(sr.ci95_low)}, {_fmt(sr.ci95_high)}] "
+                f"(Wilson [{_fmt(w.ci95_low)}, {_fmt(w.ci95_high)}])"
             )
-        print(f"out: {out}  wall {data['wall_s']:.1f} s  complete: {data['complete']}")
-    if not data["complete"]:
-        print(f"cdw-twin sweep: incomplete: {data.get('stopped')}", file=sys.stderr)
+        print(f"out: {out}  wall {data.wall_s:.1f} s  complete: {data.complete}")
+    if not data.complete:
+        print(f"cdw-twin sweep: incomplete: {data.stopped}", file=sys.stderr)
     return code
 
 

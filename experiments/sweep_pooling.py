@@ -1,21 +1,21 @@
 """The sweep's pooling: per grid cell the mean and 95 % Student t interval of every metric over
-its episodes, the pooled rates with their Wilson intervals (:mod:`experiments.stats`), the
-reasons and the classes, the headline of a cell, and ``sweep.csv``. It reads the rows each
-episode's run wrote (``episodes.json``) and never scores an episode again.
+its episodes, the pooled rates with their Wilson intervals (both from :mod:`experiments.stats`)
+and the reasons, for the line, each station and each object class.
+
+It pools the typed rows each episode's run wrote (:class:`interfaces.run_records.EpisodeMetrics`
+and :class:`~interfaces.run_records.FailedEpisode`, read from ``episodes.json`` or handed over
+by the runner) and never scores an episode again. Each result is a frozen record whose
+``to_data`` is its block of ``sweep.json``.
 """
 
 from __future__ import annotations
 
-import csv
-import io
-from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 from experiments.stats import student_t_interval, wilson_interval
-from interfaces.metrics import BY_NAME, METRICS, RATES, Scope, in_scope
-
-if TYPE_CHECKING:
-    pass
+from interfaces.metrics import RATES, Scope, in_scope
+from interfaces.run_records import EpisodeRow, Metrics, ScopeMetrics, succeeded
 
 
 def _pooled_rates(scope: Scope) -> dict[str, tuple[str, str]]:
@@ -53,189 +53,220 @@ share of the objects that entered a station's window, drops), each reason aggreg
 Student t interval (a reason missing from an episode counts 0 there)."""
 
 
-def _interval(values: Sequence[float]) -> dict[str, Any]:
-    mean, low, high = student_t_interval(values)
-    return {"mean": mean, "ci95_low": low, "ci95_high": high, "n": len(values)}
+ReasonCounts = Mapping[str, int | float]
+"""One episode's per-reason block: a count (or a share) by reason."""
 
 
-def _pooled(rows: Sequence[dict[str, Any]], num: str, den: str) -> dict[str, Any]:
-    successes = sum(int(r.get(num) or 0) for r in rows)
-    trials = sum(int(r.get(den) or 0) for r in rows)
-    low, high = wilson_interval(successes, trials)
-    return {
-        "successes": successes,
-        "trials": trials,
-        "pooled": successes / trials if trials else None,
-        "ci95_low": low,
-        "ci95_high": high,
-    }
+@dataclass(frozen=True, kw_only=True)
+class Interval:
+    """The mean of a metric over a cell's episodes and its 95 % Student t interval (bounds None
+    for fewer than two episodes, everything None for none); ``n`` episodes had a value."""
+
+    mean: float | None
+    ci95_low: float | None
+    ci95_high: float | None
+    n: int
+
+    @classmethod
+    def of(cls, values: Sequence[float]) -> Interval:
+        """The interval of ``values`` (:func:`experiments.stats.student_t_interval`)."""
+        mean, low, high = student_t_interval(values)
+        return cls(mean=mean, ci95_low=low, ci95_high=high, n=len(values))
+
+    def to_data(self) -> dict[str, float | int | None]:
+        """As ``sweep.json`` holds it."""
+        return {
+            "mean": self.mean,
+            "ci95_low": self.ci95_low,
+            "ci95_high": self.ci95_high,
+            "n": self.n,
+        }
 
 
-def aggregate_reasons(rows: Sequence[dict[str, Any]], block: str) -> dict[str, dict[str, Any]]:
-    """Per reason of the episodes' ``block`` (:data:`REASON_BLOCKS`), its mean with a Student t
-    interval over the episodes that have the block (a reason one of them lacks counts 0 there);
+@dataclass(frozen=True, kw_only=True)
+class PooledRate:
+    """A rate pooled over a cell's episodes: the summed counts, their ratio (None without
+    trials) and its 95 % Wilson interval."""
+
+    successes: int
+    trials: int
+    pooled: float | None
+    ci95_low: float | None
+    ci95_high: float | None
+
+    @classmethod
+    def of(cls, successes: int, trials: int) -> PooledRate:
+        """The pooled rate of the counts (:func:`experiments.stats.wilson_interval`)."""
+        low, high = wilson_interval(successes, trials)
+        pooled = successes / trials if trials else None
+        return cls(successes=successes, trials=trials, pooled=pooled, ci95_low=low, ci95_high=high)
+
+    def to_data(self) -> dict[str, float | int | None]:
+        """As ``sweep.json`` holds it."""
+        return {
+            "successes": self.successes,
+            "trials": self.trials,
+            "pooled": self.pooled,
+            "ci95_low": self.ci95_low,
+            "ci95_high": self.ci95_high,
+        }
+
+
+@dataclass(frozen=True, kw_only=True)
+class ScopeSample:
+    """What one successful episode gives a scope's pooling: the metric table's values and the
+    per-reason blocks it has (of :data:`REASON_BLOCKS`)."""
+
+    values: Metrics
+    reasons: Mapping[str, ReasonCounts] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, block: ScopeMetrics) -> ScopeSample:
+        """The line's or a station's block of a row (``untargeted_share``: a station's only)."""
+        reasons: dict[str, ReasonCounts] = {
+            "untargeted": block.untargeted,
+            "dropped_by_reason": block.dropped_by_reason,
+        }
+        if block.untargeted_share is not None:
+            reasons["untargeted_share"] = block.untargeted_share
+        return cls(values=block.values, reasons=reasons)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ScopePool:
+    """The pooled metrics of one scope (the line, a station or a class) of a grid cell: how many
+    episodes succeeded and failed, every metric's interval, every rate pooled, and per reason of
+    each per-reason block the episodes have, its interval."""
+
+    episodes: int
+    failed: int = 0
+    metrics: Mapping[str, Interval]
+    wilson: Mapping[str, PooledRate]
+    reasons: Mapping[str, Mapping[str, Interval]] = field(default_factory=dict)
+    """By block of :data:`REASON_BLOCKS` (those the episodes have), by reason (sorted)."""
+
+    def to_data(self) -> dict[str, object]:
+        """As ``sweep.json`` holds it: counts, ``metrics``, ``wilson``, then the reason blocks."""
+        out: dict[str, object] = {
+            "episodes": self.episodes,
+            "failed": self.failed,
+            "metrics": {k: v.to_data() for k, v in self.metrics.items()},
+            "wilson": {k: v.to_data() for k, v in self.wilson.items()},
+        }
+        for block in REASON_BLOCKS:
+            if block in self.reasons:
+                out[block] = {k: v.to_data() for k, v in self.reasons[block].items()}
+        return out
+
+
+def pool_reasons(samples: Sequence[ScopeSample], block: str) -> dict[str, Interval]:
+    """Per reason of the samples' ``block`` (:data:`REASON_BLOCKS`), its mean with a Student t
+    interval over the samples that have the block (a reason one of them lacks counts 0 there);
     reasons sorted."""
-    blocks = [r[block] for r in rows if isinstance(r.get(block), dict)]
+    blocks = [s.reasons[block] for s in samples if block in s.reasons]
     reasons = sorted({str(k) for b in blocks for k in b})
-    return {reason: _interval([float(b.get(reason) or 0.0) for b in blocks]) for reason in reasons}
+    return {r: Interval.of([float(b.get(r) or 0.0) for b in blocks]) for r in reasons}
 
 
-def aggregate_cell(
-    rows: Sequence[dict[str, Any]],
-    metrics: Sequence[str] = CI_METRICS,
-    rates: dict[str, tuple[str, str]] | None = None,
-) -> dict[str, Any]:
-    """Per-metric ``{mean, ci95_low, ci95_high, n}``, pooled Wilson intervals of the rates and,
-    per reason, the untargeted objects and the drops (:data:`REASON_BLOCKS`, those the rows
-    have).
-
-    ``rows`` are rows of ``episodes.json`` as written (:meth:`EpisodeMetrics.to_data`; or their
-    ``stations`` or ``classes`` blocks, with ``metrics`` and ``rates`` of that scope); a metric
-    that is None in an episode (e.g. no settled pursuit) leaves that episode out of that metric
-    only. Failed episodes (``"failed": true``) are counted in ``failed`` and left out of
-    everything else.
-    """
-    rates = WILSON_RATES if rates is None else rates
-    failed = sum(1 for r in rows if r.get("failed"))
-    rows = [r for r in rows if not r.get("failed")]
-    out: dict[str, Any] = {"episodes": len(rows), "failed": failed, "metrics": {}, "wilson": {}}
-    for key in metrics:
-        out["metrics"][key] = _interval([float(r[key]) for r in rows if r.get(key) is not None])
-    for rate, (num, den) in rates.items():
-        out["wilson"][rate] = _pooled(rows, num, den)
-    for block in REASON_BLOCKS:
-        if any(block in r for r in rows):
-            out[block] = aggregate_reasons(rows, block)
-    return out
-
-
-def _aggregate_entries(
-    rows: Sequence[dict[str, Any]],
-    block: str,
+def pool_scope(
+    samples: Sequence[ScopeSample],
     metrics: Sequence[str],
-    rates: dict[str, tuple[str, str]],
-) -> dict[str, dict[str, Any]]:
-    good = [r for r in rows if not r.get("failed")]
-    names: dict[str, None] = {}
-    for row in good:
-        names.update(dict.fromkeys(row.get(block) or {}))
+    rates: Mapping[str, tuple[str, str]],
+    *,
+    failed: int = 0,
+) -> ScopePool:
+    """Every metric's interval over the samples (a metric that is None in an episode, e.g. no
+    settled pursuit, leaves that episode out of that metric only), every rate pooled from its
+    counts (``rates``: rate -> (successes, trials)) and the reasons."""
+    return ScopePool(
+        episodes=len(samples),
+        failed=failed,
+        metrics={
+            key: Interval.of([float(v) for s in samples if (v := s.values.get(key)) is not None])
+            for key in metrics
+        },
+        wilson={
+            rate: PooledRate.of(
+                sum(int(s.values.get(num) or 0) for s in samples),
+                sum(int(s.values.get(den) or 0) for s in samples),
+            )
+            for rate, (num, den) in rates.items()
+        },
+        reasons={
+            block: pool_reasons(samples, block)
+            for block in REASON_BLOCKS
+            if any(block in s.reasons for s in samples)
+        },
+    )
+
+
+def pool_line(rows: Sequence[EpisodeRow]) -> ScopePool:
+    """The line's pool over the rows: failed episodes are counted in ``failed`` and left out of
+    everything else."""
+    good = succeeded(rows)
+    samples = [ScopeSample.of(r.line) for r in good]
+    return pool_scope(samples, CI_METRICS, WILSON_RATES, failed=len(rows) - len(good))
+
+
+def pool_stations(rows: Sequence[EpisodeRow]) -> dict[str, ScopePool]:
+    """Each station's pool over the successful episodes that have it, stations in the order
+    the rows first name them."""
+    good = succeeded(rows)
+    names = dict.fromkeys(name for r in good for name in r.stations)
     return {
-        name: aggregate_cell(
-            [r[block][name] for r in good if name in (r.get(block) or {})], metrics, rates
+        name: pool_scope(
+            [ScopeSample.of(r.stations[name]) for r in good if name in r.stations],
+            STATION_CI_METRICS,
+            STATION_WILSON_RATES,
         )
         for name in names
     }
 
 
-def aggregate_stations(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """:func:`aggregate_cell` of each station's block over the successful episodes."""
-    return _aggregate_entries(rows, "stations", STATION_CI_METRICS, STATION_WILSON_RATES)
-
-
-def aggregate_classes(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """:func:`aggregate_cell` of each object class's block (the line's, per class: recovery,
-    purity, ...) over the successful episodes; classes sorted."""
-    out = _aggregate_entries(rows, "classes", CLASS_CI_METRICS, CLASS_WILSON_RATES)
-    return dict(sorted(out.items()))
-
-
-def headline(cell: dict[str, Any], names: Sequence[str]) -> list[dict[str, Any]]:
-    """The grid's ``headline`` metrics of one grid cell's entry of ``sweep.json``: one row per
-    metric and scope (the line's when the table gives the metric for the line, else each
-    station's), with the mean, its 95 % Student t interval over the seeds and, for a rate, the
-    pooled value with its Wilson interval."""
-    agg = cell["aggregate"]
-    rows = []
-    for name in names:
-        scopes = (
-            [("line", agg)]
-            if "line" in BY_NAME[name].scopes
-            else [(f"station {s}", a) for s, a in (agg.get("stations") or {}).items()]
+def pool_classes(rows: Sequence[EpisodeRow]) -> dict[str, ScopePool]:
+    """Each object class's pool (the line's, per class: recovery, purity, ...) over the
+    successful episodes that have it; classes sorted."""
+    good = succeeded(rows)
+    names = sorted({name for r in good for name in r.classes})
+    return {
+        name: pool_scope(
+            [ScopeSample(values=r.classes[name]) for r in good if name in r.classes],
+            CLASS_CI_METRICS,
+            CLASS_WILSON_RATES,
         )
-        for scope, block in scopes:
-            row: dict[str, Any] = {
-                "cell": cell["cell"],
-                "stations": len(cell["stations"]),
-                "speed_mps": cell["speed_mps"],
-                "metric": name,
-                "scope": scope,
-                **block["metrics"].get(name, _interval([])),
-            }
-            wilson = block["wilson"].get(name)
-            if wilson is not None:
-                row["pooled"] = wilson["pooled"]
-                row["wilson_low"] = wilson["ci95_low"]
-                row["wilson_high"] = wilson["ci95_high"]
-            rows.append(row)
-    return rows
+        for name in names
+    }
 
 
-CSV_HEADER = (
-    "cell",
-    "station",
-    "scenario",
-    "mode",
-    "speed_mps",
-    "duration_s",
-    "episodes",
-    "failed",
-)
-"""The leading columns of ``sweep.csv``; then mean and interval of every metric and rate."""
+@dataclass(frozen=True, kw_only=True)
+class CellPool:
+    """A grid cell's pooled metrics: the line's (with the episode counts), each station's and
+    each object class's (``sweep.json``'s ``aggregate``)."""
 
+    line: ScopePool
+    stations: Mapping[str, ScopePool]
+    classes: Mapping[str, ScopePool]
 
-CSV_METRICS = tuple(m.name for m in METRICS if {"line", "station"} & set(m.scopes))
-"""The metric columns of ``sweep.csv``: every metric given for the line or per station."""
+    @property
+    def episodes(self) -> int:
+        """How many of the cell's episodes succeeded (the ones pooled)."""
+        return self.line.episodes
 
+    @property
+    def failed(self) -> int:
+        """How many of the cell's episodes failed."""
+        return self.line.failed
 
-CSV_RATES = {**WILSON_RATES, **STATION_WILSON_RATES}
-"""The pooled-rate columns of ``sweep.csv``."""
+    @classmethod
+    def of(cls, rows: Sequence[EpisodeRow]) -> CellPool:
+        """The pools of a cell's rows, as written (:func:`pool_line`, :func:`pool_stations`,
+        :func:`pool_classes`)."""
+        return cls(line=pool_line(rows), stations=pool_stations(rows), classes=pool_classes(rows))
 
-
-def _csv_row(cell: dict[str, Any], station: str, agg: dict[str, Any]) -> list[Any]:
-    row: list[Any] = [
-        cell["cell"],
-        station,
-        cell["scenario"],
-        cell["mode"],
-        cell["speed_mps"],
-        cell["duration_s"],
-        agg["episodes"],
-        agg.get("failed", 0),
-    ]
-    for key in CSV_METRICS:
-        m = agg["metrics"].get(key)
-        row += [None, None, None] if m is None else [m["mean"], m["ci95_low"], m["ci95_high"]]
-    for rate in CSV_RATES:
-        w = agg["wilson"].get(rate)
-        row += [None, None, None] if w is None else [w["pooled"], w["ci95_low"], w["ci95_high"]]
-    return ["" if v is None else v for v in row]
-
-
-def sweep_csv(cells: Sequence[dict[str, Any]]) -> str:
-    """``sweep.csv``: one row per grid cell (``station`` empty: the line), mean and interval of
-    every metric, and for a cell of several stations one more row per station (a metric not
-    given per station, or not for the line, is left empty; in a cell of one station the line
-    is the station, so its row also gives the per-station metrics, such as ``unfit_share``)."""
-    header = list(CSV_HEADER)
-    for key in CSV_METRICS:
-        header += [f"{key}_mean", f"{key}_ci95_low", f"{key}_ci95_high"]
-    for rate in CSV_RATES:
-        header += [f"{rate}_pooled", f"{rate}_wilson_low", f"{rate}_wilson_high"]
-    buffer = io.StringIO()
-    writer = csv.writer(buffer)
-    writer.writerow(header)
-    for cell in cells:
-        agg = cell["aggregate"]
-        stations = agg.get("stations") or {}
-        if len(stations) == 1:
-            (only,) = stations.values()
-            agg = {
-                **agg,
-                "metrics": {**only["metrics"], **agg["metrics"]},
-                "wilson": {**only["wilson"], **agg["wilson"]},
-            }
-        writer.writerow(_csv_row(cell, "", agg))
-        if len(stations) > 1:
-            for name, station_agg in stations.items():
-                writer.writerow(_csv_row(cell, name, station_agg))
-    return buffer.getvalue()
+    def to_data(self) -> dict[str, object]:
+        """As ``sweep.json`` holds it: the line's block, then ``stations`` and ``classes``."""
+        return {
+            **self.line.to_data(),
+            "stations": {k: v.to_data() for k, v in self.stations.items()},
+            "classes": {k: v.to_data() for k, v in self.classes.items()},
+        }

@@ -15,9 +15,11 @@ from typing import Any
 
 import pytest
 
-from experiments.ray_backend import local_head, pack, unpack, worker_options
+from experiments.ray_backend import local_head
 from experiments.run_types import RunOptions
 from experiments.sweep import run_sweep
+from experiments.sweep_shipping import pack, unpack, worker_options
+from interfaces.run_folder import RunFolder
 
 pytest.importorskip("ray")
 
@@ -74,7 +76,7 @@ def _sweep_on_ray(
 
 
 def _rows(cell_folder: Path) -> list[dict[str, Any]]:
-    rows: list[dict[str, Any]] = json.loads((cell_folder / "episodes.json").read_text())
+    rows: list[dict[str, Any]] = json.loads(RunFolder(cell_folder).episodes_json.read_text())
     return rows
 
 
@@ -88,8 +90,9 @@ def test_a_grid_gives_the_same_lockstep_metrics_on_ray_as_on_the_local_pool(
 ) -> None:
     address, env = ray_head
     grid = _grid(tmp_path, "[1, 2]", 3.0)
-    local, code = run_sweep(grid, tmp_path / "local", 2, quiet=True, dataset=builtin_meshes)
+    summary, code = run_sweep(grid, tmp_path / "local", 2, quiet=True, dataset=builtin_meshes)
     assert code == 0
+    assert summary.backend.name == "local"
     proc = _sweep_on_ray(grid, tmp_path / "ray", address, env, builtin_meshes)
     out, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err.decode()[-3000:]
@@ -97,19 +100,18 @@ def test_a_grid_gives_the_same_lockstep_metrics_on_ray_as_on_the_local_pool(
     assert on_ray["backend"]["name"] == "ray"
     assert on_ray["backend"]["address"] == address
     assert on_ray["backend"]["episode_cpu_s"] > 0
-    assert on_ray["episodes"] == local["episodes"] == 2
-    assert on_ray["failed"] == local["failed"] == 0
-    (cell,) = [c["cell"] for c in local["cells"]]
+    assert on_ray["episodes"] == summary.episodes == 2
+    assert on_ray["failed"] == summary.failed == 0
+    (cell,) = [c.cell for c in summary.cells]
     for i in range(2):
-        ep = f"ep{i:03d}"
-        a = (tmp_path / "local" / cell / ep / "twin" / "events.jsonl").read_bytes()
-        b = (tmp_path / "ray" / cell / ep / "twin" / "events.jsonl").read_bytes()
-        assert a == b, f"{ep}: the events differ between the backends"
-        assert (tmp_path / "ray" / cell / ep / "recording.mcap").stat().st_size > 0
+        a = RunFolder(tmp_path / "local" / cell).episode(i)
+        b = RunFolder(tmp_path / "ray" / cell).episode(i)
+        assert a.events.read_bytes() == b.events.read_bytes(), f"{i}: the events differ"
+        assert b.recording.stat().st_size > 0
     rows_local = [_without_timing(r) for r in _rows(tmp_path / "local" / cell)]
     rows_ray = [_without_timing(r) for r in _rows(tmp_path / "ray" / cell)]
     assert rows_local == rows_ray
-    agg_local = local["cells"][0]["aggregate"]["metrics"]["placed_correct"]
+    agg_local = summary.cells[0].aggregate.line.metrics["placed_correct"].to_data()
     agg_ray = on_ray["cells"][0]["aggregate"]["metrics"]["placed_correct"]
     assert agg_local == agg_ray
 
@@ -154,9 +156,7 @@ def test_a_worker_killed_mid_episode_gets_its_episode_retried(
     assert "WorkerCrashedError" in data["retried"][0]
     (cell,) = data["cells"]
     assert cell["aggregate"]["episodes"] == 1
-    summary = json.loads(
-        (tmp_path / "ray" / cell["cell"] / "ep000" / "twin" / "summary.json").read_text()
-    )
+    summary = json.loads(RunFolder(tmp_path / "ray" / cell["cell"]).episode(0).summary.read_text())
     assert summary["complete"] is True
     assert summary["sim_seconds"] == pytest.approx(20.0)
 

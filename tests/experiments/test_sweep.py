@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import math
 from pathlib import Path
@@ -16,14 +17,46 @@ from experiments.sweep_grid import Grid, expand
 from experiments.sweep_pooling import (
     CI_METRICS,
     WILSON_RATES,
-    aggregate_cell,
-    aggregate_stations,
-    sweep_csv,
+    CellPool,
+    Interval,
+    pool_line,
+    pool_stations,
 )
+from experiments.sweep_summary import CellSummary, sweep_csv
 from interfaces.errors import ConfigError
 from interfaces.metrics import METRICS
+from interfaces.run_records import EpisodeRow, FailedEpisode, row_from_data
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "scenarios"
+
+
+def _typed(rows: list[dict]) -> list[EpisodeRow]:
+    """Rows of ``episodes.json`` as the runner writes them, from their line (and station and
+    class) blocks; ``{"failed": True}`` a failed episode."""
+    base = {"seed": 1, "mode": "lockstep", "speed_mps": 0.4}
+    return [
+        FailedEpisode(episode=i, seed=1, mode="lockstep", reason="test")
+        if row.get("failed")
+        else row_from_data({"episode": i, **base, **row}, f"rows[{i}]")
+        for i, row in enumerate(rows)
+    ]
+
+
+def _cell(rows: list[EpisodeRow], stations: tuple[str, ...] = ()) -> CellSummary:
+    """A grid cell's summary of ``rows``."""
+    return CellSummary(
+        cell="c",
+        folder="c",
+        scenario="s",
+        stations=stations,
+        mode="lockstep",
+        speed_mps=0.4,
+        duration_s=5.0,
+        overrides={},
+        complete=True,
+        failures=(),
+        aggregate=CellPool.of(rows),
+    )
 
 
 def _row(placed: int, targeted: int, missed: int, processed: int, **extra: float) -> dict:
@@ -59,12 +92,14 @@ def test_wilson_interval_matches_the_textbook_value_and_stays_in_unit_range() ->
 
 
 def test_aggregate_cell_pools_counts_and_skips_missing_values() -> None:
-    rows = [
-        _row(4, 5, 1, 6, tracking=1.0),
-        _row(3, 5, 2, 6),
-        _row(5, 5, 0, 6, tracking=3.0),
-    ]
-    agg = aggregate_cell(rows)
+    rows = _typed(
+        [
+            _row(4, 5, 1, 6, tracking=1.0),
+            _row(3, 5, 2, 6),
+            _row(5, 5, 0, 6, tracking=3.0),
+        ]
+    )
+    agg = pool_line(rows).to_data()
     assert agg["episodes"] == 3
     assert set(agg["metrics"]) == set(CI_METRICS)
     success = agg["metrics"]["success_rate"]
@@ -78,24 +113,7 @@ def test_aggregate_cell_pools_counts_and_skips_missing_values() -> None:
     assert (wilson["ci95_low"], wilson["ci95_high"]) == pytest.approx(wilson_interval(12, 15))
     miss = agg["wilson"]["miss_rate"]
     assert (miss["successes"], miss["trials"], miss["pooled"]) == (3, 18, pytest.approx(1 / 6))
-    table = list(
-        csv.DictReader(
-            io.StringIO(
-                sweep_csv(
-                    [
-                        {
-                            "cell": "c",
-                            "scenario": "s",
-                            "mode": "lockstep",
-                            "speed_mps": 0.4,
-                            "duration_s": 5.0,
-                            "aggregate": agg,
-                        },
-                    ]
-                )
-            )
-        )
-    )
+    table = list(csv.DictReader(io.StringIO(sweep_csv([_cell(rows)]))))
     assert float(table[0]["success_rate_mean"]) == pytest.approx(0.8)
     assert float(table[0]["success_rate_wilson_low"]) == pytest.approx(wilson["ci95_low"])
 
@@ -120,8 +138,8 @@ def _station_row(up: tuple[int, int], down: tuple[int, int]) -> dict:
 
 
 def test_a_cell_of_two_stations_gets_intervals_and_csv_rows_per_station() -> None:
-    rows = [_station_row((2, 4), (1, 2)), _station_row((3, 4), (0, 2)), {"failed": True}]
-    stations = aggregate_stations(rows)
+    rows = _typed([_station_row((2, 4), (1, 2)), _station_row((3, 4), (0, 2)), {"failed": True}])
+    stations = {k: v.to_data() for k, v in pool_stations(rows).items()}
     assert list(stations) == ["upstream", "downstream"]
     up = stations["upstream"]
     assert up["episodes"] == 2
@@ -130,23 +148,24 @@ def test_a_cell_of_two_stations_gets_intervals_and_csv_rows_per_station() -> Non
     pooled = up["wilson"]["pick_success_rate"]
     assert (pooled["successes"], pooled["trials"], pooled["pooled"]) == (5, 8, 5 / 8)
     assert stations["downstream"]["wilson"]["pick_success_rate"]["pooled"] == pytest.approx(0.25)
-    agg = aggregate_cell(rows)
-    agg["stations"] = stations
-    cell = {"cell": "c", "scenario": "s", "mode": "lockstep", "speed_mps": 0.4, "duration_s": 5.0}
-    table = list(csv.DictReader(io.StringIO(sweep_csv([{**cell, "aggregate": agg}]))))
+    cell = _cell(rows)
+    table = list(csv.DictReader(io.StringIO(sweep_csv([cell]))))
     assert [r["station"] for r in table] == ["", "upstream", "downstream"]
     assert float(table[0]["picked_mean"]) == pytest.approx(3.0)
     assert float(table[1]["picked_mean"]) == pytest.approx(2.5)
     assert table[1]["real_time_factor_mean"] == ""
     assert float(table[2]["pick_success_rate_pooled"]) == pytest.approx(0.25)
     # a cell of one station has its line row only, which also gives the per-station metrics
-    agg["stations"] = {"upstream": up}
-    (line,) = csv.DictReader(io.StringIO(sweep_csv([{**cell, "aggregate": agg}])))
+    upstream = cell.aggregate.stations["upstream"]
+    one = dataclasses.replace(cell.aggregate, stations={"upstream": upstream})
+    (line,) = csv.DictReader(io.StringIO(sweep_csv([dataclasses.replace(cell, aggregate=one)])))
     assert float(line["picked_mean"]) == pytest.approx(3.0)  # the line's own
     assert "unfit_share_mean" in line
     assert line["unfit_share_mean"] == ""  # these rows have no unfit share
-    up["metrics"]["unfit_share"] = {"mean": 0.04, "ci95_low": 0.01, "ci95_high": 0.07, "n": 2}
-    (line,) = csv.DictReader(io.StringIO(sweep_csv([{**cell, "aggregate": agg}])))
+    unfit = Interval(mean=0.04, ci95_low=0.01, ci95_high=0.07, n=2)
+    upstream = dataclasses.replace(upstream, metrics={**upstream.metrics, "unfit_share": unfit})
+    one = dataclasses.replace(cell.aggregate, stations={"upstream": upstream})
+    (line,) = csv.DictReader(io.StringIO(sweep_csv([dataclasses.replace(cell, aggregate=one)])))
     assert float(line["unfit_share_mean"]) == pytest.approx(0.04)
 
 
@@ -178,7 +197,7 @@ def test_every_grid_cell_folder_keeps_its_resolved_cell_before_anything_runs(
 
 
 def test_aggregate_of_no_episodes_has_no_numbers() -> None:
-    agg = aggregate_cell([])
+    agg = pool_line([]).to_data()
     assert agg["metrics"]["picked"] == {"mean": None, "ci95_low": None, "ci95_high": None, "n": 0}
     assert agg["wilson"]["success_rate"]["pooled"] is None
 
@@ -392,15 +411,17 @@ def _reason_row(untargeted: dict, drops: dict, spawned: int) -> dict:
 def test_the_sweep_gives_each_reason_and_each_class_a_mean_and_interval() -> None:
     """The untargeted objects and drops by reason (a reason an episode lacks counts 0 there),
     each reason's share of a station's window, and the class scores (recovery, purity)."""
-    from experiments.sweep_pooling import aggregate_classes, aggregate_reasons
+    from experiments.sweep_pooling import pool_classes, pool_reasons
 
-    rows = [
-        _reason_row({"too_wide": 2, "claimed_by_other": 4}, {"slipped": 1}, 10),
-        _reason_row({"too_wide": 0}, {}, 10),
-        _reason_row({"too_wide": 1, "too_flat": 3}, {"slipped": 2, "seal_lost": 1}, 20),
-        {"failed": True, "untargeted": {"too_wide": 99}},
-    ]
-    agg = aggregate_cell(rows)
+    rows = _typed(
+        [
+            _reason_row({"too_wide": 2, "claimed_by_other": 4}, {"slipped": 1}, 10),
+            _reason_row({"too_wide": 0}, {}, 10),
+            _reason_row({"too_wide": 1, "too_flat": 3}, {"slipped": 2, "seal_lost": 1}, 20),
+            {"failed": True},
+        ]
+    )
+    agg = pool_line(rows).to_data()
     assert list(agg["untargeted"]) == ["claimed_by_other", "too_flat", "too_wide"]
     assert agg["untargeted"]["too_wide"]["mean"] == pytest.approx(1.0)
     assert agg["untargeted"]["claimed_by_other"]["mean"] == pytest.approx(4 / 3)
@@ -408,14 +429,14 @@ def test_the_sweep_gives_each_reason_and_each_class_a_mean_and_interval() -> Non
     assert agg["dropped_by_reason"]["slipped"]["mean"] == pytest.approx(1.0)
     assert agg["dropped_by_reason"]["seal_lost"]["mean"] == pytest.approx(1 / 3)
     assert "untargeted_share" not in agg  # per station only
-    station = aggregate_stations(rows)["s"]
+    station = pool_stations(rows)["s"].to_data()
     share = station["untargeted_share"]["too_wide"]
     assert share["mean"] == pytest.approx((0.2 + 0.0 + 0.05) / 3)
     assert share["ci95_low"] < share["mean"] < share["ci95_high"]
     unfit = station["wilson"]["unfit_share"]
     assert (unfit["successes"], unfit["trials"]) == (3, 40)
-    assert aggregate_reasons([], "untargeted") == {}
-    classes = aggregate_classes(rows)
+    assert pool_reasons([], "untargeted") == {}
+    classes = {k: v.to_data() for k, v in pool_classes(rows).items()}
     assert list(classes) == ["brick", "wood"]
     # each episode: 3 bricks in their bins of 4 objects there, 2 of them in the complete cohort
     assert classes["brick"]["wilson"]["purity"]["pooled"] == pytest.approx(9 / 12)
@@ -426,16 +447,14 @@ def test_the_sweep_gives_each_reason_and_each_class_a_mean_and_interval() -> Non
 def test_the_headline_lists_the_grids_figures_first(tmp_path: Path) -> None:
     """A grid names the metrics it exists to measure; ``sweep.json`` lists them per grid cell
     with their intervals: the line's, or each station's for a per-station metric."""
-    from experiments.sweep_pooling import headline
+    from experiments.sweep_summary import headline
 
     rows = [_row(4, 5, 1, 6), _row(3, 5, 2, 6), _row(5, 5, 0, 6)]
     for row, share in zip(rows, (0.1, 0.2, 0.3), strict=True):
         row["stations"] = {"s1": {"untargeted_unfit": round(share * 10), "considered": 10}}
         row["stations"]["s1"]["unfit_share"] = share
-    agg = aggregate_cell(rows)
-    agg["stations"] = aggregate_stations(rows)
-    cell = {"cell": "c", "stations": ["s1"], "speed_mps": 0.4, "aggregate": agg}
-    success, unfit = headline(cell, ["success_rate", "unfit_share"])
+    cell = _cell(_typed(rows), stations=("s1",))
+    success, unfit = (r.to_data() for r in headline(cell, ["success_rate", "unfit_share"]))
     assert (success["metric"], success["scope"], success["stations"]) == ("success_rate", "line", 1)
     assert success["mean"] == pytest.approx(0.8)
     assert success["ci95_low"] < 0.8 < success["ci95_high"]

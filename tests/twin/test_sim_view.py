@@ -8,9 +8,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-import twin
+import twin.sim_view
 
-TWIN_DIR = Path(twin.__file__).resolve().parent
+# from a module, not the package: pytest's pythonpath holds tests/, whose tests/twin folder would
+# otherwise be found as a namespace package named twin with no __file__
+TWIN_DIR = Path(twin.sim_view.__file__).resolve().parent
 
 
 def imported_modules(path: Path) -> set[str]:
