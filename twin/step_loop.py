@@ -91,11 +91,29 @@ def run_loop(
     """Step the twin until its scenario's duration, serving callbacks between steps;
     ``on_first_step`` is called as the first step's messages go out (in lockstep, once the
     controllers have matched). ``executor`` has a ``spin_once(timeout_sec=...)``."""
-    twin = node.twin
     spin_once: SpinOnce = executor.spin_once  # type: ignore[attr-defined]
-    duration = twin.scenario.duration_s
     gc.collect()
     gc.freeze()  # everything built so far is long-lived: keep the collector off it
+    try:
+        _step_until_done(
+            node, spin_once, realtime_factor, ack_timeout_s, start_timeout_s, on_first_step
+        )
+    finally:
+        # back to the collector: a caller that runs episodes in its own process (in-process runs,
+        # tests) must get the twin, its robots and their Ruckig objects freed once it lets go
+        gc.unfreeze()
+
+
+def _step_until_done(
+    node: SteppedEndpoint[Any],
+    spin_once: SpinOnce,
+    realtime_factor: float,
+    ack_timeout_s: float,
+    start_timeout_s: float,
+    on_first_step: Callable[[], None] | None,
+) -> None:
+    twin = node.twin
+    duration = twin.scenario.duration_s
     if node.lockstep:
         Lockstep(node, spin_once, ack_timeout_s, start_timeout_s).run(duration, on_first_step)
         return
