@@ -61,6 +61,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("picture",), "experiments.picture", "a PNG of the cell as the twin renders it"),
     (("player",), "experiments.player", "an episode's self-contained HTML player"),
     (("fit",), "experiments.fit", "which tools fit a dataset's pieces, by the controllers' rules"),
+    (("perception", "fit"), "experiments.oracle_fit", "refit the oracle to the camera's errors"),
 )
 
 

@@ -6,7 +6,8 @@ inside the camera's field of view (an x interval over the belt's width: the cell
 scenario's). Each detection carries
 the footprint centroid (its z at the object's underside: the belt surface, or the top of the
 object it lies on), the long-axis yaw (modulo pi), length, width and height as seen from above
-(``twin.top_view``: an object that has tipped over shows a side), with Gaussian position and yaw
+(``twin.top_view``: an object that has tipped over shows a side), with Gaussian position noise (a
+``position_outlier_rate`` share of it from a wider Gaussian, drawn from its own stream) and yaw
 noise, a per-object drop probability and a misclassification probability (a uniformly chosen
 other class). With a ``suction_points`` finder (:mod:`twin.suction_point`) each detection also
 carries the suction point of the face turned up, shifted by the same position noise, and its
@@ -74,6 +75,8 @@ class Perception:
         self.every_n_steps = max(1, round(1.0 / (config.rate_hz * dt_s)))
         self.rng = rng
         (self._confidence_rng,) = rng.spawn(1)  # its own stream: the others stay as they were
+        # the outliers' own stream too, spawned only when there are any (same seeds, same frames)
+        self._outlier_rng = rng.spawn(1)[0] if config.position_outlier_rate > 0 else None
         self._queue: deque[DetectionFrame] = deque()
         self._suction_points = suction_points
 
@@ -108,8 +111,7 @@ class Perception:
                 others = [c for c in self.classes if c != name]
                 name = others[int(pick * len(others))]
             confidence = cfg.draw_confidence(self._confidence_rng, correct=name == obj.class_name)
-            dx_m = cfg.position_noise_m * float(noise[0])
-            dy_m = cfg.position_noise_m * float(noise[1])
+            dx_m, dy_m = self._position_noise(float(noise[0]), float(noise[1]))
             suction_m, suction_radius_m = (math.nan, math.nan, math.nan), math.nan
             suction_tilt_rad = math.nan
             if self._suction_points is not None:
@@ -141,6 +143,16 @@ class Perception:
         else:
             self._queue.append(frame)
         return frame
+
+    def _position_noise(self, n_x: float, n_y: float) -> tuple[float, float]:
+        """The (x, y) error of one detection from its two standard normal draws: scaled by
+        ``position_noise_m``, or for an outlier (``position_outlier_rate``, its own stream, one
+        uniform per candidate) by ``position_outlier_noise_m``."""
+        cfg = self.config
+        std_m = cfg.position_noise_m
+        if self._outlier_rng is not None and self._outlier_rng.random() < cfg.position_outlier_rate:
+            std_m = cfg.position_outlier_noise_m
+        return std_m * n_x, std_m * n_y
 
     def released(self, time_s: float) -> list[DetectionFrame]:
         """Frames whose latency has elapsed by ``time_s``, oldest first."""

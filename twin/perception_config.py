@@ -25,7 +25,12 @@ class PerceptionConfig:
     (the cell's rendered RGB-D cameras, its ``cameras:`` list, through a detector:
     :mod:`twin.perception_source`, ``docs/camera.md``); the error-model fields apply to the
     oracle only, ``rate_hz`` and ``latency_s`` to both (every camera is rendered at ``rate_hz``
-    and its merged detections released ``latency_s`` after the exposure)."""
+    and its merged detections released ``latency_s`` after the exposure).
+
+    ``position_outlier_rate`` of the detections get their position noise from a wider Gaussian,
+    ``position_outlier_noise_m`` (a detector's fragments and merges; 0: none, and no random
+    number is drawn for it). ``fitted_from`` says where the error model's figures come from
+    (``cdw-twin perception fit`` writes it; free text, empty for a hand-set model)."""
 
     source: str = "oracle"
     rate_hz: float = 30.0
@@ -37,6 +42,9 @@ class PerceptionConfig:
     confidence_correct_mean: float = 0.9
     confidence_wrong_mean: float = 0.55
     confidence_concentration: float = 20.0
+    position_outlier_rate: float = 0.0
+    position_outlier_noise_m: float = 0.0
+    fitted_from: str = ""
 
     def __post_init__(self) -> None:
         if self.source not in PERCEPTION_SOURCES:
@@ -52,6 +60,8 @@ class PerceptionConfig:
             ("latency_s", self.latency_s >= 0),
             ("drop_rate", 0 <= self.drop_rate < 1),
             ("misclassification_rate", 0 <= self.misclassification_rate <= 1),
+            ("position_outlier_rate", 0 <= self.position_outlier_rate <= 1),
+            ("position_outlier_noise_m", self.position_outlier_noise_m >= 0),
         )
         for name, ok in checks:
             if not ok:

@@ -338,4 +338,7 @@ def test_the_recording_holds_the_closed_loop_rtt_the_layout_plots(episode: Path)
     assert len(measured) > 100
     assert set(from_log) == set(measured)
     gaps = [measured[s] - from_log[s] for s in measured]
-    assert 0.0 <= float(np.median(gaps)) < 0.5
+    # the send takes well under a millisecond on a free core and up to ~1 ms on a loaded one
+    # (0.52 ms median seen at load 6); a state paired with the wrong trajectory would be off by
+    # a control period (8.3 ms)
+    assert 0.0 <= float(np.median(gaps)) < 2.0
