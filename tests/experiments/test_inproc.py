@@ -51,10 +51,29 @@ def _run(scenario: Path, dataset: Path, out: Path, *args: str) -> subprocess.Com
     )
 
 
-def _episode(scenario: Path, dataset: Path, out: Path, seed: int, transport: str) -> Path:
-    done = _run(scenario, dataset, out, "--seed", str(seed), "--transport", transport)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return out / "ep000"
+def _episodes(scenario: Path, dataset: Path, out: Path, seed: int) -> tuple[Path, Path]:
+    """The same lockstep episode over ROS 2 and in process, run side by side (lockstep: the
+    load of one does not change the other's events)."""
+    runs = {
+        transport: subprocess.Popen(
+            [
+                *(sys.executable, "-m", "twin.cli", "run", str(scenario), "--dataset"),
+                *(str(dataset), "--out", str(out / transport), "--seed", str(seed)),
+                *("--transport", transport),
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for transport in ("ros", "inproc")
+    }
+    for transport, process in runs.items():
+        try:
+            _, err = process.communicate(timeout=300)
+        finally:
+            process.kill()
+        assert process.returncode == 0, f"{transport}: {err[-3000:]}"
+    return out / "ros" / "ep000", out / "inproc" / "ep000"
 
 
 @pytest.mark.parametrize(
@@ -68,8 +87,7 @@ def test_inproc_gives_the_ros_episode_bit_for_bit(
     _needs_ros()
     scenario = tmp_path / "scenario.yaml"
     scenario.write_text(text, encoding="utf-8")
-    ros = _episode(scenario, builtin_meshes, tmp_path / "ros", seed, "ros")
-    inproc = _episode(scenario, builtin_meshes, tmp_path / "inproc", seed, "inproc")
+    ros, inproc = _episodes(scenario, builtin_meshes, tmp_path, seed)
 
     events = (ros / "twin" / "events.jsonl").read_bytes()
     assert events == (inproc / "twin" / "events.jsonl").read_bytes()
