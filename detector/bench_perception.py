@@ -62,6 +62,7 @@ __all__ = [
     "MIN_TRUTH_PX",
     "YAW_ELONGATION",
     "LaidPiece",
+    "PieceRenderer",
     "bench_perception",
     "configure",
     "lay_out",
@@ -148,7 +149,7 @@ def lay_out(scene_path: Path) -> list[LaidPiece]:
     return out
 
 
-class _Renderer:
+class PieceRenderer:
     """The twin's OpenGL renderer with a belt, drawing laid-out pieces under one camera."""
 
     def __init__(self, camera: RgbdCameraSpec, belt_z_m: float) -> None:
@@ -309,7 +310,7 @@ def _rendered(
     names = tuple(class_names)
     scorers = {m: PerceptionScorer(class_names=names, centroid_unit="m") for m in detectors}
     seconds: dict[str, list[float]] = {m: [] for m in detectors}
-    renderer = _Renderer(camera, belt_z_m)
+    renderer = PieceRenderer(camera, belt_z_m)
     rng = np.random.default_rng(seed)
     frames = pieces_total = 0
     try:

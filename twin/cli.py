@@ -59,6 +59,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("record",), "experiments.record", "record every twin/controller topic to MCAP"),
     (("demo",), "experiments.demo", "the main job: sample, mesh, closed-loop runs, report"),
     (("picture",), "experiments.picture", "a PNG of the cell as the twin renders it"),
+    (("photo",), "experiments.photo_render", "a dataset's photo beside the twin's render of it"),
     (("player",), "experiments.player", "an episode's self-contained HTML player"),
     (("fit",), "experiments.fit", "which tools fit a dataset's pieces, by the controllers' rules"),
     (("perception", "fit"), "experiments.oracle_fit", "refit the oracle to the camera's errors"),

@@ -44,7 +44,7 @@ def test_pieces_are_drawn_where_the_photo_has_them(sample: Path, tmp_path: Path)
     assert pieces
     assert all(p.base_m >= 0.0 for p in pieces)
     camera = RgbdCameraSpec()
-    renderer = bp._Renderer(camera, 0.0)
+    renderer = bp.PieceRenderer(camera, 0.0)
     try:
         frame = renderer.frame(pieces, np.random.default_rng(0))
     finally:
