@@ -46,9 +46,10 @@ typecheck: $(STAMPS)/deps
 pytest: setup
 	$(VENV)/bin/pytest -q -n 2 --dist loadfile
 
-# ruff and mypy run beside the suite (-j: mypy is one core for ~20 s while the suite's workers
-# also wait on subprocesses and the wall clock); their lines are not mixed
-test: setup
+# ruff and mypy run beside the FMU and message builds and then the suite (-j: mypy is one core
+# for ~20 s; the builds and the suite's workers also wait on subprocesses and the wall clock);
+# their lines are not mixed. mypy needs no built message (ignore_missing_imports).
+test: $(STAMPS)/deps
 	$(MAKE) --no-print-directory -j3 --output-sync=line lint typecheck pytest
 
 clean:
