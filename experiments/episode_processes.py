@@ -101,12 +101,14 @@ def twin_command(options: RunOptions, episode: EpisodeSpec) -> list[str]:
 
 
 def view_arguments(options: RunOptions) -> list[str]:
-    """The twin node's live view and window options."""
+    """The twin node's live view, window and image-recording options."""
     args = []
     if options.foxglove_port is not None:
         args += ["--foxglove", str(options.foxglove_port), "--foxglove-host", options.foxglove_host]
     if options.gui:
         args.append("--gui")
+    if options.record_images_hz is not None:
+        args += ["--record-images", str(options.record_images_hz)]
     return args
 
 

@@ -351,7 +351,8 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
     and the live view's port (``--foxglove``); write the run folder's ``scenario.yaml``,
     ``cell.yaml`` and ``controller.yaml``."""
     from experiments.outdir import RUN, OutputError, check_output, fresh_output, reason
-    from twin.cmd_node import build_scenario, check_display
+    from twin.cmd_node import build_scenario
+    from twin.gui_window import check_display
     from twin.live_view import DEFAULT_HOST, check_port
     from twin.scenario import MAX_SEED
 
@@ -408,6 +409,7 @@ def prepare_run(args: argparse.Namespace) -> PreparedRun:
         gui=gui,
         transport=transport,
         record=getattr(args, "record", True),
+        record_images_hz=getattr(args, "record_images", None),
     )
     info = RunInfo(
         scenario=scenario.name,

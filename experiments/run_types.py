@@ -45,6 +45,7 @@ class RunOptions:
     foxglove_port: int | None = None
     foxglove_host: str = "127.0.0.1"
     gui: bool = False
+    record_images_hz: float | None = None
     transport: Transport = "ros"
     record: bool = True
 

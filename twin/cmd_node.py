@@ -44,10 +44,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ctypes
-import ctypes.util
 import dataclasses
-import os
 import signal
 import time
 from collections.abc import Callable, Sequence
@@ -58,10 +55,12 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from interfaces.errors import CdwTwinError, cut_message
 from interfaces.lifecycle import STOP_SIGNALS, die_with_parent
+from twin.gui_window import check_display, window_off, window_on
 
 if TYPE_CHECKING:
     from interfaces.cell import Cell
     from interfaces.inproc import Bus
+    from twin.camera_publisher import CameraPublisher
     from twin.episode_log import EventLog
     from twin.live_view import LiveView
     from twin.ros_node import Tap, TwinEndpoint
@@ -183,8 +182,25 @@ def _ack_timeout_argument(text: str) -> float:
     return value
 
 
+MAX_RECORD_IMAGES_HZ = 120.0
+"""Highest ``--record-images`` rate (a camera's own rate bounds it: one frame per frame)."""
+
+
+def _record_hz_argument(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        msg = f"invalid float value: {text[:40]!r}"
+        raise argparse.ArgumentTypeError(msg) from None
+    if not 0.0 <= value <= MAX_RECORD_IMAGES_HZ:
+        msg = f"must be in [0, {MAX_RECORD_IMAGES_HZ:g}] Hz (0: no images), not {text[:40]}"
+        raise argparse.ArgumentTypeError(msg)
+    return value
+
+
 def add_view_options(parser: argparse.ArgumentParser) -> None:
-    """``--foxglove [PORT]``, ``--foxglove-host`` and ``--gui`` (twin-node and run)."""
+    """``--foxglove [PORT]``, ``--foxglove-host``, ``--gui`` and ``--record-images HZ``
+    (twin-node and run)."""
     from twin.live_view import DEFAULT_HOST, DEFAULT_PORT
 
     parser.add_argument(
@@ -203,37 +219,15 @@ def add_view_options(parser: argparse.ArgumentParser) -> None:
         help=f"address the live view listens on ({DEFAULT_HOST}: this machine only)",
     )
     parser.add_argument("--gui", action="store_true", help="open PyBullet's window on the cell")
-
-
-class DisplayError(CdwTwinError):
-    """``--gui`` without a display PyBullet can open a window on."""
-
-
-def check_display(environ: dict[str, str] | None = None) -> str:
-    """The X display ``--gui`` will open (``DISPLAY``); raises :class:`DisplayError` when there
-    is none or it cannot be opened.
-
-    PyBullet ends the whole process when its window cannot connect, so the display is opened
-    (and closed) here first, with the X library PyBullet loads itself.
-    """
-    display = (os.environ if environ is None else environ).get("DISPLAY", "")
-    if not display:
-        msg = "--gui: no display (DISPLAY is not set); run without --gui, or under xvfb-run"
-        raise DisplayError(msg)
-    name = ctypes.util.find_library("X11")
-    if name is None:
-        msg = f"--gui: cannot open display {display!r}: the X11 library (libX11) is not installed"
-        raise DisplayError(msg)
-    xlib = ctypes.CDLL(name)
-    xlib.XOpenDisplay.restype = ctypes.c_void_p
-    xlib.XOpenDisplay.argtypes = [ctypes.c_char_p]
-    xlib.XCloseDisplay.argtypes = [ctypes.c_void_p]
-    handle = xlib.XOpenDisplay(display.encode())
-    if not handle:
-        msg = f"--gui: cannot open display {display!r} (DISPLAY); run without --gui"
-        raise DisplayError(msg)
-    xlib.XCloseDisplay(handle)
-    return display
+    parser.add_argument(
+        "--record-images",
+        type=_record_hz_argument,
+        default=None,
+        metavar="HZ",
+        help="rate (sim time) at which the recording and the live view take the cameras' "
+        "images (default: 1 with perception.source camera, 0 with the oracle; a subscriber "
+        "on a camera topic gets every frame)",
+    )
 
 
 def build_scenario(args: argparse.Namespace) -> tuple[Scenario, Path, Cell]:
@@ -320,13 +314,23 @@ def _open_live_view(args: argparse.Namespace, cell: Cell) -> LiveView | None:
     port: int | None = getattr(args, "foxglove", None)
     if port is None:
         return None
-    from interfaces.contract import resolved_topics
+    from interfaces.cell_topics import cell_topics
     from twin.live_view import LiveView
 
-    topics = resolved_topics(tuple(s.namespace for s in cell.stations))
-    view = LiveView(topics, host=args.foxglove_host, port=port)
+    view = LiveView(cell_topics(cell), host=args.foxglove_host, port=port)
     print(f"cdw-twin twin-node: live view on {view.url} (Foxglove: Open connection)", flush=True)
     return view
+
+
+def camera_publisher(args: argparse.Namespace, twin: Twin) -> CameraPublisher | None:
+    """The publisher of the cell's cameras (None for a cell without any), taking the tap's
+    frames at ``--record-images`` (:func:`twin.camera_publisher.record_hz_for`)."""
+    if not twin.cell.cameras:
+        return None
+    from twin.camera_publisher import CameraPublisher, record_hz_for
+
+    hz = record_hz_for(twin.perception_config.source, getattr(args, "record_images", None))
+    return CameraPublisher(record_hz=hz)
 
 
 def fan_out(writers: Sequence[Tap]) -> Tap | None:
@@ -341,39 +345,6 @@ def fan_out(writers: Sequence[Tap]) -> Tap | None:
             write(topic, data, log_time_ns)
 
     return tap
-
-
-def _window_off(twin: Twin) -> None:
-    """Stop PyBullet's window from redrawing while the episode's bodies are loaded."""
-    import pybullet as pb
-
-    pb.configureDebugVisualizer(pb.COV_ENABLE_RENDERING, 0, physicsClientId=twin.client)
-
-
-def _window_on(twin: Twin) -> None:
-    """Show the cell in PyBullet's window: the belt and stations in view, the side panels,
-    camera previews and shadows off (each costs a redraw of the scene), drawing on again."""
-    import pybullet as pb
-
-    for flag in (
-        pb.COV_ENABLE_GUI,
-        pb.COV_ENABLE_SHADOWS,
-        pb.COV_ENABLE_RGB_BUFFER_PREVIEW,
-        pb.COV_ENABLE_DEPTH_BUFFER_PREVIEW,
-        pb.COV_ENABLE_SEGMENTATION_MARK_PREVIEW,
-    ):
-        pb.configureDebugVisualizer(flag, 0, physicsClientId=twin.client)
-    belt = twin.cell.belt
-    centre = [0.5 * (belt.start_x_m + belt.end_x_m), belt.centre_y_m, belt.surface_z_m]
-    pb.resetDebugVisualizerCamera(
-        cameraDistance=max(1.5, 0.6 * belt.length_m),
-        cameraYaw=30.0,
-        cameraPitch=-40.0,
-        cameraTargetPosition=centre,
-        physicsClientId=twin.client,
-    )
-    pb.configureDebugVisualizer(pb.COV_ENABLE_RENDERING, 1, physicsClientId=twin.client)
-    print("cdw-twin twin-node: PyBullet window open", flush=True)
 
 
 class InprocPeers(Protocol):
@@ -486,17 +457,24 @@ def _serve(
     scenario = twin.scenario
     gui = getattr(args, "gui", False)
     if gui:
-        _window_off(twin)
+        window_off(twin)
     twin.reset()
     if gui:
-        _window_on(twin)
+        window_on(twin)
     recording = open_cell_recording(args.record, twin.cell)
     writers = [sink.write for sink in (recording, view) if sink is not None]
     # a recording takes everything; the live view alone only what a client subscribed to
     wants = view.wants if recording is None and view is not None else None
-    node, executor, detach = _endpoint(args, twin, fan_out(writers), peers, wants)
+    cameras = camera_publisher(args, twin)
+    node, executor, detach = _endpoint(args, twin, fan_out(writers), peers, wants, cameras)
     wall0 = time.perf_counter()
-    interrupted, first, end = _step(args, node, StoppableExecutor(executor, stop), peers, detach)
+    try:
+        interrupted, first, end = _step(
+            args, node, StoppableExecutor(executor, stop), peers, detach
+        )
+    finally:
+        if cameras is not None:
+            cameras.close()
     wall = end - first
     if recording is not None:
         try:
@@ -574,10 +552,12 @@ def _endpoint(
     tap: Tap | None,
     peers: InprocPeers | None,
     tap_wants: Callable[[str], bool] | None = None,
+    cameras: CameraPublisher | None = None,
 ) -> tuple[TwinEndpoint, Any, Callable[[], None]]:
     """The twin's endpoint, what serves its callbacks, and what stops its reading at the end:
     a ROS 2 node and its executor, or (``peers``) the in-process bus, with the controllers
-    created on it."""
+    created on it; ``cameras`` publishes the cell's cameras beside the twin's messages."""
+    extras = () if cameras is None else (cameras,)
     if peers is None:
         import rclpy
         from rclpy.signals import SignalHandlerOptions
@@ -586,7 +566,13 @@ def _endpoint(
 
         # rclpy's own SIGINT handler would shut the context down under the step loop
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-        node = TwinNode(twin, lockstep=args.mode == "lockstep", tap=tap, tap_wants=tap_wants)
+        node = TwinNode(
+            twin,
+            lockstep=args.mode == "lockstep",
+            tap=tap,
+            tap_wants=tap_wants,
+            step_publishers=extras,
+        )
         executor = make_executor()
         executor.add_node(node)
         return node, executor, lambda: None
@@ -594,6 +580,6 @@ def _endpoint(
     from twin.ros_node import InprocTwin
 
     bus = Bus()
-    inproc = InprocTwin(twin, bus, tap=tap, tap_wants=tap_wants)
+    inproc = InprocTwin(twin, bus, tap=tap, tap_wants=tap_wants, step_publishers=extras)
     peers.start(bus, twin.cell)
     return inproc, bus, inproc.detach

@@ -155,6 +155,9 @@ class CameraSource:
         self._queue: deque[tuple[float, Future[DetectionFrame]]] = deque()
         self._pending: list[Future[DetectionFrame]] = []
         self._worker = worker
+        self.latest: tuple[RgbdFrame, ...] = ()
+        """Every camera's frame of the last capture, as rendered (read-only: the worker reads
+        them too): what the twin node publishes on the cameras' topics."""
 
     def capture(self, time_s: float) -> None:
         """Render every camera now and hand the frames to the worker (detect, merge, score);
@@ -170,6 +173,7 @@ class CameraSource:
                 camera.spec, rng=camera.rng, snapshot=snapshot
             )
             shots.append((camera, frame, robot, time.perf_counter() - t0 + snapshot_s))
+        self.latest = tuple(shot[1] for shot in shots)
         future = self._worker.submit(self._detect, time_s, shots, objects)
         self._pending.append(future)
         if any(a <= time_s < b for a, b in self.dropout_windows_s):
@@ -311,6 +315,10 @@ class PerceptionStepper:
         """Frames released since the last call."""
         frames, self._released = self._released, []
         return frames
+
+    def latest_frames(self) -> tuple[RgbdFrame, ...]:
+        """Every camera's frame of the cameras' last capture (none with the oracle)."""
+        return () if self.camera is None else self.camera.latest
 
     def summary(self) -> dict[str, float] | None:
         """The episode's perception scores (None unless the cameras are the source)."""

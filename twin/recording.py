@@ -256,17 +256,17 @@ class McapRecording:
 
 
 def open_cell_recording(out: Path | None, cell: Cell) -> McapRecording | None:
-    """The episode's MCAP of every topic of the cell (every station's under its namespace),
-    written as ``OUT.partial`` until it is closed.
+    """The episode's MCAP of every topic of the cell (every station's under its namespace, each
+    camera's: :func:`interfaces.cell_topics.cell_topics`), written as ``OUT.partial`` until it
+    is closed.
 
     Chunks are flushed every 0.5 s, so a killed twin leaves a readable ``OUT.partial``.
     """
     if out is None:
         return None
-    from interfaces.contract import resolved_topics
+    from interfaces.cell_topics import cell_topics
 
-    topics = resolved_topics(tuple(s.namespace for s in cell.stations))
-    return McapRecording(out, topics, flush_interval_s=DEFAULT_FLUSH_INTERVAL_S)
+    return McapRecording(out, cell_topics(cell), flush_interval_s=DEFAULT_FLUSH_INTERVAL_S)
 
 
 __all__ = [

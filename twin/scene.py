@@ -30,6 +30,7 @@ from enum import IntEnum
 import numpy as np
 
 from interfaces.bins import BinSpec
+from interfaces.camera import RgbdCameraSpec, static_frames
 from interfaces.cdr import CdrWriter
 from interfaces.cell import Cell
 from interfaces.class_colours import RGB
@@ -140,6 +141,17 @@ def world_frames(poses: Iterable[tuple[str, Pose]]) -> list[Frame]:
     return [
         Frame(WORLD_FRAME, name, _vec3(position), _quat(orientation))
         for name, (position, orientation) in poses
+    ]
+
+
+def camera_frames(cameras: Iterable[RgbdCameraSpec]) -> list[Frame]:
+    """Every camera's two static frames (REP 103 / 105, :func:`interfaces.camera.static_frames`):
+    ``NAME_link`` in ``world`` as the cell file places it, ``NAME_optical_frame`` in
+    ``NAME_link`` (z forward, x right, y down)."""
+    return [
+        Frame(f.parent, f.child, f.translation_m, f.rotation_xyzw)
+        for spec in cameras
+        for f in static_frames(spec, WORLD_FRAME)
     ]
 
 

@@ -1,11 +1,12 @@
 """The scene topics of the twin (``docs/interfaces.md``, values from :mod:`twin.scene`).
 
 ``/tf`` (every link of every station, each TCP, every object in the simulation; at the
-ground-truth tick), ``/tf_static`` (each station's root link), ``/scene/markers`` (belt, bins,
-robot links; once), ``/scene/objects`` (every live object's mesh, re-sent whole when the set
-changes, and a DELETE for each one gone) and ``/scene/targets`` (each station's announced target
-and TCP path, at :data:`SCENE_TARGETS_HZ`), sent only while someone takes them (a tap or a
-matched subscriber), and not at all when the scene is off.
+ground-truth tick), ``/tf_static`` (each station's root link, each camera's two frames),
+``/scene/markers`` (belt, bins, robot links; once), ``/scene/objects`` (every live object's
+mesh, re-sent whole when the set changes, and a DELETE for each one gone) and
+``/scene/targets`` (each station's announced target and TCP path, at
+:data:`SCENE_TARGETS_HZ`), sent only while someone takes them (a tap or a matched subscriber),
+and not at all when the scene is off.
 
 Extra per-step publishers (:class:`StepPublisher`, such as a camera's images) ride along: the
 node hands each the step's stamp after the twin's own messages and the scene.
@@ -113,8 +114,8 @@ class ScenePublisher:
             self.io.send(self.pub_targets, self._marker_array(markers, stamp))
 
     def publish_static(self, stamp: Time) -> None:
-        """``/tf_static`` (each station's root link in ``world``) and ``/scene/markers`` (belt,
-        bins, every station's link meshes), once."""
+        """``/tf_static`` (each station's root link in ``world``, each camera's link and optical
+        frame) and ``/scene/markers`` (belt, bins, every station's link meshes), once."""
         twin = self.twin
         frames: list[sc.Frame] = []
         markers = [sc.belt_marker(twin.cell), *sc.bin_markers(twin.cell, self.colour)]
@@ -123,6 +124,7 @@ class ScenePublisher:
             root = sc.link_frame(ns, robot.root_link)
             frames += sc.world_frames([(root, robot.root_pose())])
             markers += sc.link_markers(ns, link_visuals(robot.urdf))
+        frames += sc.camera_frames(twin.cell.cameras)
         self.io.send_serialized(
             self.pub_tf_static, sc.tf_message_cdr(frames, stamp.sec, stamp.nanosec)
         )

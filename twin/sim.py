@@ -47,6 +47,7 @@ from types import TracebackType
 import numpy as np
 import pybullet as pb
 
+from interfaces.camera import RgbdFrame
 from interfaces.cell import Cell
 from interfaces.detections import DetectionFrame
 from interfaces.events import Event, EventType
@@ -358,6 +359,11 @@ class Twin:
     def take_detections(self) -> list[DetectionFrame]:
         """Detection frames released since the last call (after their latency)."""
         return self._perception.take()
+
+    def camera_frames(self) -> tuple[RgbdFrame, ...]:
+        """Every camera's frame of the camera source's last capture, as rendered (none with the
+        oracle): what the node publishes, without a second render."""
+        return self._perception.latest_frames()
 
     def perception_summary(self) -> dict[str, float] | None:
         """The episode's perception scored against ground truth so far (flat keys with units:

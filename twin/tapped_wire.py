@@ -102,13 +102,21 @@ class TappedWire:
             self.tap(publisher.topic_name, data, time.time_ns())
 
     def wanted(self, publisher: Any) -> bool:
-        """Someone takes ``publisher``'s messages: the tap (unless it says it does not want
-        that topic now) or a matched subscriber. A message of a volatile topic nobody takes
-        need not be built: nobody would ever see it."""
-        if self.tap is not None and (
+        """Someone takes ``publisher``'s messages: the tap (:meth:`tapped`) or a matched
+        subscriber (:meth:`subscribed`). A message of a volatile topic nobody takes need not be
+        built: nobody would ever see it."""
+        return self.tapped(publisher) or self.subscribed(publisher)
+
+    def tapped(self, publisher: Any) -> bool:
+        """The tap takes ``publisher``'s messages (unless it says it does not want that topic
+        now: a live view without a client on it)."""
+        return self.tap is not None and (
             self.tap_wants is None or self.tap_wants(publisher.topic_name)
-        ):
-            return True
+        )
+
+    @staticmethod
+    def subscribed(publisher: Any) -> bool:
+        """A subscriber on the wire is matched to ``publisher``."""
         return bool(publisher.get_subscription_count() > 0)
 
     def subscribe(

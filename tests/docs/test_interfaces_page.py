@@ -19,6 +19,7 @@ import pybullet as pb
 import pytest
 
 from interfaces import contract
+from interfaces.camera_topics import camera_topics
 from interfaces.cell import Cell, StationSpec, default_cell
 from interfaces.events import Event, EventType
 from interfaces.robots import resolve_urdf
@@ -618,10 +619,10 @@ def test_the_page_lists_every_fault_kind(interfaces_page: Page) -> None:
 
 # -- topics, stamps, tracking, the message comments -----------------------------------------
 def test_the_topic_tables_are_the_contract(interfaces_page: Page) -> None:
-    """Name, scope, type and QoS of every topic, in the contract's order (rate and notes are
-    the page's own)."""
+    """Name, scope, type and QoS of every topic, in the contract's order, then a camera's
+    (:mod:`interfaces.camera_topics`; rate and notes are the page's own)."""
     for title, topics in (
-        ("Published by the cell (the twin)", contract.PUBLISHED),
+        ("Published by the cell (the twin)", contract.PUBLISHED + camera_topics("NAME").all),
         ("Subscribed by the cell", contract.SUBSCRIBED),
     ):
         got = [tuple(cells(line)[:4]) for line in interfaces_page.rows(title)]

@@ -118,6 +118,12 @@ CASES: dict[str, Case] = {
     ),
     # -- twin-node ------------------------------------------------------------------------
     "twin-node: --foxglove 99999": Case(("twin-node", "--foxglove", "99999"), "not 99999"),
+    "twin-node: --record-images -1": Case(
+        ("twin-node", "--record-images", "-1"), "must be in [0, 120] Hz (0: no images), not -1"
+    ),
+    "run: --record-images fast": Case(
+        ("run", "--record-images", "fast"), "invalid float value: 'fast'"
+    ),
     "twin-node: a seed above 2**64": Case(("twin-node", "--seed", BIG_SEED), "2**64 - 1"),
     "twin-node: a NaN ack timeout": Case(("twin-node", "--ack-timeout", "nan"), "not nan"),
     # -- sweep ----------------------------------------------------------------------------

@@ -23,7 +23,9 @@ import pytest
 from twin_helpers import box_px
 
 from interfaces import contract
+from interfaces.camera_topics import camera_topics
 from interfaces.cell import Cell, default_cell, load_cell
+from interfaces.cell_topics import cell_topics
 from twin.scenario import FaultLevel, Scenario, SystemLevel
 from twin.sim import Twin
 
@@ -43,8 +45,8 @@ class Qos(NamedTuple):
 
 
 def _expected(topics: tuple[contract.Topic, ...], cell: Cell) -> dict[str, Qos]:
-    """Wire name -> type and QoS of ``topics`` in ``cell`` (station topics once per station)."""
-    namespaces = tuple(s.namespace for s in cell.stations)
+    """Wire name -> type and QoS of ``topics`` in ``cell`` (station topics once per station,
+    camera topics once per camera)."""
     return {
         wire: Qos(
             f"{t.package}/{t.type_name}",
@@ -52,7 +54,7 @@ def _expected(topics: tuple[contract.Topic, ...], cell: Cell) -> dict[str, Qos]:
             "transient local" if t.qos.latched else "volatile",
             t.qos.depth,
         )
-        for wire, t in contract.resolved_topics(namespaces)
+        for wire, t in cell_topics(cell)
         if t in topics
     }
 
@@ -133,17 +135,20 @@ def _spin_until(executor: Any, done: Callable[[], bool], timeout_s: float = 20.0
 def test_the_twin_nodes_topics_types_and_qos_are_the_contracts(
     ros: Any, mesh_polygons: Callable[..., Path], cell_name: str
 ) -> None:
+    from twin.camera_publisher import CameraPublisher
     from twin.ros_node import TwinNode
 
     cell = load_cell(cell_name)
     with _twin(mesh_polygons(ONE_BOX), cell) as twin:
-        node = TwinNode(twin, lockstep=True)
+        node = TwinNode(twin, lockstep=True, step_publishers=(CameraPublisher(),))
         try:
             published = _endpoints(node.publishers)
             subscribed = _endpoints(node.subscriptions)
         finally:
             node.destroy_node()
-    assert published == _expected(contract.PUBLISHED, cell)
+    cameras = tuple(t for spec in cell.cameras for t in camera_topics(spec.name).all)
+    assert cameras, f"the shipped cell {cell_name} has a camera"
+    assert published == _expected(contract.PUBLISHED + cameras, cell)
     assert subscribed == _expected(contract.SUBSCRIBED, cell)
     if cell_name == "default":  # one station, empty namespace: today's bare names
         assert "/joint_states" in published

@@ -10,14 +10,10 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 
 from interfaces.camera import RgbdCameraSpec, RgbdFrame, camera_info, project
+from interfaces.camera_topics import camera_topics
 from twin.camera.errors import RenderError
-from twin.camera.ros_images import (
-    colour_message,
-    depth_message,
-    info_message,
-    static_transforms,
-    topics,
-)
+from twin.camera.ros_images import colour_message, depth_message, info_message
+from twin.scene import camera_frames, tf_message_cdr
 
 SPEC = RgbdCameraSpec(
     name="cam2",
@@ -80,11 +76,10 @@ def test_camera_info_projects_as_the_camera_does() -> None:
     assert np.allclose(uvw[:2] / uvw[2], uv[0])
 
 
-def test_static_transforms_round_trip_in_a_tf_message() -> None:
+def test_the_cameras_static_frames_round_trip_in_a_tf_message() -> None:
     from tf2_msgs.msg import TFMessage
 
-    msg = TFMessage(transforms=static_transforms(SPEC))
-    back = deserialize_message(serialize_message(msg), TFMessage)
+    back = deserialize_message(tf_message_cdr(camera_frames([SPEC]), 0, 0), TFMessage)
     names = [(t.header.frame_id, t.child_frame_id) for t in back.transforms]
     assert names == [("world", "cam2_link"), ("cam2_link", "cam2_optical_frame")]
     link = back.transforms[0].transform
@@ -92,9 +87,9 @@ def test_static_transforms_round_trip_in_a_tf_message() -> None:
 
 
 def test_topics_and_bad_frames() -> None:
-    assert topics("cam2").colour == "/camera/cam2/color/image_raw"
-    assert topics("cam2").depth == "/camera/cam2/depth/image_raw"
-    assert topics("cam2").info == "/camera/cam2/color/camera_info"
+    assert camera_topics("cam2").colour.name == "/camera/cam2/color/image_raw"
+    assert camera_topics("cam2").depth.name == "/camera/cam2/depth/image_raw"
+    assert camera_topics("cam2").info.name == "/camera/cam2/color/camera_info"
     f = frame()
     bad = RgbdFrame(
         camera="cam2",

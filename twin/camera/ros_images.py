@@ -1,4 +1,4 @@
-"""A camera's frames as ROS 2 messages: ``sensor_msgs/Image``, ``CameraInfo`` and ``/tf_static``.
+"""A camera's frames as ROS 2 messages: ``sensor_msgs/Image`` and ``CameraInfo``.
 
 For the twin's ROS node and its recording (real rclpy message types, imported when called, so
 the rest of the camera package needs no ROS):
@@ -8,53 +8,28 @@ the rest of the camera package needs no ROS):
   both little-endian (``is_bigendian = 0``), stamped with the frame's exposure (sim clock) in the
   camera's optical frame;
 - :func:`info_message`: the camera's ``CameraInfo`` (:func:`interfaces.camera.camera_info`:
-  ``plumb_bob``, zero distortion, ``R = I``, ``P = [K | 0]``);
-- :func:`static_transforms`: ``NAME_link`` in ``world`` and ``NAME_optical_frame`` in
-  ``NAME_link`` (:func:`interfaces.camera.static_frames`), one ``TransformStamped`` each, for a
-  ``tf2_msgs/TFMessage`` on ``/tf_static``;
-- :func:`topics`: the topic names of camera ``NAME``: ``/camera/NAME/color/image_raw``,
-  ``/camera/NAME/depth/image_raw``, ``/camera/NAME/color/camera_info`` (colour and depth share
-  one pinhole model: the depth is registered to the colour image).
+  ``plumb_bob``, zero distortion, ``R = I``, ``P = [K | 0]``).
+
+The topics are :mod:`interfaces.camera_topics`'s; the camera's frames go on ``/tf_static`` with
+the scene's (:func:`twin.scene.camera_frames`).
 """
 
 from __future__ import annotations
 
+import array
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from interfaces.camera import RgbdCameraSpec, RgbdFrame, camera_info, static_frames
+from interfaces.camera import RgbdCameraSpec, RgbdFrame, camera_info
 from twin.camera.errors import RenderError
 
 __all__ = [
-    "CameraTopics",
     "colour_message",
     "depth_message",
     "info_message",
-    "static_transforms",
-    "topics",
 ]
-
-
-@dataclass(frozen=True, kw_only=True)
-class CameraTopics:
-    """The topics of one camera (see the module)."""
-
-    colour: str
-    depth: str
-    info: str
-
-
-def topics(name: str) -> CameraTopics:
-    """The topic names of camera ``name``."""
-    base = f"/camera/{name}"
-    return CameraTopics(
-        colour=f"{base}/color/image_raw",
-        depth=f"{base}/depth/image_raw",
-        info=f"{base}/color/camera_info",
-    )
 
 
 def _stamp(stamp_s: float) -> Any:
@@ -77,7 +52,7 @@ def _image(frame: RgbdFrame, frame_id: str, data: np.ndarray, encoding: str) -> 
     msg.encoding = encoding
     msg.is_bigendian = 0
     msg.step = int(data.strides[0])
-    msg.data = data.tobytes()
+    msg.data = array.array("B", data.tobytes())  # bytes through the setter: 40x slower
     return msg
 
 
@@ -114,23 +89,3 @@ def info_message(spec: RgbdCameraSpec, stamp_s: float) -> Any:
     msg.r = list(fields.r)
     msg.p = list(fields.p)
     return msg
-
-
-def static_transforms(spec: RgbdCameraSpec, stamp_s: float = 0.0) -> list[Any]:
-    """``geometry_msgs/TransformStamped`` of the camera's two static frames."""
-    from geometry_msgs.msg import TransformStamped
-
-    out = []
-    for frame in static_frames(spec):
-        t = TransformStamped()
-        t.header.stamp = _stamp(stamp_s)
-        t.header.frame_id = frame.parent
-        t.child_frame_id = frame.child
-        tx, ty, tz = frame.translation_m
-        t.transform.translation.x, t.transform.translation.y = tx, ty
-        t.transform.translation.z = tz
-        qx, qy, qz, qw = frame.rotation_xyzw
-        t.transform.rotation.x, t.transform.rotation.y = qx, qy
-        t.transform.rotation.z, t.transform.rotation.w = qz, qw
-        out.append(t)
-    return out
