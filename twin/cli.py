@@ -54,6 +54,11 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("sweep",), "experiments.sweep", "a grid of scenarios x seeds in parallel, aggregated"),
     (("bench", "sweep"), "experiments.bench_sweep", "sweep speed-up with 2 workers against 1"),
     (("bench", "line"), "experiments.bench_line", "the line's cost against its number of stations"),
+    (
+        ("bench", "camera"),
+        "experiments.bench_camera",
+        "the camera's cost to the loop vs oracle",
+    ),
     (("bench", "ray"), "experiments.bench_ray", "the same sweep on the local pool and on Ray"),
     (("report",), "experiments.report", "HTML report with figures from run folders"),
     (("record",), "experiments.record", "record every twin/controller topic to MCAP"),

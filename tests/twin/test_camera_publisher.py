@@ -108,7 +108,11 @@ def test_with_the_camera_source_the_detectors_frames_are_sent_and_recorded(
         got = _run(twin, publisher, Bus(), None, subscribe=True, tap=recording.write)
         recording.close()
         assert publisher.renders == 0
-        assert len(got) == round(SECONDS * RATE_HZ)
+        # every frame drawn by the end (the last one, begun at the last step, is read back
+        # at the next), one per 1 / RATE_HZ
+        assert len(got) == round(SECONDS * RATE_HZ) - 1
+        stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in got]
+        assert np.allclose(np.diff(stamps), 1.0 / RATE_HZ, atol=twin.dt_s)
         last = twin.camera_frames()[0]
         image = np.frombuffer(bytes(got[-1].data), np.uint8).reshape(last.rgb.shape)
         assert np.array_equal(image, last.rgb)

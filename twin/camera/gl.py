@@ -26,7 +26,7 @@ a machine without EGL or Mesa gets :class:`~twin.camera.errors.RenderError` sayi
 from __future__ import annotations
 
 import os
-from collections.abc import Hashable, Sequence
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -118,6 +118,20 @@ def gl_context() -> Any:
     return context
 
 
+def gl_flush() -> Callable[[], None]:
+    """``glFlush`` of the process's GL library (the one the context was made with), which
+    hands the commands issued so far to the rasteriser without waiting for it; moderngl has
+    only ``finish``, which waits. A no-op where the library cannot be loaded: the read then
+    waits for the whole draw."""
+    import ctypes
+
+    try:
+        flush: Callable[[], None] = ctypes.CDLL("libGL.so.1").glFlush
+    except (OSError, AttributeError):
+        return lambda: None
+    return flush
+
+
 def gl_renderer_name() -> str:
     """The OpenGL renderer string of the process's context (``llvmpipe (LLVM ...)`` on Mesa's
     software rasteriser)."""
@@ -181,6 +195,14 @@ class _Target:
     z_buffer: np.ndarray
 
 
+@dataclass(frozen=True, eq=False)
+class PendingImages:
+    """A draw in flight (:meth:`GlRenderer.draw`): its framebuffer and view."""
+
+    target: _Target
+    view: CameraView
+
+
 class GlRenderer:
     """Draws uploaded meshes with moderngl into an offscreen framebuffer per image size.
 
@@ -206,7 +228,8 @@ class GlRenderer:
         self._eye = self._program["eye"]
         self._meshes: dict[Hashable, _Mesh] = {}
         self._textures: dict[Hashable, Any] = {}
-        self._targets: dict[tuple[int, int], _Target] = {}
+        self._targets: dict[tuple[int, int, int], _Target] = {}
+        self._flush = gl_flush()
         self._white = self.ctx.texture((1, 1), 3, bytes((255, 255, 255)))
         self._moderngl = moderngl
 
@@ -278,8 +301,9 @@ class GlRenderer:
             old.release()
 
     # -- drawing ----------------------------------------------------------------------------
-    def _target(self, width_px: int, height_px: int) -> _Target:
-        target = self._targets.get((width_px, height_px))
+    def _target(self, width_px: int, height_px: int, slot: int) -> _Target:
+        key = (width_px, height_px, slot)
+        target = self._targets.get(key)
         if target is None:
             size = (width_px, height_px)
             colour = self.ctx.renderbuffer(size, 4)
@@ -288,13 +312,22 @@ class GlRenderer:
             fbo = self.ctx.framebuffer(color_attachments=[colour, ids], depth_attachment=depth)
             z_buffer = np.empty((height_px, width_px), dtype=np.float32)
             target = _Target(fbo=fbo, buffers=(colour, ids, depth), z_buffer=z_buffer)
-            self._targets[size] = target
+            self._targets[key] = target
         return target
 
     def render(self, view: CameraView, instances: Sequence[Instance]) -> RenderedImages:
         """Colour, depth and instance ids of ``instances`` seen from ``view``, in one pass."""
+        return self.read(self.draw(view, instances))
+
+    def draw(
+        self, view: CameraView, instances: Sequence[Instance], *, slot: int = 0
+    ) -> PendingImages:
+        """Start drawing ``instances`` seen from ``view`` into framebuffer ``slot`` and return
+        at once: Mesa's rasteriser threads draw while the caller goes on, :meth:`read` waits
+        for them. Until it is read, a slot's images are overwritten by its next draw: give
+        each image in flight its own slot."""
         k = view.intrinsics
-        target = self._target(k.width_px, k.height_px)
+        target = self._target(k.width_px, k.height_px, slot)
         opticalMworld = np.linalg.inv(np.asarray(view.worldMoptical, dtype=float))  # noqa: N806
         view_proj = projection_matrix(view) @ opticalMworld
         ctx = self.ctx
@@ -318,11 +351,14 @@ class GlRenderer:
             self._tint.write(mesh.tint)
             self._id.value = int(instance.instance_id)
             mesh.vao.render()
-        return self._read(target, view)
+        self._flush()
+        return PendingImages(target=target, view=view)
 
     @staticmethod
-    def _read(target: _Target, view: CameraView) -> RenderedImages:
-        """Read the three images back (new arrays; the z-buffer into the target's scratch)."""
+    def read(pending: PendingImages) -> RenderedImages:
+        """The three images of a :meth:`draw`, read back (new arrays; the z-buffer into the
+        target's scratch)."""
+        target, view = pending.target, pending.view
         k = view.intrinsics
         h, w = k.height_px, k.width_px
         rgb = np.empty((h, w, 3), dtype=np.uint8)

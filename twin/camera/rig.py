@@ -45,7 +45,7 @@ from interfaces.class_colours import RGB, class_colour
 from twin.camera.choose import Renderer, choose_renderer
 from twin.camera.depth_noise import noisy_depth
 from twin.camera.errors import RenderError
-from twin.camera.gl import GlRenderer
+from twin.camera.gl import GlRenderer, PendingImages
 from twin.camera.render_types import CameraView, Instance, MeshData, RenderedImages
 from twin.camera.textures import GRAIN_PERIOD_M, grain_texture, read_rgb_image
 from twin.camera.tiny import TinyRenderer
@@ -64,7 +64,7 @@ from twin.sim_view import CameraSim
 if TYPE_CHECKING:
     from twin.robot import Robot
 
-__all__ = ["BELT_RGB", "FLOOR_RGB", "ROBOT_ID", "CameraRig", "Snapshot"]
+__all__ = ["BELT_RGB", "FLOOR_RGB", "ROBOT_ID", "CameraRig", "PendingFrame", "Snapshot"]
 
 BELT_RGB: RGB = (0.07, 0.07, 0.075)
 """The belt's colour: near-black rubber, as a real conveyor belt."""
@@ -102,6 +102,17 @@ class Snapshot:
     instances: tuple[Instance, ...] = ()
     bodies: dict[int, int] = field(default_factory=dict)
     classes: dict[int, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class PendingFrame:
+    """A camera's frame begun (:meth:`CameraRig.begin`): OpenGL's draw in flight, or
+    TinyRenderer's images already drawn; stamped with the snapshot's time."""
+
+    spec: RgbdCameraSpec
+    stamp_s: float
+    drawing: PendingImages | None = None
+    drawn: RenderedImages | None = None
 
 
 class CameraRig:
@@ -173,7 +184,29 @@ class CameraRig:
         """:meth:`capture`, and where a robot link was drawn, ``(H, W) bool``: what a robot
         self-filter (the arm's known pose) removes before detection."""
         taken = snapshot if snapshot is not None else self.snapshot()
-        images = self.draw(spec, taken)
+        return self.finish(self.begin(spec, taken), rng=rng)
+
+    def begin(self, spec: RgbdCameraSpec, snapshot: Snapshot, *, slot: int = 0) -> PendingFrame:
+        """Start drawing camera ``spec``'s frame of ``snapshot`` and return at once (with
+        OpenGL: the rasteriser draws while the caller steps on; TinyRenderer draws it here);
+        :meth:`finish` makes the frame. Frames in flight together need their own ``slot``."""
+        self._open()
+        if self._gl is not None:
+            pending = self._gl.draw(CameraView.of(spec), snapshot.instances, slot=slot)
+            return PendingFrame(spec=spec, stamp_s=snapshot.stamp_s, drawing=pending)
+        return PendingFrame(spec=spec, stamp_s=snapshot.stamp_s, drawn=self.draw(spec, snapshot))
+
+    def finish(
+        self, pending: PendingFrame, *, rng: np.random.Generator | None = None
+    ) -> tuple[RgbdFrame, np.ndarray]:
+        """The frame of a :meth:`begin` and its robot pixels (see :meth:`capture_with_robot`),
+        its depth noise drawn from ``rng`` now."""
+        spec = pending.spec
+        if pending.drawing is not None:
+            images = GlRenderer.read(pending.drawing)
+        else:
+            assert pending.drawn is not None
+            images = pending.drawn
         robot = images.instance_ids == ROBOT_ID
         images.instance_ids[robot] = 0
         if rng is not None:
@@ -190,7 +223,7 @@ class CameraRig:
                 depth[(depth < spec.depth_min_m) | (depth > spec.depth_max_m)] = np.nan
         frame = RgbdFrame(
             camera=spec.name,
-            stamp_s=taken.stamp_s,
+            stamp_s=pending.stamp_s,
             rgb=images.rgb,
             depth_m=depth,
             intrinsics=spec.intrinsics,
