@@ -15,11 +15,11 @@ from PIL import Image
 
 from interfaces.cell import load_cell
 from interfaces.events import EventType
+from twin.camera.detect_process import camera_stretches
 from twin.camera.filters import belt_plane_depth
 from twin.camera.overlay import write_overlay
 from twin.perception_config import PerceptionConfig
 from twin.perception_score import PERCEPTION_METRICS
-from twin.camera.detect_process import camera_stretches
 from twin.scenario import Scenario, SystemLevel
 from twin.sim import Twin
 
