@@ -18,8 +18,9 @@ import pytest
 import trimesh
 
 from interfaces.cell import default_cell, load_cell
+from interfaces.cell_topics import cell_topics
 from interfaces.class_colours import CLASS_RGB, class_rgb, dataset_class_rgb
-from interfaces.contract import SCENE, resolved_topics
+from interfaces.contract import SCENE
 from interfaces.urdf import station_urdf
 from twin import scene as sc
 from twin.errors import ConfigError
@@ -395,8 +396,8 @@ def test_the_foxglove_layout_names_only_topics_the_cell_publishes() -> None:
     layout = json.loads(LAYOUT.read_text(encoding="utf-8"))
     panels = _panels(layout["layout"])
     assert sorted(panels) == sorted(layout["configById"])
-    assert {p.split("!")[0] for p in panels} == {"3D", "Plot", "RawMessages"}
-    wires = {wire for wire, _ in resolved_topics(("",))}
+    assert {p.split("!")[0] for p in panels} == {"3D", "Plot", "RawMessages", "Image"}
+    wires = {wire for wire, _ in cell_topics(default_cell())}
     outputs: set[str] = set()
     for script in layout["userNodes"].values():
         inputs, output = _script_topics(script["sourceCode"])
@@ -409,6 +410,10 @@ def test_the_foxglove_layout_names_only_topics_the_cell_publishes() -> None:
             assert config["followTf"] == "world"
             assert set(config["topics"]) == markers
             named |= set(config["topics"])
+        if panel.startswith("Image!"):  # the reference cell's camera, with its pinhole model
+            image = config["imageMode"]
+            assert {image["imageTopic"], image["calibrationTopic"]} <= wires
+            named |= {image["imageTopic"], image["calibrationTopic"]}
         for path in [p["value"] for p in config.get("paths", [])] + [config.get("topicPath", "")]:
             if path:
                 named.add(path.split(".", 1)[0])
