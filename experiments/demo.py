@@ -9,8 +9,13 @@ as over ROS, at a fraction of the cost of a process per station), writes the HTM
 prints summary tables: the meshed objects per class; per speed the picks, success and miss
 rates, tracking time to 4 mm, closed-loop round-trip latency and real-time factor; and per
 station of the line and for the whole line the picks per minute, recovery, success and miss
-rate. Everything goes under ``--out`` (default ``out/demo``):
-``sample/``, ``meshes/``, ``runs/speed_*``, ``runs/line`` and ``report/report.html``.
+rate; then the reference cell with the camera as its perception against the same with the
+oracle (``experiments/scenarios/camera.yaml`` and ``default.yaml``, in process,
+``--camera-seconds``): picks, success, the camera's recall, precision, class accuracy and
+centroid error, and the real-time factor, and one camera frame with its detections drawn.
+Everything goes under ``--out`` (default ``out/demo``): ``sample/``, ``meshes/``,
+``runs/speed_*``, ``runs/line``, ``runs/camera``, ``runs/oracle_in_process``,
+``camera_frame.png`` and ``report/report.html``.
 
 The line's episode is shorter than the others (``--line-seconds``): in lockstep every station's
 controller must answer every tick, so even in one process the line runs slower than real time.
@@ -34,6 +39,14 @@ LINE_SECONDS = 20.0
 """Sim seconds of the line's episode."""
 LINE_SCENARIO = Path(__file__).resolve().parent / "scenarios" / "line.yaml"
 """The line the demo runs after the single-station speeds."""
+CAMERA_PAIR = tuple(
+    Path(__file__).resolve().parent / "scenarios" / name for name in ("camera.yaml", "default.yaml")
+)
+"""The camera against the oracle: the reference cell's scenario with the camera as its
+perception, and the same with the oracle."""
+CAMERA_SECONDS = 20.0
+"""Sim seconds of each of the camera-against-oracle episodes."""
+CAMERA_SPEED_MPS = 0.4
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -50,6 +63,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=LINE_SECONDS,
         help="line episode length (%(default)s s)",
+    )
+    parser.add_argument(
+        "--camera-seconds",
+        type=float,
+        default=CAMERA_SECONDS,
+        help="length of the camera and oracle episodes (%(default)s s)",
     )
 
 
@@ -121,9 +140,10 @@ def _run_episode(
     scenario: Path | None,
     speed: float | None,
     transport: str = "ros",
+    seconds: float | None = None,
 ) -> int:
-    """One lockstep episode through ``cdw-twin run`` (over ``transport``) into ``out``; returns
-    its exit status."""
+    """One lockstep episode through ``cdw-twin run`` (over ``transport``; ``seconds`` long,
+    else the speeds' or the line's length) into ``out``; returns its exit status."""
     from experiments import run as run_cmd
 
     options = argparse.Namespace(
@@ -131,7 +151,7 @@ def _run_episode(
         speed=speed,
         episodes=1,
         seed=args.seed,
-        duration=args.line_seconds if scenario is not None else args.seconds,
+        duration=seconds or (args.line_seconds if scenario is not None else args.seconds),
         mode="lockstep",
         dataset=meshes,
         cell=None,
@@ -160,6 +180,54 @@ def line_rows(run_dir: Path) -> list[list[str]]:
         ]
         for name, block in blocks
     ]
+
+
+def camera_rows(camera_dir: Path, oracle_dir: Path) -> list[list[str]]:
+    """The camera-against-oracle table: per perception source the picks, success and miss
+    rates, the camera's recall, precision, class accuracy and centroid error (none for the
+    oracle: it has nothing to score) and the real-time factor (``episodes.json``)."""
+    rows = []
+    for name, run_dir in (("camera", camera_dir), ("oracle", oracle_dir)):
+        row = _first_row(run_dir)
+        centroid = row.metric("perception_centroid_error_median_m")
+        rows.append(
+            [
+                name,
+                str(row.metric("picks")),
+                str(row.metric("targeted")),
+                _fmt(row.metric("success_rate"), ".2f"),
+                _fmt(row.metric("miss_rate"), ".2f"),
+                _fmt(row.metric("perception_recall"), ".3f"),
+                _fmt(row.metric("perception_precision"), ".3f"),
+                _fmt(row.metric("perception_class_accuracy"), ".3f"),
+                _fmt(None if centroid is None else 1000.0 * centroid, ".1f"),
+                _fmt(row.metric("real_time_factor"), ".2f"),
+            ]
+        )
+    return rows
+
+
+def _camera_against_oracle(out: Path, meshes: Path, args: argparse.Namespace) -> tuple[int, Path]:
+    """The reference cell with the camera and with the oracle, in process; the exit status and
+    the camera's run folder. The camera's example frame is copied to ``out/camera_frame.png``."""
+    import shutil
+
+    print(
+        f"the camera against the oracle (reference cell, {CAMERA_SPEED_MPS} m/s, "
+        f"{args.camera_seconds:.0f} s each, in process) ...",
+        flush=True,
+    )
+    dirs = [out / "runs" / "camera", out / "runs" / "oracle_in_process"]
+    for run_dir, scenario in zip(dirs, CAMERA_PAIR, strict=True):
+        code = _run_episode(
+            run_dir, meshes, args, scenario, CAMERA_SPEED_MPS, "inproc", args.camera_seconds
+        )
+        if code != 0:
+            return code, dirs[0]
+    frames = RunFolder(dirs[0]).episode(0).camera_frames()
+    if frames:
+        shutil.copyfile(frames[0], out / "camera_frame.png")
+    return 0, dirs[0]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -200,7 +268,11 @@ def run(args: argparse.Namespace) -> int:
     if code != 0:
         return code
     run_dirs.append(line_dir)
-    report = write_report(run_dirs, out / "report", replace=True)
+    code, camera_dir = _camera_against_oracle(out, meshes, args)
+    if code != 0:
+        return code
+    # the in-process oracle episode stays out of the report: it would pool with the speeds'
+    report = write_report([*run_dirs, camera_dir], out / "report", replace=True)
     _print_table(
         f"Closed-loop episodes ({args.seconds:.0f} s each, lockstep, twin + controller processes)",
         [
@@ -223,5 +295,25 @@ def run(args: argparse.Namespace) -> int:
         ["station", "picks", "picks/min", "recovery", "success", "miss"],
         line_rows(line_dir),
     )
+    _print_table(
+        f"The camera against the oracle: reference cell, {CAMERA_SPEED_MPS} m/s, "
+        f"{args.camera_seconds:.0f} s each (lockstep, in one process)",
+        [
+            "perception",
+            "picks",
+            "targeted",
+            "success",
+            "miss",
+            "recall",
+            "precision",
+            "class acc",
+            "centroid mm",
+            "RTF",
+        ],
+        camera_rows(camera_dir, out / "runs" / "oracle_in_process"),
+    )
+    frame = out / "camera_frame.png"
+    if frame.is_file():
+        print(f"\na camera frame with its detections: {frame}")
     print(f"\nreport: {report}")
     return 0

@@ -63,7 +63,9 @@ from experiments.report_html import (
     PageParts,
     figure_image,
     figure_missing,
+    grid,
     page,
+    perception_section,
     player_link,
     table,
 )
@@ -74,6 +76,12 @@ from experiments.report_line import (
     bin_rows,
     class_rows,
     recovery_by_stations,
+)
+from experiments.report_perception import (
+    PERCEPTION_COLUMNS,
+    confusion_table,
+    copy_example_frames,
+    perception_rows,
 )
 from experiments.report_players import write_players
 from experiments.report_tables import (
@@ -160,6 +168,7 @@ def _write_pages(data: RunData, out: Path, staging: Path) -> None:
     ]
     stations = table(station_rows(data), STATION_COLUMNS) if len(data.stations()) >= 2 else None
     parts = PageParts(
+        perception=_perception(data, staging),
         run_dirs=data.run_dirs,
         datasets=data.datasets,
         speed_table=table(speed_rows(data), SPEED_COLUMNS),
@@ -172,6 +181,23 @@ def _write_pages(data: RunData, out: Path, staging: Path) -> None:
         notes=(*data.notes, *players.notes),
     )
     write_atomic(staging / "report.html", page(parts))
+
+
+def _perception(data: RunData, staging: Path) -> str:
+    """The perception section (empty when no episode scored a camera: oracle runs)."""
+    rows = perception_rows(data)
+    if not rows:
+        return ""
+    columns, confusion = confusion_table(data)
+    confusion_html = grid(
+        ["cell", "belt m/s", "true class", *columns],
+        [
+            [line.cell, line.speed_mps, line.true_class, *(line.counts.get(c, 0) for c in columns)]
+            for line in confusion
+        ],
+    )
+    frames = copy_example_frames(data.episodes, staging)
+    return perception_section(table(rows, PERCEPTION_COLUMNS), confusion_html, frames)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

@@ -125,6 +125,11 @@ class RunFacts:
         )
 
 
+CAMERA_SUFFIX = " (camera)"
+"""Appended to the cell name of an episode whose perception was the camera: its groups are
+never pooled with the oracle's episodes of the same cell and speed."""
+
+
 @dataclass(frozen=True)
 class Episode:
     """One episode folder of a run, with whatever files it has (None when missing)."""
@@ -138,7 +143,8 @@ class Episode:
     metrics: EpisodeMetrics | None
     """The episode's row of the run's ``episodes.json`` (None when there is none)."""
     cell: str = ""
-    """The name of the cell the run used (``run.json``'s ``cell``)."""
+    """The name of the cell the run used (``run.json``'s ``cell``), with
+    :data:`CAMERA_SUFFIX` when its perception was the camera."""
     stations: tuple[str, ...] = ()
     """The stations of that cell (``run.json``'s ``stations``, else the episode's metrics)."""
 
@@ -334,7 +340,9 @@ def _episode(
         summary=summary,
         telemetry=_telemetry(folder, notes),
         metrics=row if complete else None,
-        cell=run.cell,
+        cell=f"{run.cell}{CAMERA_SUFFIX}"
+        if summary is not None and summary.perception
+        else run.cell,
         stations=run.stations or (tuple(row.stations) if row is not None else ()),
     )
 

@@ -62,6 +62,14 @@ def table(rows: Sequence[object], columns: Sequence[tuple[str, str]]) -> str:
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
+def grid(headings: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    """An HTML table of plain rows of values under ``headings`` (a table whose columns depend
+    on the data, such as a class confusion)."""
+    head = "".join(f"<th>{html.escape(title)}</th>" for title in headings)
+    body = "".join("<tr>" + "".join(f"<td>{_fmt(v)}</td>" for v in row) + "</tr>" for row in rows)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
 def _items(values: Sequence[object]) -> str:
     return "".join(f"<li>{html.escape(str(v))}</li>" for v in values)
 
@@ -99,6 +107,25 @@ class PageParts:
     episode_table: str
     figures: Sequence[str]
     notes: Sequence[str]
+    perception: str = ""
+    """The perception section (HTML, :func:`perception_section`); empty for oracle runs."""
+
+
+def perception_section(
+    table_html: str, confusion_html: str, frames: Sequence[tuple[str, str]]
+) -> str:
+    """The perception section: its table, the class confusion and the example frames (caption,
+    image file relative to the report)."""
+    images = "".join(
+        fill("frame.html", caption=html.escape(caption), src=html.escape(src))
+        for caption, src in frames
+    )
+    return fill(
+        "perception.html",
+        table=table_html,
+        confusion=confusion_html,
+        frames=images or "<p>No example frame in these runs.</p>",
+    )
 
 
 def page(parts: PageParts) -> str:
@@ -113,6 +140,7 @@ def page(parts: PageParts) -> str:
         runs=_items(parts.run_dirs),
         datasets=_items(parts.datasets),
         speed_table=parts.speed_table,
+        perception_section=parts.perception,
         station_section=stations,
         stations_table=parts.stations_table,
         class_table=parts.class_table,

@@ -15,7 +15,13 @@ from dataclasses import dataclass, field
 
 from experiments.stats import student_t_interval, wilson_interval
 from interfaces.metrics import RATES, Scope, in_scope
-from interfaces.run_records import EpisodeRow, Metrics, ScopeMetrics, succeeded
+from interfaces.run_records import (
+    PERCEPTION_RATES,
+    EpisodeRow,
+    Metrics,
+    ScopeMetrics,
+    succeeded,
+)
 
 
 def _pooled_rates(scope: Scope) -> dict[str, tuple[str, str]]:
@@ -238,14 +244,27 @@ def pool_classes(rows: Sequence[EpisodeRow]) -> dict[str, ScopePool]:
     }
 
 
+def pool_perception(rows: Sequence[EpisodeRow]) -> ScopePool | None:
+    """The camera's scores over the successful episodes that scored one (None when none did:
+    the oracle): every score's interval (keys sorted) and recall and precision pooled from
+    their counts (:data:`interfaces.run_records.PERCEPTION_RATES`)."""
+    scored = [r for r in succeeded(rows) if r.perception]
+    if not scored:
+        return None
+    keys = sorted({k for r in scored for k in r.perception})
+    return pool_scope([ScopeSample(values=r.perception) for r in scored], keys, PERCEPTION_RATES)
+
+
 @dataclass(frozen=True, kw_only=True)
 class CellPool:
-    """A grid cell's pooled metrics: the line's (with the episode counts), each station's and
-    each object class's (``sweep.json``'s ``aggregate``)."""
+    """A grid cell's pooled metrics: the line's (with the episode counts), each station's,
+    each object class's and, with a camera, the perception's (``sweep.json``'s
+    ``aggregate``)."""
 
     line: ScopePool
     stations: Mapping[str, ScopePool]
     classes: Mapping[str, ScopePool]
+    perception: ScopePool | None = None
 
     @property
     def episodes(self) -> int:
@@ -260,13 +279,22 @@ class CellPool:
     @classmethod
     def of(cls, rows: Sequence[EpisodeRow]) -> CellPool:
         """The pools of a cell's rows, as written (:func:`pool_line`, :func:`pool_stations`,
-        :func:`pool_classes`)."""
-        return cls(line=pool_line(rows), stations=pool_stations(rows), classes=pool_classes(rows))
+        :func:`pool_classes`, :func:`pool_perception`)."""
+        return cls(
+            line=pool_line(rows),
+            stations=pool_stations(rows),
+            classes=pool_classes(rows),
+            perception=pool_perception(rows),
+        )
 
     def to_data(self) -> dict[str, object]:
-        """As ``sweep.json`` holds it: the line's block, then ``stations`` and ``classes``."""
-        return {
+        """As ``sweep.json`` holds it: the line's block, then ``stations``, ``classes`` and
+        (with a camera) ``perception``."""
+        out = {
             **self.line.to_data(),
             "stations": {k: v.to_data() for k, v in self.stations.items()},
             "classes": {k: v.to_data() for k, v in self.classes.items()},
         }
+        if self.perception is not None:
+            out["perception"] = self.perception.to_data()
+        return out

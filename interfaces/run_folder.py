@@ -40,10 +40,18 @@ STATUS_FILE = "status.json"
 SUMMARY_FILE = "summary.json"
 TELEMETRY_FILE = "telemetry.json"
 RECORDING_FILE = "recording.mcap"
+CAMERA_FRAME_PREFIX = "camera_"
+"""With the camera source, the twin's folder holds one example frame per camera with its
+detections drawn, ``camera_NAME.png`` (:func:`camera_frame_name`)."""
 PARTIAL_SUFFIX = ".partial"
 """Appended to the recording's name while it is written (and left after a crash)."""
 
 _EPISODE_DIR = re.compile(r"ep(\d+)")
+
+
+def camera_frame_name(camera: str) -> str:
+    """The file name of camera ``camera``'s example frame in the twin's folder."""
+    return f"{CAMERA_FRAME_PREFIX}{camera}.png"
 
 
 def episode_dir_name(index: int) -> str:
@@ -109,6 +117,10 @@ class EpisodeFolder:
     @property
     def recording(self) -> Path:
         return self.path / RECORDING_FILE
+
+    def camera_frames(self) -> list[Path]:
+        """The example camera frames the twin wrote (none with the oracle), by name."""
+        return sorted(self.twin.glob(f"{CAMERA_FRAME_PREFIX}*.png"))
 
     @property
     def twin_log(self) -> Path:

@@ -263,6 +263,13 @@ class ScopeMetrics:
 PERCEPTION_PREFIX = "perception_"
 """An episode row's perception scores (with a camera) are its keys with this prefix."""
 
+PERCEPTION_RATES: Mapping[str, tuple[str, str]] = {
+    "recall": ("matched", "truth_instances"),
+    "precision": ("matched", "detections"),
+}
+"""The perception rates that pool over episodes as (successes, trials) of their counts: recall
+at mask IoU 0.5 (matched / pieces in view), precision (matched / detections)."""
+
 _ROW_KEYS = ("episode", "speed_mps", "seed", "mode", "picks", "stations", "classes", "complete")
 
 

@@ -458,6 +458,7 @@ def _serve(
     gui = getattr(args, "gui", False)
     if gui:
         window_off(twin)
+    twin.write_camera_examples(args.out)  # with the camera source: one frame per camera
     twin.reset()
     if gui:
         window_on(twin)

@@ -40,13 +40,14 @@ from collections import deque
 from collections.abc import Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from interfaces.camera import RgbdFrame
 from interfaces.detections import DetectionFrame
-from twin.camera.detect_process import Shot, camera_stretches
+from twin.camera.detect_process import Examples, Shot, camera_stretches
 from twin.errors import ConfigError
 from twin.perception import Perception
 from twin.sim_view import PerceptionSim
@@ -63,6 +64,10 @@ __all__ = [
     "PerceptionStepper",
     "camera_seed",
 ]
+
+EXAMPLE_AT = 0.5
+"""An episode's example frames are its first at or after this fraction of its duration (the
+belt and the arms at work)."""
 
 CAMERA_SEED_KEY = 5
 """The camera's child of the episode's ``SeedSequence(seed)``: children 0-4 are
@@ -95,6 +100,7 @@ class CameraSource:
         detection: DetectionProcess,
         *,
         seed: int,
+        examples: Examples | None = None,
     ) -> None:
         cell = twin.cell
         config = twin.perception_config
@@ -108,7 +114,7 @@ class CameraSource:
         self.dropped_frames = 0
         self.rngs = [np.random.default_rng(s) for s in camera_seed(seed).spawn(len(cell.cameras))]
         self._detection = detection
-        detection.start_episode(self.latency_s)
+        detection.start_episode(self.latency_s, examples)
         self._queue: deque[tuple[float, Future[DetectionFrame]]] = deque()
         self._in_flight: _InFlight | None = None
         self.latest: tuple[RgbdFrame, ...] = ()
@@ -174,6 +180,9 @@ class PerceptionStepper:
         self.camera: CameraSource | None = None
         self._rig: CameraRig | None = None
         self._detection: DetectionProcess | None = None
+        self.examples_folder: Path | None = None
+        """Where the camera source writes each camera's example frame, one per episode (None:
+        nowhere); set before ``reset``."""
         self._released: list[DetectionFrame] = []
 
     def reset(self, seed: int, rng: np.random.Generator) -> Perception | None:
@@ -207,9 +216,18 @@ class PerceptionStepper:
             self._rig = CameraRig(twin)
         if self._detection is None:
             self._detection = DetectionProcess(
-                twin.dataset_dir, twin.cell.cameras, twin.cell.belt, tuple(twin.classes)
+                twin.dataset_dir,
+                twin.cell.cameras,
+                twin.cell.belt,
+                tuple(twin.classes),
+                twin.cell.materials,
             )
-        self.camera = CameraSource(twin, self._rig, self._detection, seed=seed)
+        examples = None
+        if self.examples_folder is not None:
+            examples = Examples(
+                folder=self.examples_folder, at_s=EXAMPLE_AT * twin.scenario.duration_s
+            )
+        self.camera = CameraSource(twin, self._rig, self._detection, seed=seed, examples=examples)
         return None
 
     def step(self, step: int, time_s: float) -> None:

@@ -360,6 +360,12 @@ class Twin:
         """Detection frames released since the last call (after their latency)."""
         return self._perception.take()
 
+    def write_camera_examples(self, folder: Path | None) -> None:
+        """With the camera source, each later episode writes one frame per camera with its
+        detections drawn into ``folder`` (:func:`interfaces.run_folder.camera_frame_name`;
+        None: none); the oracle writes nothing."""
+        self._perception.examples_folder = folder
+
     def camera_frames(self) -> tuple[RgbdFrame, ...]:
         """Every camera's frame of the camera source's last capture, as rendered (none with the
         oracle): what the node publishes, without a second render."""

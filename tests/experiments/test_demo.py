@@ -27,6 +27,7 @@ def test_the_demo_runs_the_line_after_the_speeds_and_prints_its_table(tmp_path: 
     out = tmp_path / "demo"
     cmd = [sys.executable, "-m", "twin.cli", "demo", "--out", str(out), "--images", "4"]
     cmd += ["--seconds", "3", "--line-seconds", "4", "--line-scenario", str(scenario)]
+    cmd += ["--camera-seconds", "2"]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=400, check=False)
     assert done.returncode == 0, done.stderr[-3000:]
     text = done.stdout
@@ -49,3 +50,23 @@ def test_the_demo_runs_the_line_after_the_speeds_and_prints_its_table(tmp_path: 
     assert "<td>line_standin</td>" in page
     assert 'id="per-station"' in page
     assert 'id="fig-recovery_stations"' in page
+
+    # the camera against the oracle: both rows, the camera's scores only on its own, the frame
+    table = text[text.index("The camera against the oracle: reference cell, 0.4 m/s, 2 s") :]
+    lines = table.splitlines()
+    assert lines[1].split()[:2] == ["perception", "picks"]
+    camera, oracle = (line.split() for line in lines[3:5])
+    assert (camera[0], oracle[0]) == ("camera", "oracle")
+    (row,) = json.loads((out / "runs" / "camera" / "episodes.json").read_text("utf-8"))
+    assert camera[5] == f"{row['perception_recall']:.3f}"
+    assert oracle[5:9] == ["-", "-", "-", "-"]
+    frame = out / "camera_frame.png"
+    assert f"a camera frame with its detections: {frame}" in text
+    from PIL import Image
+
+    from interfaces.cell import load_cell
+
+    spec = load_cell("default").cameras[0]
+    with Image.open(frame) as image:
+        assert image.size == (spec.width_px, spec.height_px)
+    assert 'id="perception"' in page

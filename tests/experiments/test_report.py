@@ -71,6 +71,7 @@ def test_report_has_every_figure_and_opens_offline_in_chromium(
     assert not list(out.glob(".*.tmp"))
     assert "RTT p50 (ms)" in page
     assert "RTT p99 (ms)" in page
+    assert 'id="perception"' not in page  # the oracle has nothing to score: no empty section
     if not CHROMIUM.is_file():
         pytest.skip(f"no chromium at {CHROMIUM}: `apt-get install chromium` to run this check")
     probe = out / "probe.html"

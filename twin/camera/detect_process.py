@@ -25,7 +25,7 @@ import multiprocessing
 import os
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -40,10 +40,22 @@ from twin.errors import ConfigError
 
 if TYPE_CHECKING:
     from detector.detector import Detector, DetectorOutput
+    from interfaces.materials import ClassTable
     from twin.ground_truth import GroundTruth
     from twin.perception_score import EpisodeScorer
 
-__all__ = ["DetectionProcess", "Shot", "camera_stretches"]
+__all__ = ["DetectionProcess", "Examples", "Shot", "camera_stretches"]
+
+
+@dataclass(kw_only=True)
+class Examples:
+    """Where an episode's example frames go: into ``folder``, one per camera
+    (:func:`interfaces.run_folder.camera_frame_name`), the first frame exposed at or after
+    ``at_s`` (sim time)."""
+
+    folder: Path
+    at_s: float
+    written: set[str] = field(default_factory=set)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -93,7 +105,8 @@ class _Camera:
 
 
 class _Child:
-    """The child's state: the cameras, and the episode's scorer and latency."""
+    """The child's state: the cameras, and the episode's scorer, latency and where its example
+    frames go."""
 
     def __init__(
         self,
@@ -101,6 +114,7 @@ class _Child:
         cameras: tuple[RgbdCameraSpec, ...],
         belt: BeltSpec,
         classes: tuple[str, ...],
+        materials: ClassTable,
     ) -> None:
         from twin.camera.detectors import detectors_for
 
@@ -113,15 +127,36 @@ class _Child:
                 _Camera(detector=detector, stretch_x_m=stretch, belt_depth_m=depth, off_belt=off)
             )
         self.cameras = tuple(made)
+        self.names = tuple(spec.name for spec in cameras)
         self.classes = classes
+        self.materials = materials
         self.scorer: EpisodeScorer | None = None
         self.latency_s = 0.0
+        self.examples: Examples | None = None
 
-    def start(self, latency_s: float) -> None:
+    def start(self, latency_s: float, examples: Examples | None) -> None:
         from twin.perception_score import EpisodeScorer
 
         self.scorer = EpisodeScorer(self.classes)
         self.latency_s = latency_s
+        self.examples = examples
+
+    def _example(self, time_s: float, shot: Shot, output: DetectorOutput) -> None:
+        """Write the camera's example frame when this is the first frame at or after the
+        examples' time (once per camera and episode)."""
+        examples = self.examples
+        if examples is None or time_s < examples.at_s:
+            return
+        from interfaces.class_colours import class_colour
+        from interfaces.run_folder import camera_frame_name
+        from twin.camera.overlay import write_overlay
+
+        name = self.names[shot.camera]
+        if name in examples.written:
+            return
+        examples.written.add(name)
+        colours = class_colour(self.materials)
+        write_overlay(examples.folder / camera_frame_name(name), shot.frame, output, colours)
 
     def detect(
         self, time_s: float, shots: list[Shot], objects: dict[int, GroundTruth]
@@ -141,6 +176,7 @@ class _Child:
             output = camera.detector.detect(frame)
             detect_s = time.perf_counter() - t0
             detections.extend(_kept(camera, output))
+            self._example(time_s, shot, output)
             self.scorer.add(shot.frame, output, objects, detect_s=detect_s, render_s=shot.render_s)
         return DetectionFrame(
             capture_time_s=time_s,
@@ -171,12 +207,13 @@ def _init(
     cameras: tuple[RgbdCameraSpec, ...],
     belt: BeltSpec,
     classes: tuple[str, ...],
+    materials: ClassTable,
     parent_pid: int,
 ) -> None:
     global _CHILD  # noqa: PLW0603 (the child process's one state)
     os.environ[PARENT_PID_VARIABLE] = str(parent_pid)
     die_with_parent()  # a twin killed outright takes its detector with it
-    _CHILD = _Child(dataset_dir, cameras, belt, classes)
+    _CHILD = _Child(dataset_dir, cameras, belt, classes, materials)
 
 
 def _child() -> _Child:
@@ -184,8 +221,8 @@ def _child() -> _Child:
     return _CHILD
 
 
-def _start(latency_s: float) -> None:
-    _child().start(latency_s)
+def _start(latency_s: float, examples: Examples | None) -> None:
+    _child().start(latency_s, examples)
 
 
 def _detect(time_s: float, shots: list[Shot], objects: dict[int, GroundTruth]) -> DetectionFrame:
@@ -205,17 +242,19 @@ class DetectionProcess:
         cameras: tuple[RgbdCameraSpec, ...],
         belt: BeltSpec,
         classes: tuple[str, ...],
+        materials: ClassTable,
     ) -> None:
         self._pool = ProcessPoolExecutor(
             max_workers=1,
             mp_context=multiprocessing.get_context("spawn"),
             initializer=_init,
-            initargs=(dataset_dir, cameras, belt, classes, os.getpid()),
+            initargs=(dataset_dir, cameras, belt, classes, materials, os.getpid()),
         )
 
-    def start_episode(self, latency_s: float) -> None:
-        """A new episode: a fresh scorer, detections released ``latency_s`` after exposure."""
-        self._pool.submit(_start, latency_s)
+    def start_episode(self, latency_s: float, examples: Examples | None = None) -> None:
+        """A new episode: a fresh scorer, detections released ``latency_s`` after exposure,
+        and (``examples``) one frame per camera written with its detections drawn."""
+        self._pool.submit(_start, latency_s, examples)
 
     def detect(
         self, time_s: float, shots: list[Shot], objects: dict[int, GroundTruth]

@@ -98,6 +98,7 @@ def write_overlay(
     try:
         with os.fdopen(fd, "wb") as handle:
             image.save(handle, format="PNG")
+        os.chmod(tmp, 0o644)  # mkstemp's 0600 would keep the picture from other readers
         Path(tmp).replace(path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
