@@ -44,7 +44,7 @@ CAMERA_PAIR = tuple(
 )
 """The camera against the oracle: the reference cell's scenario with the camera as its
 perception, and the same with the oracle."""
-CAMERA_SECONDS = 20.0
+CAMERA_SECONDS = 15.0
 """Sim seconds of each of the camera-against-oracle episodes."""
 CAMERA_SPEED_MPS = 0.4
 
