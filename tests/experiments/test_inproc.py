@@ -78,8 +78,8 @@ def _episodes(scenario: Path, dataset: Path, out: Path, seed: int) -> tuple[Path
 
 @pytest.mark.parametrize(
     ("text", "seed"),
-    [(DEFAULT_CELL, 1), (DEFAULT_CELL, 2), (TWO_STATIONS, 3)],
-    ids=["default-seed1", "default-seed2", "two_pandas-seed3"],
+    [(DEFAULT_CELL, 1), (TWO_STATIONS, 3)],
+    ids=["default-seed1", "two_pandas-seed3"],
 )
 def test_inproc_gives_the_ros_episode_bit_for_bit(
     builtin_meshes: Path, tmp_path: Path, text: str, seed: int

@@ -392,7 +392,11 @@ def test_a_websocket_client_watches_the_episode_as_it_runs(
     bins = decode_on(channels, "/cell/bins", received.by_topic["/cell/bins"][0][1])
     assert len(bins.bins) >= 2
     static = decode_on(channels, "/tf_static", received.by_topic["/tf_static"][0][1])
-    assert [t.child_frame_id for t in static.transforms] == ["panda_link0"]
+    assert [t.child_frame_id for t in static.transforms] == [
+        "panda_link0",
+        "camera_link",
+        "camera_optical_frame",
+    ]
 
     log_ns, payload = received.by_topic["/objects/ground_truth"][-1]
     truth = decode_on(channels, "/objects/ground_truth", payload)

@@ -74,7 +74,10 @@ def _read(path: Path) -> Recording:
             if topic in ("/tf", "/tf_static"):
                 for t in msg.transforms:
                     pose = (_xyz(t.transform.translation), _xyzw(t.transform.rotation))
-                    assert t.header.frame_id == "world", t.child_frame_id
+                    # every frame a child of world, but a camera's optical frame (its link's)
+                    optical = t.child_frame_id.removesuffix("_optical_frame")
+                    parent = f"{optical}_link" if optical != t.child_frame_id else "world"
+                    assert t.header.frame_id == parent, t.child_frame_id
                     if topic == "/tf":
                         out.tf.setdefault(_ns(t.header.stamp), {})[t.child_frame_id] = pose
                     else:
@@ -228,7 +231,13 @@ def test_every_station_of_a_line_has_its_frames_under_its_namespace(
     for station in stations:
         _check_station_frames(station, recording)
     frames = set(recording.tf[max(recording.tf)]) | set(recording.tf_static)
-    assert not {f for f in frames if not f.startswith(("s1/", "s2/", "object/"))}
+    cameras = {
+        f"{c.name}_{kind}"
+        for c in load_cell(out / "cell.yaml").cameras
+        for kind in ("link", "optical_frame")
+    }
+    assert cameras <= set(recording.tf_static)  # the line's cameras, by their own names
+    assert not {f for f in frames - cameras if not f.startswith(("s1/", "s2/", "object/"))}
     link_ns = {m.ns for m in recording.static_markers if m.ns.endswith("links")}
     assert link_ns == {"s1/links", "s2/links"}
     assert len({m.id for _, ms in recording.targets for m in ms if m.ns == "tcp_paths"}) == 2
