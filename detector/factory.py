@@ -53,7 +53,7 @@ __all__ = [
 CACHE_NAME = "detector_classifier.json"
 """The classifier cache file in a dataset folder."""
 
-RECIPE_VERSION = 2
+RECIPE_VERSION = 3
 """Version of how the factory trains; part of the cache key (bump it when training changes)."""
 
 L2 = DEFAULT_L2

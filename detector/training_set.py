@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image, ImageDraw, ImageFilter
 
 from detector.errors import DatasetError
 from detector.features import instance_features
@@ -44,6 +44,18 @@ TABLE_PATCHES_PER_CLASS = 48
 """Patches of each class's colour in a class-table training set."""
 
 _BELT_RGB = np.array([18, 18, 19], dtype=np.float64)
+
+CAMERA_VIEW_GAIN = 0.95
+"""Brightness of a piece's top face as the camera sees it, relative to its texture: a texture
+sample is also taken at this gain (with :data:`CAMERA_VIEW_BLUR_PX`). The twin's renderer
+lights a face by ``ambient + (1 - ambient) cos`` (:mod:`twin.camera.gl`: 0.45 ambient, the
+light 25 degrees off the vertical), 0.95 on a level top face; a real camera's exposure varies
+about as much."""
+
+CAMERA_VIEW_BLUR_PX = 0.6
+"""Gaussian blur (pixels at the camera's scale) of the camera-view copy of a texture: texture
+filtering and optics soften the grain the texture shows sharp (local contrast and the darkest
+percentile of L* are lower in renders than on the texture)."""
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -108,8 +120,9 @@ def _positive(data: dict[str, object], key: str, where: Path) -> float:
 def scene_samples(
     scene_path: Path, *, belt_m_per_px: float, stride: int
 ) -> tuple[np.ndarray, list[str]] | None:
-    """Features ``(k, F)`` and classes of the pieces of one meshgen image folder, its texture
-    resized to ``belt_m_per_px`` (``None``: the scene has no texture or no pieces)."""
+    """Features ``(2k, F)`` and classes of the ``k`` pieces of one meshgen image folder, its
+    texture resized to ``belt_m_per_px``, each piece twice: as the texture shows it and as the
+    camera sees it (:func:`camera_view`) (``None``: the scene has no texture or no pieces)."""
     data = _read_scene(scene_path)
     texture = data.get("texture")
     objects = data.get("objects")
@@ -158,8 +171,21 @@ def scene_samples(
         return None
     lut = np.zeros(n + 1, dtype=np.int32)
     lut[1:][keep] = np.arange(1, int(keep.sum()) + 1)
-    features = instance_features(rgb, lut[labels], stride)
-    return features, [c for c, k in zip(classes, keep, strict=True) if k]
+    ids = lut[labels]
+    features = np.concatenate(
+        (instance_features(rgb, ids, stride), instance_features(camera_view(rgb), ids, stride))
+    )
+    kept = [c for c, k in zip(classes, keep, strict=True) if k]
+    return features, kept + kept
+
+
+def camera_view(rgb: np.ndarray) -> np.ndarray:
+    """``rgb`` ``(H, W, 3) uint8`` as the camera sees a top face: scaled by
+    :data:`CAMERA_VIEW_GAIN` and blurred by :data:`CAMERA_VIEW_BLUR_PX`."""
+    blurred = Image.fromarray(rgb).filter(ImageFilter.GaussianBlur(CAMERA_VIEW_BLUR_PX))
+    scaled = np.asarray(blurred, dtype=np.float32) * CAMERA_VIEW_GAIN + 0.5
+    out: np.ndarray = np.clip(scaled, 0.0, 255.0).astype(np.uint8)
+    return out
 
 
 def model_class_names(folder: Path, found: Sequence[str]) -> tuple[str, ...]:

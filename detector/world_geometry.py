@@ -20,10 +20,10 @@ From the full-resolution label image, the filtered depth and the camera
   top of what the piece lies on);
 - the **height**: the ``top_percentile`` of the face's 5x5 mean heights, minus the underside;
 - the **suction point**: the face pixel farthest from the face's outline (Euclidean distance
-  transform), as a world point, its distance in metres (minus half a pixel) as the radius, and
-  the **tilt**: the angle between world up and the normal of the plane fitted (least squares,
-  smallest eigenvector of the covariance) to the face's points within that radius (at least
-  ``min_fit_radius_m``) of it.
+  transform), as a world point, its distance in metres as the radius (:data:`RADIUS_OFFSET_PX`),
+  and the **tilt**: the angle between world up and the normal of the plane fitted (least
+  squares, smallest eigenvector of the covariance) to the face's points within
+  :data:`FIT_SCALE` times that radius (at least ``min_fit_radius_m``) of it.
 
 All on every ``stride``-th pixel (default 2: a quarter of the pixels; the rim, placed at the
 face's height, keeps the extents unbiased on the synthetic frames of the tests), with
@@ -46,6 +46,17 @@ from detector.config import GeometryConfig
 from detector.filters import max3, min3
 from detector.rect import min_area_rectangles
 from interfaces.detections import Detection
+
+RADIUS_OFFSET_PX = 0.0
+"""Added to the suction point's distance transform (geometry pixels) before it becomes the
+radius. The transform runs on the footprint less its outermost pixels (those touching
+another instance or the background), so the distance to the nearest removed pixel is already
+about the distance to the outline (which lies half a pixel beyond the last footprint pixel)."""
+
+FIT_SCALE = 1.5
+"""The face's tilt is fitted to its points within this many suction radii (at least
+``min_fit_radius_m``) of the suction point: more points, less of the depth noise's bias
+(noise only ever adds tilt)."""
 
 _TOP_SAMPLES = 20000
 """At most about this many face pixels (evenly spaced) go into the grouped top percentile."""
@@ -243,12 +254,12 @@ def _suction_points(
     depth = crop.depth[sr, sc].astype(np.float64)
     pixel_m = crop.stride * depth / math.sqrt(view.intrinsics.fx_px * view.intrinsics.fy_px)
     point[has] = crop.points[sr, sc].astype(np.float64)
-    radius[has] = np.maximum(distance[sr, sc] - 0.5, 0.0) * pixel_m
+    radius[has] = np.maximum(distance[sr, sc] + RADIUS_OFFSET_PX, 0.0) * pixel_m
     centre_r = np.zeros(n + 1)
     centre_c = np.zeros(n + 1)
     centre_r[has], centre_c[has] = sr, sc
     fit_px = np.zeros(n + 1)
-    fit_px[has] = np.maximum(radius[has], config.min_fit_radius_m) / pixel_m
+    fit_px[has] = FIT_SCALE * np.maximum(radius[has], config.min_fit_radius_m) / pixel_m
     fr, fc = np.nonzero(face)
     owner = labels[fr, fc]
     near = (fr - centre_r[owner]) ** 2 + (fc - centre_c[owner]) ** 2 <= fit_px[owner] ** 2
