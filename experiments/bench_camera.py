@@ -14,12 +14,11 @@ real-time factor over the oracle's (issue 36's target: >= 0.7).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 from pathlib import Path
 from typing import Any
 
-from experiments.bench_line import BenchLineError, Episode, run_episode
+from experiments.bench_line import BenchLineError, Episode, print_result, run_episode
 from interfaces.cell import load_cell
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -102,11 +101,7 @@ def run(args: argparse.Namespace) -> int:
         "statistic": "best of the rounds (real-time factor: highest; CPU: lowest)",
         "cpus": os.cpu_count(),
     }
-    if args.json:
-        print(json.dumps(result))
-    else:
-        for key, value in result.items():
-            print(f"{key:>18}: {value}")
+    print_result(result, as_json=args.json, width=18)
     return 0
 
 

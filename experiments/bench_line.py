@@ -286,12 +286,18 @@ def run(args: argparse.Namespace) -> int:
             "cpus": os.cpu_count(),
         }
     )
-    if args.json:
-        print(json.dumps(result))
-    else:
-        for key, value in result.items():
-            print(f"{key:>26}: {value}")
+    print_result(result, as_json=args.json, width=26)
     return 0
+
+
+def print_result(result: dict[str, Any], *, as_json: bool, width: int) -> None:
+    """A benchmark's result: one JSON line, or one ``key: value`` line per figure, the keys
+    right-aligned in ``width`` columns."""
+    if as_json:
+        print(json.dumps(result))
+        return
+    for key, value in result.items():
+        print(f"{key:>{width}}: {value}")
 
 
 __all__ = [
@@ -300,6 +306,7 @@ __all__ = [
     "Episode",
     "configure",
     "cut_cell",
+    "print_result",
     "run",
     "run_episode",
     "station_counts",

@@ -62,6 +62,7 @@ class _Camera:
     tap_every: int  # 0: the tap takes none
     due: int = 0
     sent: int = 0
+    rng: np.random.Generator | None = None  # its depth noise, once the publisher renders
 
 
 class CameraPublisher:
@@ -76,7 +77,6 @@ class CameraPublisher:
         """Frames this publisher rendered itself (the oracle's viewers)."""
         self._cameras: tuple[_Camera, ...] = ()
         self._rig: CameraRig | None = None
-        self._rngs: list[np.random.Generator] = []
         self._last_stamp_s = -math.inf
 
     @property
@@ -135,14 +135,11 @@ class CameraPublisher:
 
             self._rig = CameraRig(self.twin)
             seeds = camera_seed(self.twin.scenario.seed).spawn(len(self._cameras))
-            self._rngs = [np.random.default_rng(s) for s in seeds]
+            for camera, seed in zip(self._cameras, seeds, strict=True):
+                camera.rng = np.random.default_rng(seed)
         snapshot = self._rig.snapshot()
-        index = {id(c): i for i, c in enumerate(self._cameras)}
         self.renders += len(cameras)
-        return [
-            self._rig.capture(c.spec, rng=self._rngs[index[id(c)]], snapshot=snapshot)
-            for c in cameras
-        ]
+        return [self._rig.capture(c.spec, rng=c.rng, snapshot=snapshot) for c in cameras]
 
     def _send(self, camera: _Camera, frame: RgbdFrame) -> None:
         colour, depth, info = camera.publishers

@@ -170,12 +170,16 @@ def port_argument(text: str) -> int:
     return value
 
 
-def _ack_timeout_argument(text: str) -> float:
+def _float(text: str) -> float:
     try:
-        value = float(text)
+        return float(text)
     except ValueError:
         msg = f"invalid float value: {text[:40]!r}"
         raise argparse.ArgumentTypeError(msg) from None
+
+
+def _ack_timeout_argument(text: str) -> float:
+    value = _float(text)
     if not 0.0 < value <= MAX_ACK_TIMEOUT_S:
         msg = f"must be in (0, {MAX_ACK_TIMEOUT_S:g}] s, not {text[:40]}"
         raise argparse.ArgumentTypeError(msg)
@@ -187,11 +191,7 @@ MAX_RECORD_IMAGES_HZ = 120.0
 
 
 def _record_hz_argument(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        msg = f"invalid float value: {text[:40]!r}"
-        raise argparse.ArgumentTypeError(msg) from None
+    value = _float(text)
     if not 0.0 <= value <= MAX_RECORD_IMAGES_HZ:
         msg = f"must be in [0, {MAX_RECORD_IMAGES_HZ:g}] Hz (0: no images), not {text[:40]}"
         raise argparse.ArgumentTypeError(msg)

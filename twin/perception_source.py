@@ -209,18 +209,20 @@ class PerceptionStepper:
                 "declares no cameras (a cameras: list)"
             )
             raise ConfigError(msg)
-        from twin.camera.detect_process import DetectionProcess
+        from twin.camera.detect_process import DetectionProcess, DetectorSetup
         from twin.camera.rig import CameraRig
 
         if self._rig is None:
             self._rig = CameraRig(twin)
         if self._detection is None:
             self._detection = DetectionProcess(
-                twin.dataset_dir,
-                twin.cell.cameras,
-                twin.cell.belt,
-                tuple(twin.classes),
-                twin.cell.materials,
+                DetectorSetup(
+                    dataset_dir=twin.dataset_dir,
+                    cameras=twin.cell.cameras,
+                    belt=twin.cell.belt,
+                    classes=tuple(twin.classes),
+                    materials=twin.cell.materials,
+                )
             )
         examples = None
         if self.examples_folder is not None:

@@ -35,16 +35,29 @@ from interfaces.camera import RgbdCameraSpec, RgbdFrame, belt_view_x_m
 from interfaces.cell import BeltSpec
 from interfaces.detections import Detection, DetectionFrame
 from interfaces.lifecycle import PARENT_PID_VARIABLE, die_with_parent
+from interfaces.materials import ClassTable
 from twin.camera.filters import belt_plane_depth, filtered_frame
 from twin.errors import ConfigError
 
 if TYPE_CHECKING:
     from detector.detector import Detector, DetectorOutput
-    from interfaces.materials import ClassTable
     from twin.ground_truth import GroundTruth
     from twin.perception_score import EpisodeScorer
 
-__all__ = ["DetectionProcess", "Examples", "Shot", "camera_stretches"]
+__all__ = ["DetectionProcess", "DetectorSetup", "Examples", "Shot", "camera_stretches"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectorSetup:
+    """What the child builds its cameras' detectors from: the dataset (its photos train the
+    classifier), the cell's cameras and belt, the classes in the scorer's order and the class
+    table (the example frames' colours)."""
+
+    dataset_dir: Path
+    cameras: tuple[RgbdCameraSpec, ...]
+    belt: BeltSpec
+    classes: tuple[str, ...]
+    materials: ClassTable
 
 
 @dataclass(kw_only=True)
@@ -108,17 +121,11 @@ class _Child:
     """The child's state: the cameras, and the episode's scorer, latency and where its example
     frames go."""
 
-    def __init__(
-        self,
-        dataset_dir: Path,
-        cameras: tuple[RgbdCameraSpec, ...],
-        belt: BeltSpec,
-        classes: tuple[str, ...],
-        materials: ClassTable,
-    ) -> None:
+    def __init__(self, setup: DetectorSetup) -> None:
         from twin.camera.detectors import detectors_for
 
-        detectors = detectors_for(dataset_dir, belt_z_m=belt.surface_z_m, cameras=cameras)
+        cameras, belt = setup.cameras, setup.belt
+        detectors = detectors_for(setup.dataset_dir, belt_z_m=belt.surface_z_m, cameras=cameras)
         stretches = camera_stretches(cameras, belt)
         made = []
         for spec, detector, stretch in zip(cameras, detectors, stretches, strict=True):
@@ -128,8 +135,8 @@ class _Child:
             )
         self.cameras = tuple(made)
         self.names = tuple(spec.name for spec in cameras)
-        self.classes = classes
-        self.materials = materials
+        self.classes = setup.classes
+        self.materials = setup.materials
         self.scorer: EpisodeScorer | None = None
         self.latency_s = 0.0
         self.examples: Examples | None = None
@@ -202,18 +209,11 @@ def _kept(camera: _Camera, output: DetectorOutput) -> list[Detection]:
 _CHILD: _Child | None = None
 
 
-def _init(
-    dataset_dir: Path,
-    cameras: tuple[RgbdCameraSpec, ...],
-    belt: BeltSpec,
-    classes: tuple[str, ...],
-    materials: ClassTable,
-    parent_pid: int,
-) -> None:
+def _init(setup: DetectorSetup, parent_pid: int) -> None:
     global _CHILD  # noqa: PLW0603 (the child process's one state)
     os.environ[PARENT_PID_VARIABLE] = str(parent_pid)
     die_with_parent()  # a twin killed outright takes its detector with it
-    _CHILD = _Child(dataset_dir, cameras, belt, classes, materials)
+    _CHILD = _Child(setup)
 
 
 def _child() -> _Child:
@@ -236,19 +236,12 @@ def _summary() -> dict[str, float]:
 class DetectionProcess:
     """The child process of one twin's cameras, across its episodes (see the module)."""
 
-    def __init__(
-        self,
-        dataset_dir: Path,
-        cameras: tuple[RgbdCameraSpec, ...],
-        belt: BeltSpec,
-        classes: tuple[str, ...],
-        materials: ClassTable,
-    ) -> None:
+    def __init__(self, setup: DetectorSetup) -> None:
         self._pool = ProcessPoolExecutor(
             max_workers=1,
             mp_context=multiprocessing.get_context("spawn"),
             initializer=_init,
-            initargs=(dataset_dir, cameras, belt, classes, materials, os.getpid()),
+            initargs=(setup, os.getpid()),
         )
 
     def start_episode(self, latency_s: float, examples: Examples | None = None) -> None:
