@@ -113,6 +113,8 @@ class JointCommander:
         """Commands that could not land on the IK solution within the joint limits."""
         self.on_goal = True
         """Whether the last command landed on its IK solution (False while catching up)."""
+        self.version = 0
+        """Counts the changes of the command (every :meth:`reset` and period moved)."""
 
     @property
     def q(self) -> FloatArray:
@@ -133,6 +135,7 @@ class JointCommander:
         self._goal = self._q.copy()
         self._goal_dq = self._dq.copy()
         self.on_goal = True
+        self.version += 1
 
     def command(
         self, position_m: tuple[float, float, float], yaw_rad: float, *, ticks: int = 1
@@ -203,6 +206,7 @@ class JointCommander:
         clipped = np.clip(q, self._kin.lower_rad, self._kin.upper_rad)
         self._dq = np.where(clipped == q, dq, (clipped - self._q) / self._dt_s)
         self._q = clipped
+        self.version += 1
 
 
 __all__ = ["FeedbackTerm", "JointCommander"]

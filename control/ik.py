@@ -8,6 +8,7 @@ in the order of the robot's ``arm_joints``. Poses are Pinocchio ``SE3`` objects 
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,19 +55,81 @@ def _reach(model: pin.Model, tcp_frame_id: int) -> tuple[FloatArray, float]:
     return _frozen(origin), length_m + 1e-6
 
 
-def _wrist_reach(model: pin.Model, tcp_frame_id: int) -> tuple[FloatArray, float]:
+WRIST_REACH_MARGIN_M = 0.01
+"""Added to the farthest wrist distance the search of :func:`_farthest_wrist_m` finds."""
+
+
+def _farthest_wrist_m(model: pin.Model, joint_id: int) -> float:
+    """The farthest (m) the origin of joint ``joint_id`` gets from the first joint's origin
+    within the joint limits: the best of a projected gradient ascent on the squared distance
+    from the 16 farthest of 2,048 seeded random configurations and every corner of the limits
+    of the joints before it (deterministic: the same model gives the same figure)."""
+    data = model.createData()
+    lower = np.asarray(model.lowerPositionLimit, dtype=np.float64)
+    upper = np.asarray(model.upperPositionLimit, dtype=np.float64)
+    origin = np.asarray(model.jointPlacements[1].translation, dtype=np.float64)
+
+    def offset(q: FloatArray) -> FloatArray:
+        pin.forwardKinematics(model, data, q)
+        return np.asarray(data.oMi[joint_id].translation) - origin
+
+    rng = np.random.default_rng(0)
+    starts = list(rng.uniform(lower, upper, size=(2048, model.nq)))
+    moving = range(1, min(joint_id, model.nq))  # the first joint's turn keeps the distance
+    for corner in itertools.product((0, 1), repeat=len(moving)):
+        q = 0.5 * (lower + upper)
+        for j, side in zip(moving, corner, strict=True):
+            q[j] = upper[j] if side else lower[j]
+        starts.append(q)
+    starts.sort(key=lambda q: -float(offset(q) @ offset(q)))
+    best = 0.0
+    for start in starts[:16]:
+        q, step = start, 0.1
+        value = float(offset(q) @ offset(q))
+        for _ in range(200):
+            pin.computeJointJacobians(model, data, q)
+            jac = pin.getJointJacobian(model, data, joint_id, pin.LOCAL_WORLD_ALIGNED)[:3]
+            gradient = 2.0 * jac.T @ offset(q)
+            trial = np.clip(q + step * gradient, lower, upper)
+            trial_value = float(offset(trial) @ offset(trial))
+            if trial_value > value:
+                q, value, step = trial, trial_value, step * 1.5
+            else:
+                step *= 0.5
+                if step < 1e-9:
+                    break
+        best = max(best, math.sqrt(value))
+    return best
+
+
+_WRIST_REACH: dict[tuple[str, int, str], float] = {}
+""":func:`_farthest_wrist_m` per robot model (URDF, arm joints) and joint, once per process."""
+
+
+def _wrist_reach(model: pin.Model, tcp_frame_id: int, key: str) -> tuple[FloatArray, float]:
     """The origin ``(3,)`` of the joint that carries the TCP, in the TCP's frame, and an upper
-    bound (m) of its distance from the first joint's origin in any configuration (the sum of
-    the lengths of the offsets between the joints' origins up to it, as :func:`_reach`). A
-    tool pose fixes where that joint's origin is: farther than the bound from the first
-    joint's, no configuration reaches the pose (tighter than :func:`_reach`, which adds the
-    wrist and the tool at any angle)."""
+    bound (m) of its distance from the first joint's origin in any configuration within the
+    joint limits. A tool pose fixes where that joint's origin is: farther than the bound from
+    the first joint's, no configuration reaches the pose (tighter than :func:`_reach`, which
+    adds the wrist and the tool at any angle).
+
+    The bound is the smaller of the sum of the offsets between the joints' origins up to it
+    (the triangle inequality: certain, but 1.66 m on a UR10 whose wrist gets 1.31 m out) and
+    the farthest distance a search over the joint limits finds (:func:`_farthest_wrist_m`,
+    ``key`` names the model for its cache) plus :data:`WRIST_REACH_MARGIN_M`: a search, not a
+    proof, hence the margin, and ``tests/control/test_ik_reach.py`` checks it against random
+    configurations and the solver. Out there the solver only failed after all its iterations:
+    the idle stations' schedulers asked about every piece coming into reach."""
     frame = model.frames[tcp_frame_id]
     length_m = sum(
         float(np.linalg.norm(model.jointPlacements[j].translation))
         for j in range(2, frame.parentJoint + 1)
     )
-    return _frozen(frame.placement.inverse().translation), length_m
+    cache_key = (key, frame.parentJoint, str(model.nq))
+    if cache_key not in _WRIST_REACH:
+        _WRIST_REACH[cache_key] = _farthest_wrist_m(model, frame.parentJoint)
+    searched_m = _WRIST_REACH[cache_key] + WRIST_REACH_MARGIN_M
+    return _frozen(frame.placement.inverse().translation), min(length_m, searched_m)
 
 
 def down_rotation(yaw_rad: float) -> FloatArray:
@@ -179,8 +242,13 @@ class Kinematics:
         self.reach_origin_m, self.reach_m = _reach(model, self._tcp_id)
         """The first joint's origin in the base frame ``(3,)`` and the farthest the TCP can be from
         it (m, an upper bound): a pose beyond is refused by :meth:`solve` without iterating."""
-        self._wrist_in_tcp_m, wrist_reach_m = _wrist_reach(model, self._tcp_id)
+        self._wrist_in_tcp_m, wrist_reach_m = _wrist_reach(
+            model, self._tcp_id, f"{path}:{robot.arm_joints}"
+        )
         margin_m = self._ik.accept_tolerance * (1.0 + float(np.linalg.norm(self._wrist_in_tcp_m)))
+        self.wrist_reach_m = wrist_reach_m
+        """The farthest (m) the joint carrying the TCP gets from the first joint's origin
+        (:func:`_wrist_reach`; :meth:`wrist_distance_m` of a reachable pose is within it)."""
         self._wrist_reach_sq = (wrist_reach_m + margin_m + 1e-6) ** 2
         self._damping = self._ik.damping * np.eye(6)
 
@@ -308,6 +376,12 @@ class Kinematics:
             iterations=cfg.max_iterations,
             error_norm=error_norm,
         )
+
+    def wrist_distance_m(self, oMtool: pin.SE3) -> float:  # noqa: N803
+        """How far (m) the world TCP pose ``oMtool`` puts the origin of the joint carrying
+        the TCP from the first joint's origin (what :attr:`wrist_reach_m` bounds)."""
+        wrist = (self._baseMo * oMtool).act(self._wrist_in_tcp_m) - self.reach_origin_m
+        return float(np.linalg.norm(wrist))
 
     def _beyond_wrist(self, baseMdes: pin.SE3) -> bool:  # noqa: N803
         """Whether the pose ``baseMdes`` (the TCP's in the base frame) puts the origin of the

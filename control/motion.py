@@ -22,7 +22,13 @@ from control.config import ControllerConfig
 from control.errors import IkError, PlanningError
 from control.ik import Kinematics, yaw_of
 from control.pick_state import FloatArray, MotionState, PickBook, TcpMeasurement, Vec3
-from control.planner import CartesianPlanner, CartesianState, CartesianTarget, JointPlanner
+from control.planner import (
+    CartesianPlanner,
+    CartesianState,
+    CartesianTarget,
+    JointPlanner,
+    JointStep,
+)
 from control.poses import JointGoal
 from interfaces.phases import FOLLOWING_PHASES, Phase
 
@@ -53,6 +59,10 @@ class PickMotion:
         self.feedback = FeedbackTerm(config.motion)
         self.state = MotionState(drop_q=drop_q)
         self.book = book
+        self._held: tuple[JointStep, int, CartesianState] | None = None
+        """The joint step, command version and setpoint of the last :meth:`step_joint`: a
+        waiting arm's next step is the same object (:meth:`JointPlanner.step`), and when the
+        command and setpoint have not changed since, resetting them again would not either."""
 
     def at_joint_goal(self, goal: JointGoal) -> bool:
         """The joint command is at ``goal`` (within 1e-4 rad)."""
@@ -108,8 +118,12 @@ class PickMotion:
             self.book.error("ruckig_error", f"{phase}: {exc}")
             return
         motion.joint_remaining_s = step.remaining_s
+        held = (step, self.commander.version, self.planner.state)
+        if self._held is not None and all(a is b for a, b in zip(held, self._held, strict=True)):
+            return  # at rest on the goal as last tick: the command and setpoint are as set then
         self.commander.reset(step.q, step.dq)
         self.sync_cartesian(step.q, step.dq)
+        self._held = (step, self.commander.version, self.planner.state)
 
     def step_cartesian(
         self, target: CartesianTarget, phase: Phase, *, min_duration_s: float | None = None

@@ -70,6 +70,7 @@ from control.messages import (
     priorities_of,
 )
 from control.pick import PURSUIT_PHASES, Command, PickController, TcpMeasurement
+from control.predicted_tracks import PredictedTracks
 from control.scheduler import nearest_grasp_yaw
 from control.tracking import Track, Tracker
 from interfaces.contract import (
@@ -367,7 +368,7 @@ class ControllerEndpoint:
                 yaw_rad=yaw_of(oMtool),
                 tool_measured=joint.tool_measured,
             )
-            tracks = self._tracker.predict_to(t_s)
+            tracks = PredictedTracks(self._tracker, t_s)
             command = controller.update(t_s, measured, tracks, self._belt_velocity_mps)
         except (ControlError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
             self.skipped["controller_error"] += 1

@@ -312,6 +312,8 @@ class JointPlanner:
         self._q = np.zeros(n)
         self._dq = np.zeros(n)
         self._ddq = np.zeros(n)
+        self._rest: JointStep | None = None  # a step that left the state unchanged
+        self._rest_key = b""  # the state and target it was computed from
         self.sync_fallbacks = 0
         """Plans where time synchronisation failed and the fallback solved the move."""
 
@@ -415,11 +417,28 @@ class JointPlanner:
     def step(self, q_target: FloatArray) -> JointStep:
         """Advance one control period towards ``q_target`` ``(n_arm,)`` (at rest).
 
+        A step that leaves the state as it found it (at rest on the target, or a hair from it
+        where Ruckig's move is a fixed point: a waiting arm) is returned again, the same
+        :class:`JointStep` object, while the state and target are unchanged: the same call
+        would compute the same step, and a caller may skip what it did with it last time.
         Raises ``PlanningError`` when the target is outside the limits or Ruckig fails.
         """
         q_target = np.asarray(q_target, dtype=np.float64)
+        key = self._state_key(q_target)
+        if self._rest is not None and key == self._rest_key:
+            return self._rest
+        step = self._step(q_target)
+        if key == self._state_key(q_target):
+            step.q.flags.writeable = step.dq.flags.writeable = False  # handed out again
+            self._rest, self._rest_key = step, key
+        return step
+
+    def _state_key(self, q_target: FloatArray) -> bytes:
+        return b"".join(a.tobytes() for a in (self._q, self._dq, self._ddq, q_target))
+
+    def _step(self, q_target: FloatArray) -> JointStep:
         if not self._dq.any() and not self._ddq.any() and np.array_equal(self._q, q_target):
-            # at rest on the target (a waiting arm): Ruckig would plan a zero-length move
+            # at rest on the target: Ruckig would plan a zero-length move
             return JointStep(q=self._q.copy(), dq=self._dq.copy(), remaining_s=0.0)
         try:
             self._checked(q_target, None, 0.0, self._trajectory)

@@ -385,6 +385,7 @@ def _run_episode(
 ) -> bool:
     """The episode; True when a stop signal ended it before its duration."""
     from twin.episode_log import EpisodeWriteError, start_episode_folder, write_status
+    from twin.episode_setup import robot_visuals_wanted
     from twin.perception_config import PerceptionConfig
     from twin.ros_isolation import clean_stale_fastdds_shm, local_ros_defaults
     from twin.sim import Twin
@@ -419,6 +420,13 @@ def _run_episode(
                 )
             )
             twin.spawn_judge = judge
+            twin.visual_shapes = gui or robot_visuals_wanted(
+                cell,
+                twin.perception_config.source,
+                over_ros=peers is None,
+                recorded=args.record is not None,
+                viewed=view is not None,
+            )
             return _serve(args, twin, stop, log, view, peers)
     except BaseException as exc:
         if out is not None:

@@ -17,7 +17,12 @@ from twin.errors import ConfigError
 from twin.objects import ImageLayout
 from twin.scenario import PerturbationLevel, Scenario
 
-__all__ = ["collision_cache_dir", "drive_parameters", "entering_classes"]
+__all__ = [
+    "collision_cache_dir",
+    "drive_parameters",
+    "entering_classes",
+    "robot_visuals_wanted",
+]
 
 
 def collision_cache_dir() -> tuple[Path, tempfile.TemporaryDirectory[str] | None]:
@@ -73,3 +78,15 @@ def entering_classes(
     kept = {name for name in present if not wanted or name in wanted}
     ordered = [name for name in cell.classes if name in kept]
     return (*ordered, *sorted(kept - set(ordered)))
+
+
+def robot_visuals_wanted(
+    cell: Cell, perception_source: str, *, over_ros: bool, recorded: bool, viewed: bool
+) -> bool:
+    """Whether anything of an episode renders the robots: the camera perception source, or the
+    cell's camera topics when anyone could take their frames (a subscriber over ROS 2, a
+    recording, the live view; in process with neither, nobody can). PyBullet's window needs
+    them too (the caller's ``--gui``)."""
+    if perception_source == "camera":
+        return True
+    return bool(cell.cameras) and (over_ros or recorded or viewed)

@@ -43,7 +43,14 @@ from interfaces.bins import BinSpec
 from interfaces.cell import Cell
 from interfaces.events import Event, EventType
 from twin.ground_truth import GroundTruth
-from twin.monitor_records import AtStation, Emitter, ObjectRecord, StationWatch, TcpZone
+from twin.monitor_records import (
+    AtStation,
+    Emitter,
+    ObjectRecord,
+    StationWatch,
+    TcpZone,
+    station_contacts,
+)
 from twin.object_truth import MeshCache, landing, mesh_pose, shape_key, truth_of
 from twin.placement import Placement
 from twin.station import Station
@@ -409,12 +416,24 @@ class Monitor:
         self, watch: StationWatch, at: AtStation, record: ObjectRecord, emit: Emitter, time_s: float
     ) -> bool:
         """TCP overlap, contacts and the grasp of one station; whether it is busy with the
-        object (overlapping or touching it)."""
+        object (overlapping or touching it). A station whose TCP is not near the object, that
+        neither touches it now nor did at the last step, has nothing to say about it (a line's
+        other stations, for every object near one TCP): returns at once."""
         x, y, z = record.position
         tcp_pos, tcp_orn = watch.tcp_pose
         overlap = False
         dx, dy = x - tcp_pos[0], y - tcp_pos[1]
-        if dx * dx + dy * dy < _NEAR_TCP_M**2 and abs(z - tcp_pos[2]) < _NEAR_TCP_M:
+        near = dx * dx + dy * dy < _NEAR_TCP_M**2 and abs(z - tcp_pos[2]) < _NEAR_TCP_M
+        if not (
+            near
+            or at.overlap_since is not None
+            or at.fingers
+            or at.arm_links
+            or record.id in watch.fingers
+            or record.id in watch.arm
+        ):
+            return False
+        if near:
             overlap = bool(
                 pb.getClosestPoints(
                     bodyA=-1,
@@ -438,7 +457,7 @@ class Monitor:
             or overlap
             or (dx * dx + dy * dy < tool.engaged_radius_m**2)
         )
-        touching = self._contacts(watch, at, record, engaged, emit)
+        touching = station_contacts(watch, at, record, engaged, emit)
         if watch.held is None and record.held_by is None and at.overlap_since is not None:
             candidate = Candidate(
                 object_id=record.id,
@@ -469,32 +488,6 @@ class Monitor:
             position_m=list(record.position),
             station=watch.name,
         )
-
-    def _contacts(
-        self, watch: StationWatch, at: AtStation, record: ObjectRecord, engaged: bool, emit: Emitter
-    ) -> dict[int, Normal]:
-        """New tool-link contacts (``finger_contact``) and unintended contacts of the robot;
-        returns the tool's contacts with the object (contact link index -> normal)."""
-        tool = watch.station.tool
-        touching = watch.fingers.get(record.id, {})
-        for finger in sorted(set(touching) - at.fingers):
-            name = tool.contact_name(finger)
-            emit(EventType.FINGER_CONTACT, record, finger=name, station=watch.name)
-            if not engaged:
-                emit(EventType.UNINTENDED_CONTACT, record, link=name, station=watch.name)
-        at.fingers = frozenset(touching)
-        links = frozenset(watch.arm.get(record.id, set()))
-        if not engaged:
-            robot = watch.station.robot
-            for link in sorted(links - at.arm_links):
-                emit(
-                    EventType.UNINTENDED_CONTACT,
-                    record,
-                    link=robot.link_name(link),
-                    station=watch.name,
-                )
-        at.arm_links = links
-        return touching
 
     def _attach(self, record: ObjectRecord, watch: StationWatch, time_s: float) -> None:
         c = self.client

@@ -133,4 +133,31 @@ class Emitter:
         )
 
 
-__all__ = ["AtStation", "Emitter", "ObjectRecord", "StationWatch", "TcpZone"]
+__all__ = ["AtStation", "Emitter", "ObjectRecord", "StationWatch", "TcpZone", "station_contacts"]
+
+
+def station_contacts(
+    watch: StationWatch, at: AtStation, record: ObjectRecord, engaged: bool, emit: Emitter
+) -> dict[int, Normal]:
+    """New tool-link contacts (``finger_contact``) and unintended contacts of the robot;
+    returns the tool's contacts with the object (contact link index -> normal)."""
+    tool = watch.station.tool
+    touching = watch.fingers.get(record.id, {})
+    for finger in sorted(set(touching) - at.fingers):
+        name = tool.contact_name(finger)
+        emit(EventType.FINGER_CONTACT, record, finger=name, station=watch.name)
+        if not engaged:
+            emit(EventType.UNINTENDED_CONTACT, record, link=name, station=watch.name)
+    at.fingers = frozenset(touching)
+    links = frozenset(watch.arm.get(record.id, set()))
+    if not engaged:
+        robot = watch.station.robot
+        for link in sorted(links - at.arm_links):
+            emit(
+                EventType.UNINTENDED_CONTACT,
+                record,
+                link=robot.link_name(link),
+                station=watch.name,
+            )
+    at.arm_links = links
+    return touching

@@ -55,11 +55,13 @@ class Station:
         dt_s: float = 1.0 / 240.0,
         gravity_mps2: float = 9.81,
         materials: ClassTable | None = None,
+        visual_shapes: bool = True,
     ) -> Station:
         """Load the station's robot and build its tool; the arm at home, the tool open.
         ``dt_s`` is the physics step (the arm's joint limiter runs at that rate),
         ``gravity_mps2`` loads what the tool carries, ``materials`` is the cell's class table
-        (None: the shipped one)."""
+        (None: the shipped one); ``visual_shapes=False`` loads the robot without its visual
+        meshes (:class:`twin.robot.Robot`)."""
         try:
             urdf = station_urdf(spec.robot, spec.tool)
         except ConfigError as exc:
@@ -71,6 +73,7 @@ class Station:
             base_yaw_rad=spec.base_yaw_rad,
             urdf=urdf,
             dt_s=dt_s,
+            visual_shapes=visual_shapes,
         )
         tool = make_tool(spec.tool, robot, gravity_mps2=gravity_mps2, materials=materials)
         station = cls(index=index, spec=spec, robot=robot, tool=tool)

@@ -76,3 +76,32 @@ def test_beyond_reach_agrees_with_the_solver_for_every_yaw(kinematics: Kinematic
                 beyond += 1
                 assert all(not r.success and r.iterations == 0 for r in results)
     assert beyond > 0
+
+
+def test_no_stretched_configuration_is_refused(kinematics: Kinematics) -> None:
+    """The wrist bound comes from a search over the joint limits (plus a margin), not a proof:
+    the most stretched of 20,000 random configurations, pushed outwards joint by joint (an
+    ascent of their own, not the bound's), come within the margin of the bound but not
+    beyond it, and the solver accepts the poses they reach from where they are."""
+    rng = np.random.default_rng(7)
+    lower, upper = kinematics.lower_rad, kinematics.upper_rad
+
+    def stretch(q: np.ndarray) -> float:
+        return kinematics.wrist_distance_m(kinematics.fk(q))
+
+    samples = sorted(rng.uniform(lower, upper, size=(20000, kinematics.nq)), key=stretch)[-10:]
+    farthest = 0.0
+    for sample in samples:
+        q = sample
+        for _ in range(300):
+            j = int(rng.integers(kinematics.nq))
+            trial = q.copy()
+            trial[j] = np.clip(trial[j] + rng.normal(0.0, 0.1), lower[j], upper[j])
+            if stretch(trial) > stretch(q):
+                q = trial
+        farthest = max(farthest, stretch(q))
+        assert stretch(q) <= kinematics.wrist_reach_m
+        result = kinematics.solve(kinematics.fk(q), q)
+        assert result.success, f"a pose reached at q={q.tolist()} was refused"
+        assert result.iterations == 0
+    assert farthest > kinematics.wrist_reach_m - 0.015  # the ascent got out to the margin
