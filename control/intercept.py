@@ -32,6 +32,7 @@ from control.poses import JointApproach, JointGoal, meeting_lead_s, solve_meetin
 from control.scheduler import (
     approach_rise_m,
     clearance_rise_m,
+    descend_after_s,
     grasp_height_m,
     nearest_grasp_yaw,
 )
@@ -40,6 +41,11 @@ from control.tracking import Track
 JOINT_REPLAN_UNTIL_S = 0.1
 """The joint-space approach is re-planned to the target's latest prediction until this long
 (s) before it arrives; later corrections are left to the Cartesian approach that follows."""
+
+EARLY_RECHECK_S = 0.1
+"""While the arm rests, a track whose meeting had the arm above it before it enters the pick
+window (``upstream``) is not solved again until, at that meeting's duration, it would be less
+than this long (at its speed) from the window's entry (:meth:`Intercept.approach_estimate`)."""
 
 
 class Intercept:
@@ -62,6 +68,9 @@ class Intercept:
         self.q_ready = q_ready
         self._meetings: dict[int, JointApproach | None] = {}
         self._meetings_t_s = math.nan
+        self._early: dict[int, float] = {}  # track id: the duration (s) of its early meeting
+        self._late: set[int] = set()  # track ids met too late
+        self._rest_version = -1  # the joint command's version while those were found
 
     def object_state(
         self, t_s: float, belt_velocity_mps: tuple[float, float], *, now_s: float | None = None
@@ -162,6 +171,48 @@ class Intercept:
             )
         return self._meetings[track.track_id]
 
+    def approach_estimate(self, track: Track, t_s: float, tracks: Sequence[Track]) -> float:
+        """The scheduler's time (s) until the arm can be above ``track`` with a joint-space move
+        (:meth:`joint_meeting`; ``inf`` when there is none).
+
+        An idle station asks about every track it may take, every ``scheduler.replan_period_s``
+        (on the reference cell every tick), and most answers do not change while the arm rests:
+        a track the arm would meet before it enters the window (``upstream``) stays so while it
+        is more than :data:`EARLY_RECHECK_S` from the entry at that meeting's duration, which
+        is then returned again (the scheduler finds it ``upstream`` again); a track moving
+        downstream that the arm would hold only past the window's exit (``too_late``) cannot
+        become reachable while the arm rests (it only moves on), and is ``inf``. Neither is
+        solved again until the joint command changes (:attr:`JointCommander.version`). Not
+        bit for bit the answers of solving every time (a track's estimate moves a little with
+        each frame); ``docs/benchmarks.md`` (issue 37) measures what it changes.
+        """
+        version = self.move.commander.version
+        if version != self._rest_version or len(self._early) + len(self._late) > 4 * len(tracks):
+            self._early.clear()
+            self._late.clear()
+            self._rest_version = version
+        track_id, vx = track.track_id, track.velocity_mps[0]
+        x_min, x_max = self.cfg.pick_window_x_m
+        if vx > 0.0:
+            if track_id in self._late:
+                return math.inf
+            early_s = self._early.get(track_id)
+            if early_s is not None:
+                x_above, _ = track.position_at(t_s + early_s)
+                if x_above < x_min - vx * EARLY_RECHECK_S:
+                    return early_s
+        meeting = self.joint_meeting(track, t_s, tracks)
+        if meeting is None:
+            return math.inf
+        approach_s = meeting.goal.arrive_s - t_s
+        if vx > 0.0:
+            held_s = approach_s + descend_after_s(self.cfg) + self.cfg.timing.held_after_s
+            if track.position_at(t_s + held_s)[0] > x_max:
+                self._late.add(track_id)
+            elif track.position_at(t_s + approach_s)[0] < x_min - vx * EARLY_RECHECK_S:
+                self._early[track_id] = approach_s
+        return approach_s
+
     def plan_joint_approach(
         self, track: Track, t_s: float, tracks: Sequence[Track]
     ) -> JointApproach | None:
@@ -223,4 +274,4 @@ class Intercept:
         )
 
 
-__all__ = ["JOINT_REPLAN_UNTIL_S", "Intercept"]
+__all__ = ["EARLY_RECHECK_S", "JOINT_REPLAN_UNTIL_S", "Intercept"]

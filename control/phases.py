@@ -473,8 +473,7 @@ class PhaseMachine:
         if self._cfg.pick.approach_space == "joint" and self._move.state.joint_mode:
 
             def estimate(track: Track) -> float:
-                meeting = self._intercept.joint_meeting(track, t_s, tracks)
-                return math.inf if meeting is None else meeting.goal.arrive_s - t_s
+                return self._intercept.approach_estimate(track, t_s, tracks)
 
         book = self._book
         result = schedule(

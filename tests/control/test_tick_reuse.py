@@ -3,13 +3,20 @@ computation it skips."""
 
 from __future__ import annotations
 
-import numpy as np
+import math
+from dataclasses import replace
+from typing import Any
 
+import numpy as np
+import pytest
+
+from control import intercept, poses
 from control.config import ControllerConfig
-from control.ik import Kinematics
+from control.ik import Kinematics, yaw_of
+from control.pick import Phase, PickController, TcpMeasurement
 from control.planner import JointCommander, JointPlanner
 from control.predicted_tracks import PredictedTracks
-from control.tracking import Detection, Tracker
+from control.tracking import Detection, Track, Tracker
 
 
 def _planner() -> tuple[Kinematics, JointPlanner, np.ndarray, ControllerConfig]:
@@ -95,3 +102,70 @@ def test_predicted_tracks_are_the_trackers_prediction_computed_once_when_read() 
     assert len(lazy) == len(expected)
     assert lazy[0] == expected[0]
     assert lazy[0] is lazy[0]  # computed once, then kept
+
+
+def _first_pursuit_tick(controller: PickController, x0_m: float, ticks: int) -> int | None:
+    """Drive ``controller`` (an ideal arm, 120 Hz) with one track that was at ``x0_m`` at
+    t = 0 moving at 0.4 m/s; the first tick that is not idle."""
+    kin, q = controller.kinematics, controller.q_ready
+    for k in range(ticks):
+        t_s = k / 120.0
+        track = Track(
+            track_id=1,
+            stamp_s=t_s,
+            class_name="wood",
+            class_confidence=1.0,
+            position_m=(x0_m + 0.4 * t_s, 0.5),
+            velocity_mps=(0.4, 0.0),
+            position_std_m=0.001,
+            yaw_rad=0.2,
+            length_m=0.1,
+            width_m=0.04,
+            height_m=0.03,
+            hits=10,
+            confirmed=True,
+            last_update_s=t_s,
+        )
+        pose = kin.fk(q)
+        measured = TcpMeasurement(position_m=tuple(pose.translation), yaw_rad=yaw_of(pose))
+        command = controller.update(t_s, measured, (track,), (0.4, 0.0))
+        q = np.asarray(command.joint_positions_rad)
+        if command.phase != Phase.IDLE:
+            return k
+    return None
+
+
+def test_a_resting_arm_does_not_solve_an_upstream_meeting_again_and_targets_it_as_before(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An idle arm asks about a piece coming from upstream at every tick (the reference cell's
+    ``replan_period_s: 0``); while the piece is well upstream of the window at its meeting's
+    duration, the meeting is not solved again (:data:`control.intercept.EARLY_RECHECK_S`).
+    The piece is targeted at the same tick as when every estimate is solved afresh."""
+    base = ControllerConfig()
+    config = replace(base, pick=replace(base.pick, approach_space="joint"))
+    x0_m = base.pick_window_x_m[0] - 0.45
+    solved: list[int] = []
+    real = poses.solve_meeting
+
+    def counted(*args: Any, **kwargs: Any) -> Any:
+        solved.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(intercept, "solve_meeting", counted)
+    first = _first_pursuit_tick(PickController(config), x0_m, 240)
+    with_memo = len(solved)
+    solved.clear()
+    monkeypatch.setattr(
+        intercept.Intercept,
+        "approach_estimate",
+        lambda self, track, t_s, tracks: (
+            math.inf
+            if (m := self.joint_meeting(track, t_s, tracks)) is None
+            else m.goal.arrive_s - t_s
+        ),
+    )
+    afresh = _first_pursuit_tick(PickController(config), x0_m, 240)
+    assert first is not None
+    assert first == afresh
+    assert with_memo < len(solved) / 2  # most of the idle ticks' solves were skipped
