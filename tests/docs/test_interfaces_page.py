@@ -515,7 +515,7 @@ def _emitted_keys() -> dict[str, set[str]]:
     source: ``emit(EventType.X, record, key=...)``, ``_record(EventType.X, {...})`` and
     ``Event(type=EventType.X, data={...})``)."""
     found: dict[str, set[str]] = {}
-    for module in ("monitor", "sim", "ros_node"):
+    for module in ("monitor", "monitor_records", "sim", "ros_node"):
         tree = ast.parse((ROOT / "twin" / f"{module}.py").read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if not isinstance(node, ast.Call):
