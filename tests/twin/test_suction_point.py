@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -98,3 +99,32 @@ def test_a_propped_object_reports_its_faces_tilt(tilt_deg: float) -> None:
     assert radius_m == pytest.approx(0.03, abs=2e-4)  # still the 6 cm wide top
     # the pole, the top's centre (the mesh frame's origin is under it, on the bottom)
     assert z == pytest.approx(0.05 + HEIGHT_M * math.cos(math.radians(tilt_deg)), abs=1e-6)
+
+
+def test_a_second_instance_reuses_the_faces_of_a_mesh_and_gives_the_same_point(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The perception and the spawn judge each keep a SuctionPoints over the same objects: the
+    faces of a mesh are computed once per process (named by its triangles) and both give the
+    same point; another mesh (another height) gets its own faces."""
+    from twin import suction_point
+    from twin.tools import suction_cup
+
+    computed: list[int] = []
+    real = suction_cup.planar_faces
+
+    def counted(triangles: np.ndarray) -> Any:
+        computed.append(len(triangles))
+        return real(triangles)
+
+    monkeypatch.setattr(suction_point, "planar_faces", counted)
+    outline = box(-0.05, -0.04, 0.07, 0.04)  # a mesh no other test made
+    first = SuctionPoints(lambda _: _triangles(outline))
+    second = SuctionPoints(lambda _: _triangles(outline))
+    truth = _truth((1.0, 0.5, 0.2), (0.0, 0.0, 0.0, 1.0))
+    assert first(truth) == second(truth)
+    assert len(computed) == 1
+    taller = SuctionPoints(lambda _: _triangles(outline) * np.array([1.0, 1.0, 1.5]))
+    (_, _, z), _, _ = taller(truth)
+    assert z == pytest.approx(0.2 + 1.5 * HEIGHT_M, abs=1e-9)
+    assert len(computed) == 2
