@@ -152,8 +152,8 @@ def _clearance(
     upturned face (negative: outside), seen from above; the piece is not rotated."""
     from shapely.geometry import Point
 
-    faces = truth_points._faces[object_id]
-    up = int(np.argmax(truth_points._normals[object_id][:, 2]))
+    faces, normals = truth_points.faces(object_id)
+    up = int(np.argmax(normals[:, 2]))
     face = faces[up]
     u_vec, v_vec = np.asarray(face.u, dtype=np.float64), np.asarray(face.v, dtype=np.float64)
     origin = np.asarray(face.origin, dtype=np.float64)

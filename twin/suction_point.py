@@ -52,7 +52,7 @@ class SuctionPoints:
         self._mesh_of = mesh_of
         self._mesh_key: dict[int, bytes] = {}  # object id: the digest of its triangles
 
-    def _faces(self, object_id: int) -> tuple[bytes, tuple[Face, ...], FloatArray]:
+    def _mesh(self, object_id: int) -> tuple[bytes, tuple[Face, ...], FloatArray]:
         """The object's mesh, named by its triangles, and its faces and their normals
         (computed by the first instance that sees the mesh, for every later one)."""
         key = self._mesh_key.get(object_id)
@@ -72,10 +72,15 @@ class SuctionPoints:
             cached = _FACES[key] = (faces, np.array([f.normal for f in faces]))
         return key, *cached
 
+    def faces(self, object_id: int) -> tuple[tuple[Face, ...], FloatArray]:
+        """The object's planar faces in its own frame and their outward normals ``(f, 3)``."""
+        _, faces, normals = self._mesh(object_id)
+        return faces, normals
+
     def __call__(self, gt: GroundTruth) -> tuple[Vec3, float, float]:
         """The upturned face's pole in the world frame, its distance to the face's outline and
         the angle between the face's outward normal and up."""
-        key, faces, normals = self._faces(gt.id)
+        key, faces, normals = self._mesh(gt.id)
         rotation = rotation_matrix(gt.orientation_xyzw)
         ups = normals @ rotation[2]  # world z of every face normal
         up = int(np.argmax(ups))
