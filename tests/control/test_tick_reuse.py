@@ -16,7 +16,8 @@ from control.ik import Kinematics, yaw_of
 from control.pick import Phase, PickController, TcpMeasurement
 from control.planner import JointCommander, JointPlanner
 from control.predicted_tracks import PredictedTracks
-from control.tracking import Detection, Track, Tracker
+from control.tracking import Detection, Tracker
+from tests.control.test_pick import _track
 
 
 def _planner() -> tuple[Kinematics, JointPlanner, np.ndarray, ControllerConfig]:
@@ -110,22 +111,7 @@ def _first_pursuit_tick(controller: PickController, x0_m: float, ticks: int) -> 
     kin, q = controller.kinematics, controller.q_ready
     for k in range(ticks):
         t_s = k / 120.0
-        track = Track(
-            track_id=1,
-            stamp_s=t_s,
-            class_name="wood",
-            class_confidence=1.0,
-            position_m=(x0_m + 0.4 * t_s, 0.5),
-            velocity_mps=(0.4, 0.0),
-            position_std_m=0.001,
-            yaw_rad=0.2,
-            length_m=0.1,
-            width_m=0.04,
-            height_m=0.03,
-            hits=10,
-            confirmed=True,
-            last_update_s=t_s,
-        )
+        track = _track(x0_m, t_s)
         pose = kin.fk(q)
         measured = TcpMeasurement(position_m=tuple(pose.translation), yaw_rad=yaw_of(pose))
         command = controller.update(t_s, measured, (track,), (0.4, 0.0))
