@@ -69,9 +69,10 @@ def _farthest_wrist_m(model: pin.Model, joint_id: int) -> float:
     upper = np.asarray(model.upperPositionLimit, dtype=np.float64)
     origin = np.asarray(model.jointPlacements[1].translation, dtype=np.float64)
 
-    def offset(q: FloatArray) -> FloatArray:
+    def squared(q: FloatArray) -> float:
         pin.forwardKinematics(model, data, q)
-        return np.asarray(data.oMi[joint_id].translation) - origin
+        offset = np.asarray(data.oMi[joint_id].translation) - origin
+        return float(offset @ offset)
 
     rng = np.random.default_rng(0)
     starts = list(rng.uniform(lower, upper, size=(2048, model.nq)))
@@ -81,17 +82,18 @@ def _farthest_wrist_m(model: pin.Model, joint_id: int) -> float:
         for j, side in zip(moving, corner, strict=True):
             q[j] = upper[j] if side else lower[j]
         starts.append(q)
-    starts.sort(key=lambda q: -float(offset(q) @ offset(q)))
+    starts.sort(key=lambda q: -squared(q))
     best = 0.0
     for start in starts[:16]:
         q, step = start, 0.1
-        value = float(offset(q) @ offset(q))
+        value = squared(q)
         for _ in range(200):
-            pin.computeJointJacobians(model, data, q)
+            pin.computeJointJacobians(model, data, q)  # and the placements at q
+            offset = np.asarray(data.oMi[joint_id].translation) - origin
             jac = pin.getJointJacobian(model, data, joint_id, pin.LOCAL_WORLD_ALIGNED)[:3]
-            gradient = 2.0 * jac.T @ offset(q)
+            gradient = 2.0 * jac.T @ offset
             trial = np.clip(q + step * gradient, lower, upper)
-            trial_value = float(offset(trial) @ offset(trial))
+            trial_value = squared(trial)
             if trial_value > value:
                 q, value, step = trial, trial_value, step * 1.5
             else:
@@ -102,7 +104,7 @@ def _farthest_wrist_m(model: pin.Model, joint_id: int) -> float:
     return best
 
 
-_WRIST_REACH: dict[tuple[str, int, str], float] = {}
+_WRIST_REACH: dict[tuple[str, int], float] = {}
 """:func:`_farthest_wrist_m` per robot model (URDF, arm joints) and joint, once per process."""
 
 
@@ -125,7 +127,7 @@ def _wrist_reach(model: pin.Model, tcp_frame_id: int, key: str) -> tuple[FloatAr
         float(np.linalg.norm(model.jointPlacements[j].translation))
         for j in range(2, frame.parentJoint + 1)
     )
-    cache_key = (key, frame.parentJoint, str(model.nq))
+    cache_key = (key, frame.parentJoint)
     if cache_key not in _WRIST_REACH:
         _WRIST_REACH[cache_key] = _farthest_wrist_m(model, frame.parentJoint)
     searched_m = _WRIST_REACH[cache_key] + WRIST_REACH_MARGIN_M

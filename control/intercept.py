@@ -32,8 +32,8 @@ from control.poses import JointApproach, JointGoal, meeting_lead_s, solve_meetin
 from control.scheduler import (
     approach_rise_m,
     clearance_rise_m,
-    descend_after_s,
     grasp_height_m,
+    held_x_m,
     nearest_grasp_yaw,
 )
 from control.tracking import Track
@@ -191,27 +191,30 @@ class Intercept:
             self._early.clear()
             self._late.clear()
             self._rest_version = version
-        track_id, vx = track.track_id, track.velocity_mps[0]
-        x_min, x_max = self.cfg.pick_window_x_m
-        if vx > 0.0:
+        track_id, downstream = track.track_id, track.velocity_mps[0] > 0.0
+        if downstream:
             if track_id in self._late:
                 return math.inf
             early_s = self._early.get(track_id)
-            if early_s is not None:
-                x_above, _ = track.position_at(t_s + early_s)
-                if x_above < x_min - vx * EARLY_RECHECK_S:
-                    return early_s
+            if early_s is not None and self._well_upstream(track, t_s, early_s):
+                return early_s
         meeting = self.joint_meeting(track, t_s, tracks)
         if meeting is None:
             return math.inf
         approach_s = meeting.goal.arrive_s - t_s
-        if vx > 0.0:
-            held_s = approach_s + descend_after_s(self.cfg) + self.cfg.timing.held_after_s
-            if track.position_at(t_s + held_s)[0] > x_max:
+        if downstream:
+            if held_x_m(track, t_s, approach_s, self.cfg) > self.cfg.pick_window_x_m[1]:
                 self._late.add(track_id)
-            elif track.position_at(t_s + approach_s)[0] < x_min - vx * EARLY_RECHECK_S:
+            elif self._well_upstream(track, t_s, approach_s):
                 self._early[track_id] = approach_s
         return approach_s
+
+    def _well_upstream(self, track: Track, t_s: float, approach_s: float) -> bool:
+        """Whether ``track`` (moving downstream) is still more than :data:`EARLY_RECHECK_S` at
+        its speed from the window's entry when an approach of ``approach_s`` would be over."""
+        x_above, _ = track.position_at(t_s + approach_s)
+        x_min = self.cfg.pick_window_x_m[0]
+        return x_above < x_min - track.velocity_mps[0] * EARLY_RECHECK_S
 
     def plan_joint_approach(
         self, track: Track, t_s: float, tracks: Sequence[Track]

@@ -440,9 +440,15 @@ def _past_window(track: Track, now_s: float, config: ControllerConfig) -> bool:
     x_max = config.pick_window_x_m[1]
     if track.position_m[0] > x_max:
         return True
-    intercept_s = 0.0 + descend_after_s(config)
-    x_held, _ = track.position_at(now_s + intercept_s + config.timing.held_after_s)
-    return x_held > x_max
+    return held_x_m(track, now_s, 0.0, config) > x_max
+
+
+def held_x_m(track: Track, now_s: float, approach_s: float, config: ControllerConfig) -> float:
+    """Where along the belt (x, m) ``track`` is when the grasp of a pick whose approach takes
+    ``approach_s`` from ``now_s`` holds it (``timing.held_after_s`` after the intercept): past
+    the window's exit, the pick is ``too_late``."""
+    intercept_s = approach_s + descend_after_s(config)
+    return track.position_at(now_s + intercept_s + config.timing.held_after_s)[0]
 
 
 def _timing_reason(
@@ -464,8 +470,7 @@ def _timing_reason(
     x_done, y_done = track.position_at(
         now_s + intercept_s + timing.dwell_s - timing.close_overlap_s + timing.close_s
     )
-    x_held, _ = track.position_at(now_s + intercept_s + timing.held_after_s)
-    if x_held > x_max or track.position_m[0] > x_max:
+    if held_x_m(track, now_s, approach_s, config) > x_max or track.position_m[0] > x_max:
         return "too_late"  # the grasp of an object outside the window does not count
     x_above, _ = track.position_at(now_s + approach_s)
     if x_above < x_min:

@@ -420,7 +420,7 @@ def _run_episode(
                 )
             )
             twin.spawn_judge = judge
-            twin.visual_shapes = gui or robot_visuals_wanted(
+            twin.visual_shapes = robot_visuals_wanted(
                 cell,
                 twin.perception_config.source,
                 over_ros=peers is None,

@@ -85,8 +85,8 @@ def robot_visuals_wanted(
 ) -> bool:
     """Whether anything of an episode renders the robots: the camera perception source, or the
     cell's camera topics when anyone could take their frames (a subscriber over ROS 2, a
-    recording, the live view; in process with neither, nobody can). PyBullet's window needs
-    them too (the caller's ``--gui``)."""
+    recording, the live view; in process with neither, nobody can). PyBullet's window has
+    them whatever this says (:attr:`twin.sim.Twin.visual_shapes`)."""
     if perception_source == "camera":
         return True
     return bool(cell.cameras) and (over_ros or recorded or viewed)

@@ -133,9 +133,6 @@ class Emitter:
         )
 
 
-__all__ = ["AtStation", "Emitter", "ObjectRecord", "StationWatch", "TcpZone", "station_contacts"]
-
-
 def station_contacts(
     watch: StationWatch, at: AtStation, record: ObjectRecord, engaged: bool, emit: Emitter
 ) -> dict[int, Normal]:
@@ -161,3 +158,6 @@ def station_contacts(
             )
     at.arm_links = links
     return touching
+
+
+__all__ = ["AtStation", "Emitter", "ObjectRecord", "StationWatch", "TcpZone", "station_contacts"]

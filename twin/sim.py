@@ -134,10 +134,11 @@ class Twin:
         drive_parameters(self.cell.drive, scenario.system.perturbation, 0)  # refused early
         self._cache_dir, self._cache = collision_cache_dir()
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
+        self._gui = gui
         self.visual_shapes = True
         """Whether the next :meth:`reset` loads the robots with their visual meshes (a camera
-        or the window looks at them; without, a robot loads in milliseconds:
-        :func:`twin.robot.load_flags`, :func:`twin.episode_setup.robot_visuals_wanted`)."""
+        looks at them; without, a robot loads in milliseconds: :func:`twin.robot.load_flags`,
+        :func:`twin.episode_setup.robot_visuals_wanted`). PyBullet's window always has them."""
         self._drive: BeltDrive | None = None
         self._world: World | None = None
         self.stations: tuple[Station, ...] = ()
@@ -207,7 +208,7 @@ class Twin:
                 dt_s=self.dt_s,
                 gravity_mps2=physics.gravity_mps2,
                 materials=self.cell.materials,
-                visual_shapes=self.visual_shapes,
+                visual_shapes=self.visual_shapes or self._gui,
             )
             for i, spec in enumerate(self.cell.stations)
         )

@@ -15,6 +15,7 @@ from interfaces.camera import RgbdCameraSpec, project
 from meshgen.config import MeshgenConfig
 from meshgen.pipeline import mesh_dataset
 from meshgen.sample import write_sample
+from tests.gl_support import require_gl
 
 
 @pytest.fixture(scope="module")
@@ -25,18 +26,8 @@ def sample(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def _gl_or_skip() -> None:
-    from twin.camera.errors import RenderError
-    from twin.camera.gl import gl_context
-
-    try:
-        gl_context()
-    except RenderError as exc:
-        pytest.skip(f"no OpenGL renderer here: {exc}")
-
-
 def test_pieces_are_drawn_where_the_photo_has_them(sample: Path, tmp_path: Path) -> None:
-    _gl_or_skip()
+    require_gl()
     meshes = tmp_path / "meshes"
     mesh_dataset(sample, meshes, MeshgenConfig(seed=5))
     scene = sorted(meshes.glob("*/scene.json"))[0]
@@ -72,7 +63,7 @@ def test_pieces_are_drawn_where_the_photo_has_them(sample: Path, tmp_path: Path)
 
 
 def test_the_bench_scores_both_sides_and_says_which_mode(sample: Path, tmp_path: Path) -> None:
-    _gl_or_skip()
+    require_gl()
     result = bp.bench_perception(sample, seed=0)
     json.dumps(result, allow_nan=False)  # plain JSON
     rows = {(r["source"], r["mode"]): r for r in result["side_by_side"]}

@@ -15,6 +15,7 @@ from detector.training_set import camera_view, scene_samples
 from meshgen.config import MeshgenConfig
 from meshgen.pipeline import mesh_dataset
 from meshgen.sample import write_sample
+from tests.gl_support import require_gl
 
 
 @pytest.fixture(scope="module")
@@ -25,18 +26,8 @@ def sample(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def _gl_or_skip() -> None:
-    from twin.camera.errors import RenderError
-    from twin.camera.gl import gl_context
-
-    try:
-        gl_context()
-    except RenderError as exc:
-        pytest.skip(f"no OpenGL renderer here: {exc}")
-
-
 def test_suction_radius_tilt_and_point_are_close_to_the_meshes_truth(sample: Path) -> None:
-    _gl_or_skip()
+    require_gl()
     result = bench_grasp(sample)
     assert result["frames"] == 4
     assert result["matched_pieces"] >= 8

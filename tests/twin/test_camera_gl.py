@@ -7,7 +7,6 @@ and rasterised here (pixel centres inside the polygon), centroids, depths, quadr
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Iterator
 
 import numpy as np
@@ -15,21 +14,11 @@ import pytest
 from matplotlib.path import Path as PolygonPath
 
 from interfaces.camera import Intrinsics, RgbdCameraSpec, project
+from tests.gl_support import require_gl
 from twin.camera.errors import RenderError
-from twin.camera.gl import GlRenderer, gl_context, projection_matrix
+from twin.camera.gl import GlRenderer, projection_matrix
 from twin.camera.render_types import CameraView, Instance, MeshData
 from twin.scene import box_triangles
-
-
-def require_gl() -> None:
-    """Skip the calling test without an EGL context; fail instead under CI (``CI`` set),
-    where ``.ci/run`` installs libegl1, libegl-mesa0 and libgl1-mesa-dri."""
-    try:
-        gl_context()
-    except RenderError as exc:
-        if os.environ.get("CI"):
-            pytest.fail(f"{exc}; CI is set, so the OpenGL renderer's tests may not be skipped")
-        pytest.skip(str(exc))
 
 
 @pytest.fixture

@@ -18,8 +18,8 @@ from matplotlib.path import Path as PolygonPath
 from PIL import Image
 
 from interfaces.camera import RgbdCameraSpec, RgbdFrame, project, world_points
+from tests.gl_support import require_gl
 from twin.camera.errors import RenderError
-from twin.camera.gl import gl_context
 from twin.camera.rig import CameraRig
 from twin.objects import ObjectSpec
 from twin.scenario import Scenario, SystemLevel
@@ -28,17 +28,6 @@ from twin.sim import Twin
 SPEC = RgbdCameraSpec()
 """The reference camera: straight down from 1.2 m over x = -0.9 m, seeing x in about
 [-1.42, -0.38] m and y in [-0.19, 1.19] m."""
-
-
-def require_gl() -> None:
-    """Skip the calling test without an EGL context; fail instead under CI (``CI`` set),
-    where ``.ci/run`` installs libegl1, libegl-mesa0 and libgl1-mesa-dri."""
-    try:
-        gl_context()
-    except RenderError as exc:
-        if os.environ.get("CI"):
-            pytest.fail(f"{exc}; CI is set, so the OpenGL renderer's tests may not be skipped")
-        pytest.skip(str(exc))
 
 
 @pytest.fixture(scope="module")
