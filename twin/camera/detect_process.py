@@ -36,7 +36,12 @@ from interfaces.cell import BeltSpec
 from interfaces.detections import Detection, DetectionFrame
 from interfaces.lifecycle import PARENT_PID_VARIABLE, die_with_parent
 from interfaces.materials import ClassTable
-from twin.camera.filters import belt_plane_depth, filtered_frame
+from twin.camera.filters import (
+    belt_plane_depth,
+    filtered_frame,
+    occluded_labels,
+    occluder_mask,
+)
 from twin.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -182,7 +187,10 @@ class _Child:
             t0 = time.perf_counter()
             output = camera.detector.detect(frame)
             detect_s = time.perf_counter() - t0
-            detections.extend(_kept(camera, output))
+            hidden = occluded_labels(
+                output.labels, occluder_mask(shot.frame, shot.robot, held_ids=held)
+            )
+            detections.extend(_kept(camera, output, hidden))
             self._example(time_s, shot, output)
             self.scorer.add(shot.frame, output, objects, detect_s=detect_s, render_s=shot.render_s)
         return DetectionFrame(
@@ -196,13 +204,17 @@ class _Child:
         return self.scorer.summary()
 
 
-def _kept(camera: _Camera, output: DetectorOutput) -> list[Detection]:
-    """The camera's detections the merged frame keeps: whole in view, in its stretch."""
+def _kept(camera: _Camera, output: DetectorOutput, hidden: np.ndarray) -> list[Detection]:
+    """The camera's detections the merged frame keeps: whole in view (not cut by the image's
+    border, not touching a robot or a held object: ``hidden[label]``), in its stretch."""
     lo, hi = camera.stretch_x_m
     return [
         i.detection
         for i in output.instances
-        if i.detection is not None and not i.at_border and lo <= i.detection.x_m < hi
+        if i.detection is not None
+        and not i.at_border
+        and not hidden[i.label]
+        and lo <= i.detection.x_m < hi
     ]
 
 

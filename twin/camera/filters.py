@@ -3,7 +3,9 @@
 - the belt's region of interest: :func:`belt_plane_depth` says where each pixel's ray meets the
   belt plane and whether that point lies off the belt (beyond :data:`ROI_MARGIN_M` of its edges);
 - the robot self-filter: :func:`filtered_frame` sets the pixels of the robots (known from their
-  poses: the rig's mask) and of the objects their tools hold to the belt plane's depth.
+  poses: the rig's mask) and of the objects their tools hold to the belt plane's depth;
+  :func:`occluded_labels` says which instances those pixels border (a piece partly under an arm
+  is only partly seen, as one cut by the image's border).
 
 Both the camera source (:mod:`twin.perception_source`) and the overlay pictures
 (:mod:`twin.camera.overlay`) filter frames this way.
@@ -18,7 +20,13 @@ import numpy as np
 from interfaces.camera import RgbdCameraSpec, RgbdFrame
 from interfaces.cell import BeltSpec
 
-__all__ = ["ROI_MARGIN_M", "belt_plane_depth", "filtered_frame"]
+__all__ = [
+    "ROI_MARGIN_M",
+    "belt_plane_depth",
+    "filtered_frame",
+    "occluded_labels",
+    "occluder_mask",
+]
 
 ROI_MARGIN_M = 0.02
 """How far beyond the belt's edges the region of interest reaches (a piece overhanging them)."""
@@ -63,3 +71,30 @@ def filtered_frame(
         mask = mask | np.isin(frame.instance_ids, held_ids)
     depth = np.where(mask, belt_depth_m, frame.depth_m).astype(np.float32)
     return replace(frame, depth_m=depth, instance_ids=None)
+
+
+def occluder_mask(frame: RgbdFrame, robot: np.ndarray, *, held_ids: list[int]) -> np.ndarray:
+    """What hides the belt in ``frame`` ``(H, W) bool``: the robots' pixels ``robot`` and the
+    objects ``held_ids`` their tools hold (what :func:`filtered_frame` blanks, less the pixels
+    off the belt)."""
+    if held_ids and frame.instance_ids is not None:
+        return robot | np.isin(frame.instance_ids, held_ids)
+    return robot
+
+
+def occluded_labels(labels: np.ndarray, occluder: np.ndarray) -> np.ndarray:
+    """Which instances of ``labels`` ``(H, W) int`` (0: none) touch ``occluder`` ``(H, W)
+    bool``, within one pixel: ``(max label + 1,) bool``. Such an instance may be a piece partly
+    under the occluder, seen only in part: its centroid, extents and suction point are those of
+    the visible part."""
+    out = np.zeros(int(labels.max(initial=0)) + 1, dtype=bool)
+    if not occluder.any():
+        return out
+    near = occluder.copy()
+    near[1:] |= occluder[:-1]
+    near[:-1] |= occluder[1:]
+    near[:, 1:] |= near[:, :-1].copy()
+    near[:, :-1] |= near[:, 1:].copy()
+    out[np.unique(labels[near])] = True
+    out[0] = False
+    return out
