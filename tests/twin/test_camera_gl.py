@@ -213,6 +213,52 @@ def test_a_texture_shows_its_corner_markers_where_the_photo_has_them(gl: GlRende
         assert (c.mean() - centre[1]) * side > 20  # left for red, right for blue
 
 
+def test_a_tipped_pieces_sides_show_its_own_material_not_the_photos_outline(
+    gl: GlRenderer,
+) -> None:
+    """A meshgen prism's vertices carry the photo pixels of its outline, where an annotator's
+    polygon meets the belt: drawn as they are, its side walls would show that dark streak.
+    Seen from aside, the box's sides show the red inside the outline instead; its top keeps
+    the photo exactly (the black ring at its edge stays)."""
+    photo = np.full((64, 64, 3), (200, 40, 30), dtype=np.uint8)
+    photo[:4], photo[-4:], photo[:, :4], photo[:, -4:] = 0, 0, 0, 0  # the outline's dark ring
+    gl.add_texture("piece", photo)
+    half = BOX_HALF_M
+    triangles = box_triangles(half)
+    vertices = triangles.reshape(-1, 3)
+    uv = np.column_stack(
+        (
+            0.5 + 0.5 * np.sign(vertices[:, 1]) * (1 - 0.5 / 64),
+            0.5 - 0.5 * np.sign(vertices[:, 0]) * (1 - 0.5 / 64),
+        )
+    )
+    mesh = MeshData(
+        vertices_m=vertices, faces=np.arange(len(vertices)).reshape(-1, 3), uv=uv, texture="piece"
+    )
+    gl.add_mesh("box", mesh)
+    spec = RgbdCameraSpec(position_m=(-0.9, 0.1, 0.9), rpy_rad=(0.0, 0.9, 1.3))  # from aside
+    images = gl.render(
+        CameraView.of(spec),
+        [Instance(mesh="box", worldMobject=pose(-0.9, 0.5, half[2]), instance_id=1)],
+    )
+    seen = images.rgb.astype(int)[images.instance_ids == 1]
+    assert len(seen) > 1000
+    dark = seen.max(axis=1) < 40
+    reddish = (seen[:, 0] > 2 * seen[:, 2]) & (seen[:, 0] > 40)
+    # the top's own ring is about a sixth of what is seen; drawn from the outline, the sides
+    # made it more than a third
+    assert dark.mean() < 0.22, "the sides show the outline's dark ring"
+    assert reddish.mean() > 0.75
+    side = np.repeat(
+        np.abs(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])[:, 2])
+        < 1e-12,
+        3,
+    )
+    corner_uv = mesh.corner_texture_coordinates()
+    np.testing.assert_array_equal(corner_uv[~side], uv[~side].astype(np.float32))
+    assert np.abs(corner_uv[side] - 0.5).max() < 0.4  # inside the ring
+
+
 def test_an_unknown_mesh_or_texture_is_refused_naming_it(gl: GlRenderer) -> None:
     with pytest.raises(RenderError, match="texture 'missing'"):
         gl.add_mesh("box", box_mesh(texture="missing"))

@@ -57,6 +57,14 @@ class CameraView:
         )
 
 
+SIDE_UV_INSET = 0.25
+"""How far a side wall's texture coordinates move from the outline towards the uv's mean
+(:meth:`MeshData.corner_texture_coordinates`)."""
+
+SIDE_MAX_COS = 0.5
+"""A face whose normal's z component (mesh frame, unit normal) is below this is a side wall."""
+
+
 @dataclass(frozen=True, kw_only=True, eq=False)
 class MeshData:
     """A mesh to upload once: ``vertices_m`` ``(n, 3) float`` in its own frame, ``faces``
@@ -97,6 +105,33 @@ class MeshData:
         xy = np.asarray(self.vertices_m, dtype=np.float64)[:, :2] / self.planar_period_m
         return xy.astype(np.float32)
 
+    def corner_texture_coordinates(self) -> np.ndarray:
+        """The uv of every face corner, ``(3 m, 2) float32`` (face by face): the vertex's, but
+        on a side wall of a mesh with its own uv (a face whose normal is more than 60 degrees
+        from the mesh's z, its extrusion axis) drawn from :data:`SIDE_UV_INSET` of the way in
+        from the outline towards the uv's mean.
+
+        A meshgen prism's every vertex carries the photo pixel of its polygon's corner (the top
+        shows the photo), so a side wall would show the photo's pixels along the outline, half
+        of them the belt or a neighbour the annotator drew around: a piece tipped onto its side
+        would show a dark or foreign streak, which a camera's classifier (and a person) reads as
+        another material. A broken piece's sides are its own material: this draws them with
+        the piece's pixels just inside its outline."""
+        corners = np.asarray(self.faces, dtype=np.int64).reshape(-1)
+        uv = self.texture_coordinates()
+        out = uv[corners]
+        if self.uv is None:
+            return out
+        vertices = np.asarray(self.vertices_m, dtype=np.float64)[np.asarray(self.faces)]
+        normals = np.cross(vertices[:, 1] - vertices[:, 0], vertices[:, 2] - vertices[:, 0])
+        lengths = np.linalg.norm(normals, axis=1)
+        side = np.abs(normals[:, 2]) < SIDE_MAX_COS * lengths
+        if side.any():
+            centre = uv.mean(axis=0)
+            corner_side = np.repeat(side, 3)
+            out[corner_side] = centre + (out[corner_side] - centre) * (1.0 - SIDE_UV_INSET)
+        return out
+
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Instance:
@@ -119,4 +154,13 @@ class RenderedImages:
     instance_ids: np.ndarray
 
 
-__all__ = ["NEAR_M", "RGB", "CameraView", "Instance", "MeshData", "RenderedImages"]
+__all__ = [
+    "NEAR_M",
+    "RGB",
+    "SIDE_MAX_COS",
+    "SIDE_UV_INSET",
+    "CameraView",
+    "Instance",
+    "MeshData",
+    "RenderedImages",
+]
