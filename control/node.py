@@ -459,7 +459,10 @@ class ControllerEndpoint:
         before, self._error_snapshot = self._error_snapshot, after
         for key in sorted(after):
             if after[key] > before.get(key, 0):
-                detail = self._controller.last_error if self._controller is not None else ""
+                if key.startswith("rejected."):
+                    detail = self._tracker.last_rejection
+                else:
+                    detail = self._controller.last_error if self._controller is not None else ""
                 self._warn(key, f"{key}: {after[key]} so far; latest: {detail}")
 
     def _warn(self, kind: str, text: str) -> None:

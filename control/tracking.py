@@ -426,6 +426,7 @@ class Tracker:
         self._next_id = 1
         self._last_stamp_s = -math.inf
         self._rejected: Counter[str] = Counter()
+        self._last_rejected: tuple[str, Detection] | None = None
         self._accel_var = config.process_accel_std_mps2**2
         self._r_m2 = config.position_std_m**2
 
@@ -440,22 +441,42 @@ class Tracker:
         is at this time."""
         return self._last_stamp_s
 
+    @property
+    def last_rejection(self) -> str:
+        """The latest rejected detection and why, for a log line ("" before any)."""
+        if self._last_rejected is None:
+            return ""
+        reason, det = self._last_rejected
+        return (
+            f"{reason}: {det.class_name} ({det.confidence:.2f}) at ({det.x_m:.3f}, "
+            f"{det.y_m:.3f}) m, {det.length_m * 1e3:.0f} x {det.width_m * 1e3:.0f} x "
+            f"{det.height_m * 1e3:.0f} mm, stamp {det.stamp_s:.3f} s"
+        )
+
     def _accept(self, detections: Iterable[Detection], stamp_s: float) -> list[Detection]:
         accepted: list[Detection] = []
         for det in detections:
-            if not det.is_finite():
-                self._rejected["non_finite"] += 1
-            elif det.class_name not in self._classes:
-                self._rejected["unknown_class"] += 1
-            elif det.stamp_s != stamp_s or det.stamp_s <= self._last_stamp_s:
-                self._rejected["out_of_order"] += 1
-            elif det.confidence < self._config.min_confidence:
-                self._rejected["low_confidence"] += 1
-            elif min(det.length_m, det.width_m, det.height_m) <= 0.0:
-                self._rejected["bad_size"] += 1
-            else:
+            reason = self._rejection(det, stamp_s)
+            if reason is None:
                 accepted.append(_normalised(det))
+            else:
+                self._rejected[reason] += 1
+                self._last_rejected = (reason, det)
         return accepted
+
+    def _rejection(self, det: Detection, stamp_s: float) -> str | None:
+        """Why ``det`` is rejected (one of :data:`REJECT_REASONS`), None when it is not."""
+        if not det.is_finite():
+            return "non_finite"
+        if det.class_name not in self._classes:
+            return "unknown_class"
+        if det.stamp_s != stamp_s or det.stamp_s <= self._last_stamp_s:
+            return "out_of_order"
+        if det.confidence < self._config.min_confidence:
+            return "low_confidence"
+        if min(det.length_m, det.width_m, det.height_m) <= 0.0:
+            return "bad_size"
+        return None
 
     def update(
         self,

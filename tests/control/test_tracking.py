@@ -186,6 +186,9 @@ def test_bad_detections_are_counted_and_good_ones_kept() -> None:
     assert rejected["non_finite"] == 2
     assert rejected["unknown_class"] == 1
     assert rejected["out_of_order"] == 3
+    # the log line names the latest one: why, what and where
+    assert tracker.last_rejection.startswith("out_of_order: wood (0.90) at (")
+    assert "150 x 50 x 30 mm, stamp 0.100 s" in tracker.last_rejection
     (track,) = tracker.predict_to(0.1)
     assert track.position_m[0] == pytest.approx(good.x_m)
 
