@@ -107,7 +107,10 @@ class InstanceSet:
         """Instances of an id image ``(H, W)`` (each non-zero id one instance, as a renderer's
         ``instance_ids``); ``classes[id]`` its class, ``centroids``/``yaws_rad`` by id."""
         ids = np.asarray(ids)
-        present = np.unique(ids)
+        if int(ids.min(initial=0)) < 0:
+            msg = "ids: negative instance ids"
+            raise FrameError(msg)
+        present = np.flatnonzero(np.bincount(ids.ravel().astype(np.intp, copy=False)))
         present = present[present != 0]
         missing = [int(i) for i in present if int(i) not in classes]
         if missing:
@@ -115,9 +118,6 @@ class InstanceSet:
             raise FrameError(msg)
         lut = np.zeros(int(present.max(initial=0)) + 1 if present.size else 1, dtype=np.int32)
         lut[present] = np.arange(1, present.size + 1)
-        if int(ids.min(initial=0)) < 0:
-            msg = "ids: negative instance ids"
-            raise FrameError(msg)
         order = [int(i) for i in present]
         return cls.from_labels(
             lut[ids],

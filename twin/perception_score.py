@@ -82,8 +82,10 @@ class _Truth:
 
 def _truth(ids: np.ndarray, objects: Mapping[int, GroundTruth]) -> _Truth:
     """The pieces of id image ``ids`` ``(H, W) int32`` that are scored (see the module)."""
-    present, counts = np.unique(ids, return_counts=True)
-    edge = np.unique(np.concatenate((ids[0], ids[-1], ids[:, 0], ids[:, -1])))
+    pixels = np.bincount(ids.ravel())  # ids are small and >= 0: a count per id, no sort
+    present = np.flatnonzero(pixels)
+    counts = pixels[present]
+    edge = set(np.concatenate((ids[0], ids[-1], ids[:, 0], ids[:, -1])).tolist())
     kept: dict[int, str] = {}
     ignored_ids = []
     for object_id, count in zip(present.tolist(), counts.tolist(), strict=True):
@@ -101,7 +103,12 @@ def _truth(ids: np.ndarray, objects: Mapping[int, GroundTruth]) -> _Truth:
             kept[object_id] = truth.class_name
         else:
             ignored_ids.append(object_id)
-    ignored = np.isin(ids, ignored_ids) if ignored_ids else np.zeros(ids.shape, dtype=bool)
+    if ignored_ids:
+        left_out = np.zeros(pixels.size, dtype=bool)
+        left_out[ignored_ids] = True
+        ignored = left_out[ids]
+    else:
+        ignored = np.zeros(ids.shape, dtype=bool)
     scored_ids = np.where(ignored, 0, ids)
     centroids = {i: (objects[i].position_m[0], objects[i].position_m[1]) for i in kept}
     yaws = {

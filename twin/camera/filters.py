@@ -95,6 +95,6 @@ def occluded_labels(labels: np.ndarray, occluder: np.ndarray) -> np.ndarray:
     near[:-1] |= occluder[1:]
     near[:, 1:] |= near[:, :-1].copy()
     near[:, :-1] |= near[:, 1:].copy()
-    out[np.unique(labels[near])] = True
+    out[labels[near]] = True
     out[0] = False
     return out
