@@ -153,9 +153,11 @@ class _Child:
         self.latency_s = latency_s
         self.examples = examples
 
-    def _example(self, time_s: float, shot: Shot, output: DetectorOutput) -> None:
+    def _example(
+        self, time_s: float, shot: Shot, output: DetectorOutput, hidden: np.ndarray
+    ) -> None:
         """Write the camera's example frame when this is the first frame at or after the
-        examples' time (once per camera and episode)."""
+        examples' time (once per camera and episode; what is not handed on, grey)."""
         examples = self.examples
         if examples is None or time_s < examples.at_s:
             return
@@ -168,7 +170,8 @@ class _Child:
             return
         examples.written.add(name)
         colours = class_colour(self.materials)
-        write_overlay(examples.folder / camera_frame_name(name), shot.frame, output, colours)
+        path = examples.folder / camera_frame_name(name)
+        write_overlay(path, shot.frame, output, colours, hidden)
 
     def detect(
         self, time_s: float, shots: list[Shot], objects: dict[int, GroundTruth]
@@ -191,7 +194,7 @@ class _Child:
                 output.labels, occluder_mask(shot.frame, shot.robot, held_ids=held)
             )
             detections.extend(_kept(camera, output, hidden))
-            self._example(time_s, shot, output)
+            self._example(time_s, shot, output, hidden)
             self.scorer.add(shot.frame, output, objects, detect_s=detect_s, render_s=shot.render_s)
         return DetectionFrame(
             capture_time_s=time_s,

@@ -47,9 +47,12 @@ def overlay_image(
     frame: RgbdFrame,
     output: DetectorOutput,
     colour_of: Callable[[str], tuple[float, float, float]] | None = None,
+    hidden: np.ndarray | None = None,
 ) -> Image.Image:
     """``frame``'s colour image ``(H, W, 3) uint8`` with ``output``'s instances drawn on it;
-    ``colour_of(class)`` gives a class's colour in [0, 1] (default: white)."""
+    ``colour_of(class)`` gives a class's colour in [0, 1] (default: white). An instance the
+    camera source does not hand on is grey: cut by the border, or ``hidden[label]`` (``(n +
+    1,) bool``: touching a robot or a held piece, :func:`twin.camera.filters.occluded_labels`)."""
     rgb = np.asarray(frame.rgb, dtype=np.uint8)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[:2] != output.labels.shape:
         msg = (
@@ -63,7 +66,7 @@ def overlay_image(
         mask = output.labels == instance.label
         if not mask.any():
             continue
-        if instance.at_border:
+        if instance.at_border or (hidden is not None and hidden[instance.label]):
             colour = BORDER_RGB
         else:
             r, g, b = colour_of(instance.class_name) if colour_of else (1.0, 1.0, 1.0)
@@ -87,9 +90,10 @@ def write_overlay(
     frame: RgbdFrame,
     output: DetectorOutput,
     colour_of: Callable[[str], tuple[float, float, float]] | None = None,
+    hidden: np.ndarray | None = None,
 ) -> Path:
     """Write :func:`overlay_image` as a PNG at ``path`` atomically; returns ``path``."""
-    image = overlay_image(frame, output, colour_of)
+    image = overlay_image(frame, output, colour_of, hidden)
     path = Path(path)
     if not path.parent.is_dir():
         msg = f"{path}: its folder {path.parent} does not exist"
@@ -113,7 +117,12 @@ def write_twin_overlays(twin: PerceptionSim, folder: Path, *, renderer: str = "a
     with its detections drawn in their classes' colours; returns the files written."""
     from interfaces.class_colours import class_colour
     from twin.camera.detectors import detectors_for
-    from twin.camera.filters import belt_plane_depth, filtered_frame
+    from twin.camera.filters import (
+        belt_plane_depth,
+        filtered_frame,
+        occluded_labels,
+        occluder_mask,
+    )
     from twin.camera.rig import CameraRig
 
     cameras = twin.cell.cameras
@@ -133,5 +142,7 @@ def write_twin_overlays(twin: PerceptionSim, folder: Path, *, renderer: str = "a
             belt_depth_m, off_belt = belt_plane_depth(spec, twin.cell.belt)
             seen = filtered_frame(frame, robot | off_belt, held_ids=held, belt_depth_m=belt_depth_m)
             output = detector.detect(seen)
-            written.append(write_overlay(folder / f"{spec.name}.png", frame, output, colours))
+            hidden = occluded_labels(output.labels, occluder_mask(frame, robot, held_ids=held))
+            path = folder / f"{spec.name}.png"
+            written.append(write_overlay(path, frame, output, colours, hidden))
     return written
