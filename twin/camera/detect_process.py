@@ -181,18 +181,14 @@ class _Child:
         detections: list[Detection] = []
         for shot in shots:
             camera = self.cameras[shot.camera]
+            occluder = occluder_mask(shot.frame, shot.robot, held_ids=held)
             frame = filtered_frame(
-                shot.frame,
-                shot.robot | camera.off_belt,
-                held_ids=held,
-                belt_depth_m=camera.belt_depth_m,
+                shot.frame, occluder | camera.off_belt, belt_depth_m=camera.belt_depth_m
             )
             t0 = time.perf_counter()
             output = camera.detector.detect(frame)
             detect_s = time.perf_counter() - t0
-            hidden = occluded_labels(
-                output.labels, occluder_mask(shot.frame, shot.robot, held_ids=held)
-            )
+            hidden = occluded_labels(output.labels, occluder)
             detections.extend(_kept(camera, output, hidden))
             self._example(time_s, shot, output, hidden)
             self.scorer.add(shot.frame, output, objects, detect_s=detect_s, render_s=shot.render_s)

@@ -3,9 +3,9 @@
 - the belt's region of interest: :func:`belt_plane_depth` says where each pixel's ray meets the
   belt plane and whether that point lies off the belt (beyond :data:`ROI_MARGIN_M` of its edges);
 - the robot self-filter: :func:`filtered_frame` sets the pixels of the robots (known from their
-  poses: the rig's mask) and of the objects their tools hold to the belt plane's depth;
-  :func:`occluded_labels` says which instances those pixels border (a piece partly under an arm
-  is only partly seen, as one cut by the image's border).
+  poses: the rig's mask) and of the objects their tools hold (together :func:`occluder_mask`)
+  to the belt plane's depth; :func:`occluded_labels` says which instances those pixels border
+  (a piece partly under an arm is only partly seen, as one cut by the image's border).
 
 Both the camera source (:mod:`twin.perception_source`) and the overlay pictures
 (:mod:`twin.camera.overlay`) filter frames this way.
@@ -57,29 +57,21 @@ def belt_plane_depth(spec: RgbdCameraSpec, belt: BeltSpec) -> tuple[np.ndarray, 
     return depth.astype(np.float32), off
 
 
-def filtered_frame(
-    frame: RgbdFrame,
-    mask: np.ndarray,
-    *,
-    held_ids: list[int],
-    belt_depth_m: np.ndarray,
-) -> RgbdFrame:
-    """The frame as the detector gets it: the pixels of ``mask`` ``(H, W) bool`` (the robots,
-    off the belt) and of the objects ``held_ids`` set to the belt plane's depth ``belt_depth_m``
-    ``(H, W)`` (nothing stands there), without the truth (``instance_ids`` None)."""
-    if held_ids and frame.instance_ids is not None:
-        mask = mask | np.isin(frame.instance_ids, held_ids)
-    depth = np.where(mask, belt_depth_m, frame.depth_m).astype(np.float32)
-    return replace(frame, depth_m=depth, instance_ids=None)
-
-
 def occluder_mask(frame: RgbdFrame, robot: np.ndarray, *, held_ids: list[int]) -> np.ndarray:
     """What hides the belt in ``frame`` ``(H, W) bool``: the robots' pixels ``robot`` and the
-    objects ``held_ids`` their tools hold (what :func:`filtered_frame` blanks, less the pixels
-    off the belt)."""
+    objects ``held_ids`` their tools hold."""
     if held_ids and frame.instance_ids is not None:
         return robot | np.isin(frame.instance_ids, held_ids)
     return robot
+
+
+def filtered_frame(frame: RgbdFrame, mask: np.ndarray, *, belt_depth_m: np.ndarray) -> RgbdFrame:
+    """The frame as the detector gets it: the pixels of ``mask`` ``(H, W) bool`` (what hides
+    the belt, :func:`occluder_mask`, and what lies off it) set to the belt plane's depth
+    ``belt_depth_m`` ``(H, W)`` (nothing stands there), without the truth (``instance_ids``
+    None)."""
+    depth = np.where(mask, belt_depth_m, frame.depth_m).astype(np.float32)
+    return replace(frame, depth_m=depth, instance_ids=None)
 
 
 def occluded_labels(labels: np.ndarray, occluder: np.ndarray) -> np.ndarray:

@@ -273,10 +273,8 @@ class GlRenderer:
         self.remove_mesh(key)
         corners = np.asarray(mesh.faces, dtype=np.int64).reshape(-1)
         vertices = np.asarray(mesh.vertices_m, dtype=np.float64)[corners].reshape(-1, 3, 3)
-        uv = mesh.corner_texture_coordinates()
-        normals = np.cross(vertices[:, 1] - vertices[:, 0], vertices[:, 2] - vertices[:, 0])
-        lengths = np.linalg.norm(normals, axis=1, keepdims=True)
-        normals = np.divide(normals, lengths, out=np.zeros_like(normals), where=lengths > 0)
+        normals = mesh.face_normals()
+        uv = mesh.corner_texture_coordinates(normals)
         interleaved = np.hstack(
             (vertices.reshape(-1, 3), uv, np.repeat(normals, 3, axis=0))
         ).astype(np.float32)

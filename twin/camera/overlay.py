@@ -140,9 +140,10 @@ def write_twin_overlays(twin: PerceptionSim, folder: Path, *, renderer: str = "a
         for spec, detector in zip(cameras, detectors, strict=True):
             frame, robot = rig.capture_with_robot(spec, snapshot=snapshot)
             belt_depth_m, off_belt = belt_plane_depth(spec, twin.cell.belt)
-            seen = filtered_frame(frame, robot | off_belt, held_ids=held, belt_depth_m=belt_depth_m)
+            occluder = occluder_mask(frame, robot, held_ids=held)
+            seen = filtered_frame(frame, occluder | off_belt, belt_depth_m=belt_depth_m)
             output = detector.detect(seen)
-            hidden = occluded_labels(output.labels, occluder_mask(frame, robot, held_ids=held))
+            hidden = occluded_labels(output.labels, occluder)
             path = folder / f"{spec.name}.png"
             written.append(write_overlay(path, frame, output, colours, hidden))
     return written

@@ -105,7 +105,16 @@ class MeshData:
         xy = np.asarray(self.vertices_m, dtype=np.float64)[:, :2] / self.planar_period_m
         return xy.astype(np.float32)
 
-    def corner_texture_coordinates(self) -> np.ndarray:
+    def face_normals(self) -> np.ndarray:
+        """Every face's unit normal ``(m, 3) float64`` (mesh frame; zero for a face of no
+        area)."""
+        corners = np.asarray(self.vertices_m, dtype=np.float64)[np.asarray(self.faces)]
+        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        lengths = np.linalg.norm(normals, axis=1, keepdims=True)
+        out: np.ndarray = np.divide(normals, lengths, out=np.zeros_like(normals), where=lengths > 0)
+        return out
+
+    def corner_texture_coordinates(self, normals: np.ndarray | None = None) -> np.ndarray:
         """The uv of every face corner, ``(3 m, 2) float32`` (face by face): the vertex's, but
         on a side wall of a mesh with its own uv (a face whose normal is more than 60 degrees
         from the mesh's z, its extrusion axis) drawn from :data:`SIDE_UV_INSET` of the way in
@@ -116,16 +125,17 @@ class MeshData:
         of them the belt or a neighbour the annotator drew around: a piece tipped onto its side
         would show a dark or foreign streak, which a camera's classifier (and a person) reads as
         another material. A broken piece's sides are its own material: this draws them with
-        the piece's pixels just inside its outline."""
+        the piece's pixels just inside its outline. ``normals``: :meth:`face_normals`, when
+        the caller has them."""
         corners = np.asarray(self.faces, dtype=np.int64).reshape(-1)
         uv = self.texture_coordinates()
         out = uv[corners]
         if self.uv is None:
             return out
-        vertices = np.asarray(self.vertices_m, dtype=np.float64)[np.asarray(self.faces)]
-        normals = np.cross(vertices[:, 1] - vertices[:, 0], vertices[:, 2] - vertices[:, 0])
-        lengths = np.linalg.norm(normals, axis=1)
-        side = np.abs(normals[:, 2]) < SIDE_MAX_COS * lengths
+        if normals is None:
+            normals = self.face_normals()
+        z = np.abs(normals[:, 2])
+        side = (z < SIDE_MAX_COS) & np.any(normals != 0.0, axis=1)
         if side.any():
             centre = uv.mean(axis=0)
             corner_side = np.repeat(side, 3)
